@@ -1,0 +1,10 @@
+#!/usr/bin/env bash
+# Builds and runs tjepa's whole test suite (preset "ci": -O2, -march=native, warnings are errors).
+# Extra arguments go to ctest, e.g. `tools/test.sh -L graph`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source tools/deps.sh
+tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}"
+cmake --preset ci >/dev/null
+cmake --build --preset ci -j "$(nproc)"
+ctest --preset ci "$@"
