@@ -5,8 +5,19 @@
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/eigen.hpp"
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/parallel.hpp"
 #include "tjepa/core/random.hpp"
 
 #include "tjepa/graph/taxel_graph.hpp"
 
 #include "tjepa/model/param_set.hpp"
+#include "tjepa/model/prefixed_params.hpp"
+
+#include "tjepa/optim/adamw.hpp"
+#include "tjepa/optim/clip.hpp"
+#include "tjepa/optim/ema.hpp"
+#include "tjepa/optim/schedule.hpp"
+
+#include "tjepa/io/atomic_file.hpp"
+#include "tjepa/io/checkpoint.hpp"
+#include "tjepa/io/safetensors.hpp"

@@ -1,0 +1,67 @@
+#pragma once
+// Gradient-norm clipping over the trainable parts of a model (PyTorch's clip_grad_norm_ with the
+// 2-norm): the norm is taken over all gradients together, and when it exceeds max_norm every
+// gradient is scaled by max_norm / (norm + 1e-6). The reference clips at 10.
+//
+// The norm is summed in double in fixed-size chunks, so it is bitwise the same for any thread
+// count (padding between tensors holds zero gradients and adds nothing).
+#include <cmath>
+#include <cstddef>
+#include <initializer_list>
+#include <span>
+
+#include "tjepa/core/error.hpp"
+#include "tjepa/core/parallel.hpp"
+#include "tjepa/model/param_set.hpp"
+#include "tjepa/model/prefixed_params.hpp"
+
+namespace tjepa {
+
+// Sum of squared gradients of one ParamSet, in double.
+template <class T>
+double grad_sum_squares(const ParamSet<T>& params) {
+  const T* g = params.grads().data();
+  return deterministic_sum(params.flat_size(), [g](std::size_t i) {
+    const double x = static_cast<double>(g[i]);
+    return x * x;
+  });
+}
+
+// The 2-norm of all gradients of all parts.
+template <class T>
+double grad_norm(std::span<const PrefixedParams<T>> parts) {
+  double s = 0.0;
+  for (const auto& part : parts) s += grad_sum_squares(*part.params);
+  return std::sqrt(s);
+}
+
+// Multiplies every gradient by `factor`.
+template <class T>
+void scale_grads(ParamSet<T>& params, T factor) {
+  T* g = params.grads().data();
+  const auto n = static_cast<std::ptrdiff_t>(params.flat_size());
+  TJEPA_OMP(parallel for schedule(static))
+  for (std::ptrdiff_t i = 0; i < n; ++i) g[i] *= factor;
+}
+
+// Clips the joint gradient norm of `parts` to max_norm; returns the norm before clipping (what
+// the reference logs as grad_norm). A non-finite norm leaves the gradients as they are: the
+// caller decides (the JEPA step stops with NumericError).
+template <class T>
+double clip_grad_norm(std::span<const PrefixedParams<T>> parts, double max_norm) {
+  require<ConfigError>(max_norm > 0.0, "clip_grad_norm: max_norm = ", max_norm, ", expected > 0");
+  const double norm = grad_norm(parts);
+  if (!std::isfinite(norm)) return norm;
+  const double coef = max_norm / (norm + 1e-6);
+  if (coef < 1.0)
+    for (const auto& part : parts) scale_grads(*part.params, static_cast<T>(coef));
+  return norm;
+}
+
+template <class T>
+double clip_grad_norm(ParamSet<T>& params, double max_norm) {
+  const PrefixedParams<T> part{"", &params};
+  return clip_grad_norm(std::span<const PrefixedParams<T>>(&part, 1), max_norm);
+}
+
+}  // namespace tjepa
