@@ -9,4 +9,5 @@
 
 #include "tjepa/graph/taxel_graph.hpp"
 
+#include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
