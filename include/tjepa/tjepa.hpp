@@ -10,6 +10,7 @@
 
 #include "tjepa/graph/taxel_graph.hpp"
 
+#include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
 #include "tjepa/model/prefixed_params.hpp"
 
