@@ -5,7 +5,6 @@
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/eigen.hpp"
 #include "tjepa/core/error.hpp"
-#include "tjepa/core/parallel.hpp"
 #include "tjepa/core/random.hpp"
 
 #include "tjepa/graph/taxel_graph.hpp"

@@ -177,7 +177,7 @@ TEST_SUITE("train") {
     big.allocate();
     fill_grads(big, 5);
     const tjepa::PrefixedParams<float> one{"", &big};
-    const int threads = tjepa::max_threads();
+    const int threads = tjepa::detail::max_threads();
 #if defined(_OPENMP)
     omp_set_num_threads(1);
 #endif

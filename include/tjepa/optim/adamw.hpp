@@ -18,7 +18,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
-#include "tjepa/core/parallel.hpp"
+#include "tjepa/model/detail/parallel.hpp"
 #include "tjepa/model/param_set.hpp"
 #include "tjepa/model/prefixed_params.hpp"
 
@@ -68,7 +68,7 @@ class AdamW {
       T* m_all = exp_avg_[k].data();
       T* v_all = exp_avg_sq_[k].data();
       const auto& infos = ps.infos();
-      TJEPA_OMP(parallel)
+      TJEPA_OMP(omp parallel)
       for (const ParamInfo& info : infos) {
         T* p = p_all + info.offset;
         const T* g = g_all + info.offset;
@@ -76,7 +76,7 @@ class AdamW {
         T* v = v_all + info.offset;
         const T keep = info.decay ? decay_factor : T(1);
         const auto n = static_cast<std::ptrdiff_t>(info.size);
-        TJEPA_OMP(for schedule(static) nowait)
+        TJEPA_OMP(omp for schedule(static) nowait)
         for (std::ptrdiff_t i = 0; i < n; ++i) {
           const T gi = g[i];
           const T mi = m[i] + one_minus_b1 * (gi - m[i]);

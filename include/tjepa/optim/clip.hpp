@@ -11,7 +11,8 @@
 #include <span>
 
 #include "tjepa/core/error.hpp"
-#include "tjepa/core/parallel.hpp"
+#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/optim/detail/deterministic_sum.hpp"
 #include "tjepa/model/param_set.hpp"
 #include "tjepa/model/prefixed_params.hpp"
 
@@ -21,7 +22,7 @@ namespace tjepa {
 template <class T>
 double grad_sum_squares(const ParamSet<T>& params) {
   const T* g = params.grads().data();
-  return deterministic_sum(params.flat_size(), [g](std::size_t i) {
+  return detail::deterministic_sum(params.flat_size(), [g](std::size_t i) {
     const double x = static_cast<double>(g[i]);
     return x * x;
   });
@@ -40,7 +41,7 @@ template <class T>
 void scale_grads(ParamSet<T>& params, T factor) {
   T* g = params.grads().data();
   const auto n = static_cast<std::ptrdiff_t>(params.flat_size());
-  TJEPA_OMP(parallel for schedule(static))
+  TJEPA_OMP(omp parallel for schedule(static))
   for (std::ptrdiff_t i = 0; i < n; ++i) g[i] *= factor;
 }
 
