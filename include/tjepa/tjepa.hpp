@@ -11,6 +11,23 @@
 
 #include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
+
+#include "tjepa/model/attention.hpp"
+#include "tjepa/model/block.hpp"
+#include "tjepa/model/encoder.hpp"
+#include "tjepa/model/init.hpp"
+#include "tjepa/model/kernels/attention.hpp"
+#include "tjepa/model/kernels/drop_path.hpp"
+#include "tjepa/model/kernels/gather.hpp"
+#include "tjepa/model/kernels/gelu.hpp"
+#include "tjepa/model/kernels/layer_norm.hpp"
+#include "tjepa/model/kernels/linear.hpp"
+#include "tjepa/model/kernels/softmax.hpp"
+#include "tjepa/model/layers.hpp"
+#include "tjepa/model/mlp.hpp"
+#include "tjepa/model/position_table.hpp"
+#include "tjepa/model/predictor.hpp"
+#include "tjepa/model/workspace.hpp"
 #include "tjepa/model/prefixed_params.hpp"
 
 #include "tjepa/optim/adamw.hpp"

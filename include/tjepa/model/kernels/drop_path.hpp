@@ -5,7 +5,7 @@
 // backward reuses the stored scales. Rate 0 never reaches these functions: the blocks then fuse
 // the residual add into the GEMM.
 #include <cstddef>
-#include <span>
+#include <cstdint>
 
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
@@ -13,12 +13,16 @@
 
 namespace tjepa {
 
-// scale[b] for each sample b, one uniform draw from rngs[b] (B = rngs.size()).
+// scale[site, b] for `sites` residual branches (2 per block) of B samples. Sample b draws one
+// uniform per site, in site order, from its own stream Rng(seed, b).
 template <class T>
-void drop_path_sample(T* scale, std::span<Rng> rngs, double rate) {
+void drop_path_sample(T* scale, int sites, int B, double rate, std::uint64_t seed) {
   require<ConfigError>(rate >= 0.0 && rate < 1.0, "drop_path_sample: rate ", rate, ", expected [0, 1)");
   const double keep = 1.0 - rate;
-  for (std::size_t b = 0; b < rngs.size(); ++b) scale[b] = rngs[b].uniform() < keep ? T(1.0 / keep) : T(0);
+  for (int b = 0; b < B; ++b) {
+    Rng rng(seed, std::uint64_t(b));
+    for (int s = 0; s < sites; ++s) scale[std::size_t(s) * B + b] = rng.uniform() < keep ? T(1.0 / keep) : T(0);
+  }
 }
 
 namespace ref {

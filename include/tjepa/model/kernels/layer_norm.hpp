@@ -73,7 +73,7 @@ void layer_norm_forward(T* out, T* mean, T* rstd, const T* in, const T* w, const
       const V d = xsimd::load_unaligned(x + i) - vmu;
       acc = xsimd::fma(d, d, acc);
     }
-    T var = xsimd::reduce_add(acc);
+    T var = detail::hsum(acc);
     for (; i < n; ++i) var += (x[i] - mu) * (x[i] - mu);
     const T rs = T(1) / std::sqrt(var / T(C) + eps);
     const V vrs(rs);
@@ -111,7 +111,7 @@ void layer_norm_backward(T* din, T* dw, T* db, const T* dout, const T* in, const
         a1 += gw;
         a2 = xsimd::fma(gw, xh, a2);
       }
-      T m1 = xsimd::reduce_add(a1), m2 = xsimd::reduce_add(a2);
+      T m1 = detail::hsum(a1), m2 = detail::hsum(a2);
       for (std::size_t j = i; j < n; ++j) {
         const T xh = (x[j] - mean[m]) * rstd[m];
         m1 += g[j] * w[j];

@@ -50,7 +50,7 @@ void softmax_forward(T* out, const T* in, int M, int N) {
     V vmx(-std::numeric_limits<T>::infinity());
     std::size_t i = 0;
     for (; i + W <= n; i += W) vmx = xsimd::max(vmx, xsimd::load_unaligned(x + i));
-    T mx = xsimd::reduce_max(vmx);
+    T mx = detail::hmax(vmx);
     for (; i < n; ++i) mx = std::max(mx, x[i]);
     const V vm(mx);
     V acc(T(0));
@@ -59,7 +59,7 @@ void softmax_forward(T* out, const T* in, int M, int N) {
       e.store_unaligned(y + i);
       acc += e;
     }
-    T s = xsimd::reduce_add(acc);
+    T s = detail::hsum(acc);
     for (; i < n; ++i) s += (y[i] = std::exp(x[i] - mx));
     const V inv(T(1) / s);
     for (i = 0; i + W <= n; i += W) (xsimd::load_unaligned(y + i) * inv).store_unaligned(y + i);

@@ -1,0 +1,163 @@
+#pragma once
+// Multi-head attention modules around the fused kernel of kernels/attention.hpp.
+//
+// SelfAttention (timm's Attention): <name>.qkv [3d, d] (+ bias), <name>.proj [d, d] (+ bias).
+//   qkv = x · Wqkvᵀ + b  [B·L, 3d] (columns: q | k | v, head h at h·Dh within each)
+//   att = softmax(q kᵀ / √Dh) v per sample and head  [B·L, d]
+//   y   = att · Wprojᵀ + b  [B·L, d]
+// CrossAttention (V-JEPA's attentive pooler): <name>.q [d, d], <name>.kv [2d, d], <name>.proj.
+//   One query row per sample attends to that sample's L tokens.
+// The (sample, head) pairs run in parallel; each is one kernel call with H = 1 and the row
+// strides of the fused buffers, so no L×L matrix is ever stored.
+#include <algorithm>
+#include <cstdint>
+#include <string>
+
+#include "tjepa/model/kernels/attention.hpp"
+#include "tjepa/model/layers.hpp"
+#include "tjepa/model/workspace.hpp"
+
+namespace tjepa {
+
+struct SelfAttention {
+  LinearParams qkv, proj;
+  int heads = 0;
+
+  template <class T>
+  static SelfAttention add(ParamSet<T>& ps, const std::string& name, int dim, int heads, bool qkv_bias,
+                           bool proj_bias) {
+    require<ConfigError>(heads > 0 && dim % heads == 0, name, ": dim ", dim, " is not a multiple of heads ",
+                         heads);
+    SelfAttention a;
+    a.heads = heads;
+    a.qkv = LinearParams::add(ps, name + ".qkv", dim, 3 * dim, qkv_bias);
+    a.proj = LinearParams::add(ps, name + ".proj", dim, dim, proj_bias);
+    return a;
+  }
+  int dim() const { return proj.out; }
+
+  // Head h of sample b as a kernel shape over the fused qkv buffer.
+  AttentionShape head_shape(int L) const {
+    const int d = dim();
+    return {L, L, 1, d / heads, 3 * d, 3 * d, 3 * d, d};
+  }
+
+  // x [B·L, d] → y [B·L, d] (y += when accumulate). qkv_buf [B·L, 3d] and att [B·L, d] are
+  // filled (kept for backward); lse [B, H, L] may be nullptr (inference). key_valid [B, L] or
+  // nullptr.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* qkv_buf,
+               T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws) const {
+    const int M = B * L, d = dim(), Dh = d / heads;
+    qkv.forward(ps, x, qkv_buf, M);
+    const AttentionShape s = head_shape(L);
+    AttentionWorkspace<T>* aws = ws.attention_per_thread();
+    TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
+    for (int bh = 0; bh < B * heads; ++bh) {
+      const int b = bh / heads, h = bh % heads;
+      const T* q = qkv_buf + std::size_t(b) * L * 3 * d + std::size_t(h) * Dh;
+      attention_forward(s, q, q + d, q + 2 * d, key_valid ? key_valid + std::size_t(b) * L : nullptr,
+                        att + std::size_t(b) * L * d + std::size_t(h) * Dh,
+                        lse ? lse + std::size_t(bh) * L : nullptr, aws[detail::thread_id()]);
+    }
+    if (accumulate)
+      proj.forward_accumulate(ps, att, y, M);
+    else
+      proj.forward(ps, att, y, M);
+  }
+
+  // dx [B·L, d] += ∂L/∂x given dy. dqkv [B·L, 3d] and datt [B·L, d] are scratch.
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, int B, int L, const std::uint8_t* key_valid,
+                const T* qkv_buf, const T* att, const T* lse, T* dqkv, T* datt, T* dx, Workspace<T>& ws) const {
+    const int M = B * L, d = dim(), Dh = d / heads;
+    std::fill(datt, datt + std::size_t(M) * d, T(0));
+    proj.backward(ps, dy, att, datt, M);  // y = att · Wprojᵀ + b
+    std::fill(dqkv, dqkv + std::size_t(M) * 3 * d, T(0));
+    const AttentionShape s = head_shape(L);
+    AttentionWorkspace<T>* aws = ws.attention_per_thread();
+    TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
+    for (int bh = 0; bh < B * heads; ++bh) {
+      const int b = bh / heads, h = bh % heads;
+      const std::size_t qo = std::size_t(b) * L * 3 * d + std::size_t(h) * Dh;
+      const std::size_t oo = std::size_t(b) * L * d + std::size_t(h) * Dh;
+      const T* q = qkv_buf + qo;
+      T* dq = dqkv + qo;
+      attention_backward(s, q, q + d, q + 2 * d, key_valid ? key_valid + std::size_t(b) * L : nullptr, att + oo,
+                         lse + std::size_t(bh) * L, datt + oo, dq, dq + d, dq + 2 * d, aws[detail::thread_id()]);
+    }
+    qkv.backward(ps, dqkv, x, dx, M);  // qkv = x · Wqkvᵀ + b
+  }
+};
+
+struct CrossAttention {
+  LinearParams q, kv, proj;
+  int heads = 0;
+
+  template <class T>
+  static CrossAttention add(ParamSet<T>& ps, const std::string& name, int dim, int heads, bool bias) {
+    require<ConfigError>(heads > 0 && dim % heads == 0, name, ": dim ", dim, " is not a multiple of heads ",
+                         heads);
+    CrossAttention a;
+    a.heads = heads;
+    a.q = LinearParams::add(ps, name + ".q", dim, dim, bias);
+    a.kv = LinearParams::add(ps, name + ".kv", dim, 2 * dim, bias);
+    a.proj = LinearParams::add(ps, name + ".proj", dim, dim, bias);
+    return a;
+  }
+  int dim() const { return proj.out; }
+  AttentionShape shape(int L) const {
+    const int d = dim();
+    return {1, L, heads, d / heads, d, 2 * d, 2 * d, d};
+  }
+
+  // query [B, d] (one row per sample), x [B·L, d] → y [B, d] (y += when accumulate).
+  // qbuf [B, d], kvbuf [B·L, 2d], att [B, d] are kept for backward; lse [B, H] may be nullptr.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* query, const T* x, int B, int L, const std::uint8_t* key_valid,
+               T* qbuf, T* kvbuf, T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws) const {
+    const int d = dim();
+    q.forward(ps, query, qbuf, B);
+    kv.forward(ps, x, kvbuf, B * L);
+    const AttentionShape s = shape(L);
+    AttentionWorkspace<T>* aws = ws.attention_per_thread();
+    TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
+    for (int b = 0; b < B; ++b) {
+      const T* k = kvbuf + std::size_t(b) * L * 2 * d;
+      attention_forward(s, qbuf + std::size_t(b) * d, k, k + d, key_valid ? key_valid + std::size_t(b) * L : nullptr,
+                        att + std::size_t(b) * d, lse ? lse + std::size_t(b) * heads : nullptr,
+                        aws[detail::thread_id()]);
+    }
+    if (accumulate)
+      proj.forward_accumulate(ps, att, y, B);
+    else
+      proj.forward(ps, att, y, B);
+  }
+
+  // dquery [B, d] and dx [B·L, d] (either may be nullptr) += gradients given dy [B, d].
+  // dq [B, d], dkv [B·L, 2d], datt [B, d] are scratch.
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dy, const T* query, const T* x, int B, int L,
+                const std::uint8_t* key_valid, const T* qbuf, const T* kvbuf, const T* att, const T* lse, T* dq,
+                T* dkv, T* datt, T* dquery, T* dx, Workspace<T>& ws) const {
+    const int d = dim();
+    std::fill(datt, datt + std::size_t(B) * d, T(0));
+    proj.backward(ps, dy, att, datt, B);
+    std::fill(dq, dq + std::size_t(B) * d, T(0));
+    std::fill(dkv, dkv + std::size_t(B) * L * 2 * d, T(0));
+    const AttentionShape s = shape(L);
+    AttentionWorkspace<T>* aws = ws.attention_per_thread();
+    TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
+    for (int b = 0; b < B; ++b) {
+      const std::size_t ko = std::size_t(b) * L * 2 * d;
+      attention_backward(s, qbuf + std::size_t(b) * d, kvbuf + ko, kvbuf + ko + d,
+                         key_valid ? key_valid + std::size_t(b) * L : nullptr, att + std::size_t(b) * d,
+                         lse + std::size_t(b) * heads, datt + std::size_t(b) * d, dq + std::size_t(b) * d,
+                         dkv + ko, dkv + ko + d, aws[detail::thread_id()]);
+    }
+    kv.backward(ps, dkv, x, dx, B * L);
+    q.backward(ps, dq, query, dquery, B);
+  }
+};
+
+}  // namespace tjepa
