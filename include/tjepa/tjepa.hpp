@@ -7,7 +7,15 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 
+#include "tjepa/layout/taxel_layout.hpp"
+#include "tjepa/layout/grid_pad.hpp"
+#include "tjepa/layout/layout_builder.hpp"
+#include "tjepa/layout/allegro_xela.hpp"
+#include "tjepa/layout/generic.hpp"
+
 #include "tjepa/graph/taxel_graph.hpp"
+#include "tjepa/graph/skin.hpp"
+#include "tjepa/graph/bridges.hpp"
 
 #include "tjepa/masks/collator.hpp"
 #include "tjepa/masks/config.hpp"
