@@ -7,7 +7,23 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 
+#include "tjepa/layout/taxel_layout.hpp"
+#include "tjepa/layout/grid_pad.hpp"
+#include "tjepa/layout/layout_builder.hpp"
+#include "tjepa/layout/allegro_xela.hpp"
+#include "tjepa/layout/generic.hpp"
+
 #include "tjepa/graph/taxel_graph.hpp"
+#include "tjepa/graph/skin.hpp"
+#include "tjepa/graph/bridges.hpp"
+
+#include "tjepa/masks/collator.hpp"
+#include "tjepa/masks/config.hpp"
+#include "tjepa/masks/context.hpp"
+#include "tjepa/masks/domain.hpp"
+#include "tjepa/masks/global.hpp"
+#include "tjepa/masks/ijepa_blocks.hpp"
+#include "tjepa/masks/local.hpp"
 
 #include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
