@@ -1,0 +1,70 @@
+#pragma once
+// The JEPA regression loss between the predictor's output and the target encoder's embeddings
+// at the same tokens (REFERENCE §5), forward and gradient together.
+//
+//   mse (default, the reference's nn.MSELoss):   ℓ(e) = e²
+//   smooth_l1 (I-JEPA, β = 1):                   ℓ(e) = ½e² if |e| < 1, else |e| − ½
+// loss = mean over the n = B·t·d elements of ℓ(pred − target): a target's tokens and the
+// embedding dimension, as PyTorch's reduction="mean". The option that goes with smooth_l1 in
+// I-JEPA, re-normalizing the targets by a LayerNorm without affine (F.layer_norm(h, (d,)),
+// eps 1e-5), is normalize_rows.
+#include <cmath>
+#include <cstddef>
+
+#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/optim/detail/deterministic_sum.hpp"
+
+namespace tjepa {
+
+enum class JepaLossKind { mse, smooth_l1 };
+
+inline const char* to_string(JepaLossKind k) { return k == JepaLossKind::mse ? "mse" : "smooth_l1"; }
+
+// PyTorch's F.layer_norm default eps.
+inline constexpr double target_norm_eps = 1e-5;
+
+// x[m, :] ← (x[m, :] − mean) / sqrt(var + eps) for rows x [M, d] (biased variance), in place.
+template <class T>
+void normalize_rows(T* x, std::size_t M, int d, double eps = target_norm_eps) {
+  const auto rows = static_cast<std::ptrdiff_t>(M);
+  TJEPA_OMP(omp parallel for schedule(static) if (rows > 64))
+  for (std::ptrdiff_t m = 0; m < rows; ++m) {
+    T* r = x + static_cast<std::size_t>(m) * d;
+    double mu = 0;
+    for (int c = 0; c < d; ++c) mu += r[c];
+    mu /= d;
+    double var = 0;
+    for (int c = 0; c < d; ++c) var += (r[c] - mu) * (r[c] - mu);
+    var /= d;
+    const double rs = 1.0 / std::sqrt(var + eps);
+    for (int c = 0; c < d; ++c) r[c] = static_cast<T>((r[c] - mu) * rs);
+  }
+}
+
+// Returns mean_i ℓ(pred_i − target_i) over n elements (summed in double, the same on any thread
+// count). dpred, if not null, receives scale · ∂loss/∂pred (overwritten, not added).
+template <class T>
+double regression_loss(const T* pred, const T* target, T* dpred, std::size_t n, JepaLossKind kind,
+                       double scale = 1.0) {
+  const double inv_n = 1.0 / static_cast<double>(n);
+  const double sum = detail::deterministic_sum(n, [&](std::size_t i) {
+    const double e = static_cast<double>(pred[i]) - static_cast<double>(target[i]);
+    if (kind == JepaLossKind::mse) return e * e;
+    const double a = std::abs(e);
+    return a < 1.0 ? 0.5 * e * e : a - 0.5;
+  });
+  if (dpred) {
+    const double g = scale * inv_n;
+    const auto count = static_cast<std::ptrdiff_t>(n);
+    TJEPA_OMP(omp parallel for schedule(static) if (count > 4096))
+    for (std::ptrdiff_t i = 0; i < count; ++i) {
+      const double e = static_cast<double>(pred[i]) - static_cast<double>(target[i]);
+      // ∂ℓ/∂e: 2e for mse; e inside the quadratic zone, sign(e) outside for smooth-L1.
+      const double de = kind == JepaLossKind::mse ? 2.0 * e : (std::abs(e) < 1.0 ? e : (e > 0 ? 1.0 : -1.0));
+      dpred[i] = static_cast<T>(g * de);
+    }
+  }
+  return sum * inv_n;
+}
+
+}  // namespace tjepa
