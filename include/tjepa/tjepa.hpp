@@ -13,10 +13,10 @@
 #include "tjepa/model/param_set.hpp"
 
 #include "tjepa/model/attention.hpp"
+#include "tjepa/model/attentive_probe.hpp"
 #include "tjepa/model/block.hpp"
 #include "tjepa/model/encoder.hpp"
 #include "tjepa/model/init.hpp"
-#include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/kernels/drop_path.hpp"
 #include "tjepa/model/kernels/gather.hpp"
 #include "tjepa/model/kernels/gelu.hpp"
@@ -27,4 +27,5 @@
 #include "tjepa/model/mlp.hpp"
 #include "tjepa/model/position_table.hpp"
 #include "tjepa/model/predictor.hpp"
+#include "tjepa/model/tokenizer.hpp"
 #include "tjepa/model/workspace.hpp"
