@@ -19,14 +19,24 @@
 // tjepa:: is the fast path: flash-style (online softmax over key tiles, only per-row statistics
 // lse and D = rowsum(dO * O) kept; never an Lq x Lk matrix), SIMD through xsimd, scratch in a
 // caller-owned AttentionWorkspace. Backward adds (+=) into dq, dk, dv.
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <utility>
 #include <vector>
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
+#include "tjepa/model/kernels/detail/attention_simd.hpp"
+
+// g++ 12 reports false "may be used uninitialized" warnings inside its own AVX-512 intrinsics
+// (_mm512_undefined_* operands of max/min/shift) once they are inlined here.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 
 namespace tjepa {
 
@@ -82,6 +92,7 @@ struct AttentionWorkspace {
   std::size_t capacity() const { return buffer.size(); }
 
   AlignedVector<T> buffer;
+  std::vector<int> keys;  // indices of the valid keys [Lk]
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -206,22 +217,269 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
 // ---------------------------------------------------------------------------------------------
 // Fast path
 
-template <class T>
-void AttentionWorkspace<T>::reserve(const AttentionShape&) {}
+namespace detail::attn {
 
+// Indices of the valid keys (all of them without a mask), in ws.keys[0, n); returns n.
+template <class T>
+int compact_keys(const AttentionShape& s, const std::uint8_t* key_valid, AttentionWorkspace<T>& ws) {
+  if (ws.keys.size() < static_cast<std::size_t>(s.Lk)) ws.keys.resize(static_cast<std::size_t>(s.Lk));
+  int n = 0;
+  for (int j = 0; j < s.Lk; ++j)
+    if (key_valid == nullptr || key_valid[j] != 0) ws.keys[static_cast<std::size_t>(n++)] = j;
+  return n;
+}
+
+template <class T>
+T hmax(Vec<T> x) {
+  alignas(64) T buf[W<T>];
+  x.store_aligned(buf);
+  T m = buf[0];
+  for (int i = 1; i < W<T>; ++i) m = std::max(m, buf[i]);
+  return m;
+}
+
+inline constexpr double log2e = 1.4426950408889634074;
+inline constexpr double ln2 = 0.6931471805599453094;
+
+}  // namespace detail::attn
+
+template <class T>
+void AttentionWorkspace<T>::reserve(const AttentionShape& shape) {
+  check_attention_shape(shape, "AttentionWorkspace::reserve");
+  const detail::attn::ForwardLayout<T> f(shape.Lk, shape.Dh);
+  const detail::attn::BackwardLayout<T> b(shape.Lq, shape.Lk, shape.Dh);
+  get(static_cast<std::size_t>(std::max(f.total, b.total)));
+  if (keys.size() < static_cast<std::size_t>(shape.Lk)) keys.resize(static_cast<std::size_t>(shape.Lk));
+}
+
+// Flash-style forward: per head, K_h^T and V_h of the valid keys are packed once; then per tile of
+// BQ query rows the key tiles are visited with an online softmax (running row max m and sum l, the
+// output rescaled by alpha = 2^(m_old - m_new)), so only a [BQ, BK] tile of scores ever exists.
+// Scores are kept in base 2 (scaled by scale * log2 e) so the exponential is one exp2.
 template <class T>
 void attention_forward(const AttentionShape& s, const T* q, const T* k, const T* v,
                        const std::uint8_t* key_valid, T* out, T* lse, AttentionWorkspace<T>& ws) {
-  (void)ws;
-  ref::attention_forward(s, q, k, v, key_valid, out, lse);
+  const char* where = "attention_forward";
+  check_attention_shape(s, where);
+  detail::require_ptr(q, where, "q");
+  detail::require_ptr(k, where, "k");
+  detail::require_ptr(v, where, "v");
+  detail::require_ptr(out, where, "out");
+  namespace A = detail::attn;
+  using V = A::Vec<T>;
+  using Tl = A::Tiles<T>;
+  constexpr int w = A::W<T>;
+  const int Dh = s.Dh;
+  const int nk = A::compact_keys(s, key_valid, ws);
+  if (nk == 0) {  // every key masked: output 0, lse +inf
+    for (int i = 0; i < s.Lq; ++i)
+      for (int c = 0; c < s.d(); ++c) out[static_cast<std::ptrdiff_t>(i) * s.ldo + c] = T(0);
+    if (lse != nullptr)
+      for (int i = 0; i < s.H * s.Lq; ++i) lse[i] = std::numeric_limits<T>::infinity();
+    return;
+  }
+  const A::ForwardLayout<T> lay(nk, Dh);
+  T* const base = ws.get(static_cast<std::size_t>(lay.total));
+  T* const kt = base + lay.kt;
+  T* const vp = base + lay.vp;
+  T* const S = base + lay.s;
+  T* const O = base + lay.o;
+  T* const m = base + lay.m;
+  T* const l = base + lay.l;
+  T* const alpha = base + lay.alpha;
+  T* const rmax = base + lay.rmax;
+  const int* keys = ws.keys.data();
+  const T c = static_cast<T>(A::log2e / std::sqrt(static_cast<double>(Dh)));
+  const std::ptrdiff_t Nk = lay.Nk, DhP = lay.DhP;
+  const T ninf = -std::numeric_limits<T>::infinity();
+
+  for (int h = 0; h < s.H; ++h) {
+    const int c0 = h * Dh;
+    A::pack_transposed(k + c0, s.ldk, keys, nk, Dh, kt, Nk);
+    A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
+
+    for (int q0 = 0; q0 < s.Lq; q0 += Tl::BQ) {
+      const int mq = std::min(Tl::BQ, s.Lq - q0);
+      const T* qblk = q + static_cast<std::ptrdiff_t>(q0) * s.ldq + c0;
+      // Rows past mq keep m = 0, l = 1, so the vector updates below stay finite on them.
+      for (int i = 0; i < Tl::BQ; ++i) {
+        m[i] = i < mq ? ninf : T(0);
+        l[i] = T(1);
+        rmax[i] = T(0);
+      }
+      for (int kb = 0; kb < nk; kb += Tl::BK) {
+        const int kv = std::min(Tl::BK, nk - kb);
+        const int nv = static_cast<int>(A::round_up(kv, w));
+        // S [mq, nv] = Q_blk K_blk^T (unscaled)
+        A::gemm<T, A::Store::overwrite>(mq, nv, Dh, qblk, s.ldq, 1, kt + kb, Nk, S, Tl::BK);
+        for (int i = 0; i < mq; ++i) {
+          T* row = S + i * Tl::BK;
+          for (int j = kv; j < nv; ++j) row[j] = ninf;  // padding keys of the last tile
+          V mx = V::load_aligned(row);
+          for (int j = w; j < nv; j += w) mx = xsimd::max(mx, V::load_aligned(row + j));
+          rmax[i] = A::hmax(mx);
+        }
+        // Per row, in base 2: m_new = max(m, c rowmax), alpha = 2^(m - m_new) (0 on the first tile).
+        for (int i = 0; i < Tl::BQ; i += w) {
+          const V mo = V::load_aligned(m + i);
+          const V mn = xsimd::max(mo, V::load_aligned(rmax + i) * V(c));
+          A::exp2(mo - mn).store_aligned(alpha + i);
+          mn.store_aligned(m + i);
+        }
+        for (int i = 0; i < mq; ++i) {
+          T* row = S + i * Tl::BK;
+          const V mv(m[i]), cv(c);
+          V sum(T(0));
+          for (int j = 0; j < nv; j += w) {
+            const V p = A::exp2(xsimd::fms(V::load_aligned(row + j), cv, mv));
+            p.store_aligned(row + j);
+            sum += p;
+          }
+          rmax[i] = xsimd::hadd(sum);  // now the row sum of this tile
+        }
+        for (int i = 0; i < Tl::BQ; i += w)
+          xsimd::fma(V::load_aligned(l + i), V::load_aligned(alpha + i), V::load_aligned(rmax + i)).store_aligned(l + i);
+        // O [mq, DhP] = alpha O + P V_blk
+        if (kb == 0)
+          A::gemm<T, A::Store::overwrite>(mq, static_cast<int>(DhP), kv, S, Tl::BK, 1, vp, DhP, O, DhP);
+        else
+          A::gemm<T, A::Store::rescale_add>(mq, static_cast<int>(DhP), kv, S, Tl::BK, 1, vp + kb * DhP, DhP, O,
+                                            DhP, alpha);
+      }
+      for (int i = 0; i < mq; ++i) {
+        const T inv = T(1) / l[i];
+        T* orow = out + static_cast<std::ptrdiff_t>(q0 + i) * s.ldo + c0;
+        const T* src = O + i * DhP;
+        for (int p = 0; p < Dh; ++p) orow[p] = src[p] * inv;
+        if (lse != nullptr) lse[static_cast<std::ptrdiff_t>(h) * s.Lq + q0 + i] = (m[i] + std::log2(l[i])) * T(A::ln2);
+      }
+    }
+  }
 }
 
+// Flash-style backward: key tiles outside (their dK, dV accumulate in the workspace), query tiles
+// inside; the transposed scores S^T = K Q^T are recomputed per tile, so the softmax statistics lse
+// and D index columns (vector loads, no horizontal work). P^T = 2^(S^T c - lse2),
+// dS^T = P^T * (dO V^T - D)^T; dV += P^T dO, dK += scale dS^T Q, dQ += scale dS K.
+// Every gradient entry is complete before it is added to dq, dk or dv, once.
 template <class T>
 void attention_backward(const AttentionShape& s, const T* q, const T* k, const T* v,
                         const std::uint8_t* key_valid, const T* out, const T* lse, const T* dout,
                         T* dq, T* dk, T* dv, AttentionWorkspace<T>& ws) {
-  (void)ws;
-  ref::attention_backward(s, q, k, v, key_valid, out, lse, dout, dq, dk, dv);
+  const char* where = "attention_backward";
+  check_attention_shape(s, where);
+  for (auto [p, n] : {std::pair<const void*, const char*>{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"},
+                      {lse, "lse"}, {dout, "dout"}, {dq, "dq"}, {dk, "dk"}, {dv, "dv"}})
+    detail::require_ptr(p, where, n);
+  namespace A = detail::attn;
+  using V = A::Vec<T>;
+  using Tl = A::Tiles<T>;
+  constexpr int w = A::W<T>;
+  const int Dh = s.Dh, Lq = s.Lq;
+  const int nk = A::compact_keys(s, key_valid, ws);
+  if (nk == 0) return;  // every key masked: no gradient
+  const A::BackwardLayout<T> lay(Lq, nk, Dh);
+  T* const base = ws.get(static_cast<std::size_t>(lay.total));
+  T *const qt = base + lay.qt, *const dot = base + lay.dot, *const qp = base + lay.qp;
+  T *const dop = base + lay.dop, *const dqa = base + lay.dq, *const kp = base + lay.kp;
+  T *const vp = base + lay.vp, *const lse2 = base + lay.lse2, *const dd = base + lay.dd;
+  T *const st = base + lay.st, *const dpt = base + lay.dpt, *const dka = base + lay.dk;
+  T* const dva = base + lay.dv;
+  const int* keys = ws.keys.data();
+  const T scale = static_cast<T>(1.0 / std::sqrt(static_cast<double>(Dh)));
+  const T c = static_cast<T>(A::log2e / std::sqrt(static_cast<double>(Dh)));
+  const std::ptrdiff_t NqP = lay.NqP, DhP = lay.DhP;
+
+  for (int h = 0; h < s.H; ++h) {
+    const int c0 = h * Dh;
+    for (std::ptrdiff_t i = 0; i < NqP; ++i) {
+      T* qrow = qp + i * DhP;
+      T* dorow = dop + i * DhP;
+      T* dqrow = dqa + i * DhP;
+      for (std::ptrdiff_t p = 0; p < DhP; ++p) dqrow[p] = T(0);
+      if (i >= Lq) {
+        for (std::ptrdiff_t p = 0; p < DhP; ++p) qrow[p] = dorow[p] = T(0);
+        for (int p = 0; p < Dh; ++p) qt[p * NqP + i] = dot[p * NqP + i] = T(0);
+        lse2[i] = std::numeric_limits<T>::infinity();  // P = 0 on padding queries
+        dd[i] = T(0);
+        continue;
+      }
+      const T* qi = q + i * s.ldq + c0;
+      const T* doi = dout + i * s.ldo + c0;
+      const T* oi = out + i * s.ldo + c0;
+      T D = T(0);
+      for (int p = 0; p < Dh; ++p) {
+        qrow[p] = qt[p * NqP + i] = qi[p];
+        dorow[p] = dot[p * NqP + i] = doi[p];
+        D += doi[p] * oi[p];
+      }
+      for (std::ptrdiff_t p = Dh; p < DhP; ++p) qrow[p] = dorow[p] = T(0);
+      lse2[i] = lse[static_cast<std::ptrdiff_t>(h) * Lq + i] * T(A::log2e);
+      dd[i] = D;
+    }
+    for (int jj = 0; jj < nk; ++jj) {
+      const T* kj = k + static_cast<std::ptrdiff_t>(keys[jj]) * s.ldk + c0;
+      const T* vj = v + static_cast<std::ptrdiff_t>(keys[jj]) * s.ldv + c0;
+      T* krow = kp + jj * DhP;
+      T* vrow = vp + jj * DhP;
+      for (int p = 0; p < Dh; ++p) {
+        krow[p] = kj[p];
+        vrow[p] = vj[p];
+      }
+      for (std::ptrdiff_t p = Dh; p < DhP; ++p) krow[p] = vrow[p] = T(0);
+    }
+
+    for (int kb = 0; kb < nk; kb += Tl::BKB) {
+      const int mk = std::min(Tl::BKB, nk - kb);
+      const T* kblk = kp + kb * DhP;
+      const T* vblk = vp + kb * DhP;
+      for (int qb = 0; qb < Lq; qb += Tl::BQB) {
+        const int nq = std::min(Tl::BQB, Lq - qb);
+        const int nv = static_cast<int>(A::round_up(nq, w));
+        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, kblk, DhP, 1, qt + qb, NqP, st, Tl::BQB);   // S^T
+        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, vblk, DhP, 1, dot + qb, NqP, dpt, Tl::BQB);  // dP^T
+        const V cv(c);
+        for (int r = 0; r < mk; ++r) {
+          T* srow = st + r * Tl::BQB;
+          T* dprow = dpt + r * Tl::BQB;
+          for (int j = 0; j < nv; j += w) {
+            const V p = A::exp2(xsimd::fms(V::load_aligned(srow + j), cv, V::load_aligned(lse2 + qb + j)));
+            p.store_aligned(srow + j);
+            (p * (V::load_aligned(dprow + j) - V::load_aligned(dd + qb + j))).store_aligned(dprow + j);
+          }
+        }
+        if (qb == 0) {
+          A::gemm<T, A::Store::overwrite>(mk, static_cast<int>(DhP), nq, st, Tl::BQB, 1, dop, DhP, dva, DhP);
+          A::gemm<T, A::Store::overwrite>(mk, static_cast<int>(DhP), nq, dpt, Tl::BQB, 1, qp, DhP, dka, DhP);
+        } else {
+          A::gemm<T, A::Store::add>(mk, static_cast<int>(DhP), nq, st, Tl::BQB, 1, dop + qb * DhP, DhP, dva, DhP);
+          A::gemm<T, A::Store::add>(mk, static_cast<int>(DhP), nq, dpt, Tl::BQB, 1, qp + qb * DhP, DhP, dka, DhP);
+        }
+        // dQ_blk [nq, DhP] += dS K_blk, dS read transposed out of the dS^T tile.
+        A::gemm<T, A::Store::add>(nq, static_cast<int>(DhP), mk, dpt, 1, Tl::BQB, kblk, DhP, dqa + qb * DhP, DhP);
+      }
+      for (int r = 0; r < mk; ++r) {
+        const std::ptrdiff_t j = keys[kb + r];
+        T* dkj = dk + j * s.ldk + c0;
+        T* dvj = dv + j * s.ldv + c0;
+        const T* dkr = dka + r * DhP;
+        const T* dvr = dva + r * DhP;
+        for (int p = 0; p < Dh; ++p) {
+          dkj[p] += scale * dkr[p];
+          dvj[p] += dvr[p];
+        }
+      }
+    }
+    for (int i = 0; i < Lq; ++i) {
+      T* dqi = dq + static_cast<std::ptrdiff_t>(i) * s.ldq + c0;
+      const T* src = dqa + static_cast<std::ptrdiff_t>(i) * DhP;
+      for (int p = 0; p < Dh; ++p) dqi[p] += scale * src[p];
+    }
+  }
 }
 
 }  // namespace tjepa
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif

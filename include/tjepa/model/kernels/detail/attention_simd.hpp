@@ -1,0 +1,304 @@
+#pragma once
+// SIMD internals of the fast attention kernels: a vectorized exp2, register-blocked GEMM
+// micro-kernels on tiles, and the tile sizes. Everything uses xsimd's default architecture (the best
+// one the translation unit is compiled for: AVX-512, AVX2 or plain SSE2).
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <type_traits>
+
+#include <xsimd/xsimd.hpp>
+
+namespace tjepa::detail::attn {
+
+template <class T>
+using Vec = xsimd::batch<T>;
+
+template <class T>
+inline constexpr int W = static_cast<int>(Vec<T>::size);
+
+// Register blocking of the micro-kernels: an MR x (NV*W) block of C lives in MR*NV registers.
+// AVX-512 has 32 vector registers (24 accumulators + 4 B vectors + broadcasts); AVX2 and SSE have 16.
+template <class T>
+inline constexpr int MR = sizeof(Vec<T>) >= 64 ? 6 : 3;
+inline constexpr int NV = 4;
+template <class T>
+inline constexpr int NR = NV * W<T>;  // columns of one micro-panel
+
+inline constexpr std::ptrdiff_t round_up(std::ptrdiff_t n, std::ptrdiff_t m) { return (n + m - 1) / m * m; }
+
+// ---------------------------------------------------------------------------------------------
+// exp2 on a batch, for arguments <= 0 as the softmax uses them (x <= 0 after subtracting the row
+// maximum). 2^x = 2^n * 2^f with n = round(x), f in [-1/2, 1/2]; 2^f by a polynomial (Cephes exp2f
+// in float, Taylor of degree 13 in double: both within ~1-2 ulp), 2^n by writing the exponent
+// bits. Arguments below the smallest normal exponent (and -inf) give exactly 0.
+template <class T>
+struct Exp2Traits;
+
+template <>
+struct Exp2Traits<float> {
+  using Int = std::int32_t;
+  static constexpr float lo = -127.0f, hi = 127.0f;
+  static constexpr float magic = 0x1.8p23f;  // adding it rounds to an integer in the low bits
+  static constexpr Int bias = 127;
+  static constexpr int mant = 23;
+  static Vec<float> poly(Vec<float> f) {
+    Vec<float> p(1.535336188319500e-4f);
+    p = xsimd::fma(p, f, Vec<float>(1.339887440266574e-3f));
+    p = xsimd::fma(p, f, Vec<float>(9.618437357674640e-3f));
+    p = xsimd::fma(p, f, Vec<float>(5.550332471162809e-2f));
+    p = xsimd::fma(p, f, Vec<float>(2.402264791363012e-1f));
+    p = xsimd::fma(p, f, Vec<float>(6.931472028550421e-1f));
+    return xsimd::fma(p, f, Vec<float>(1.0f));
+  }
+};
+
+template <>
+struct Exp2Traits<double> {
+  using Int = std::int64_t;
+  static constexpr double lo = -1023.0, hi = 1023.0;
+  static constexpr double magic = 0x1.8p52;
+  static constexpr Int bias = 1023;
+  static constexpr int mant = 52;
+  static Vec<double> poly(Vec<double> f) {
+    // sum_k (ln 2)^k / k! f^k, k = 0..13: truncation error < 1e-17 on |f| <= 1/2.
+    constexpr double c[14] = {1.0,
+                              0.6931471805599453094,
+                              0.2402265069591007123,
+                              0.05550410866482157995,
+                              0.009618129107628477161,
+                              0.001333355814642844343,
+                              0.0001540353039338160995,
+                              1.525273380405984028e-05,
+                              1.321548679014430806e-06,
+                              1.017808600923969972e-07,
+                              7.054911620801123329e-09,
+                              4.445538271870811497e-10,
+                              2.567843599348820521e-11,
+                              1.369104011201429164e-12};
+    Vec<double> p(c[13]);
+    for (int k = 12; k >= 0; --k) p = xsimd::fma(p, f, Vec<double>(c[k]));
+    return p;
+  }
+};
+
+template <class T>
+inline Vec<T> exp2(Vec<T> x) {
+  using Tr = Exp2Traits<T>;
+  using IV = xsimd::batch<typename Tr::Int>;
+  x = xsimd::min(xsimd::max(x, Vec<T>(Tr::lo)), Vec<T>(Tr::hi));  // also maps -inf to lo
+  const Vec<T> t = x + Vec<T>(Tr::magic);                         // low bits of t hold round(x)
+  const Vec<T> n = t - Vec<T>(Tr::magic);
+  const Vec<T> f = x - n;
+  // bits(t) = bits(magic) + n; shifting out the high bits leaves (n + bias) in the exponent field.
+  const IV e = (xsimd::bitwise_cast<IV>(t) + IV(Tr::bias)) << Tr::mant;
+  return Tr::poly(f) * xsimd::bitwise_cast<Vec<T>>(e);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Micro-kernel: C[MR_, NV_*W] (op)= A[MR_, K] B[K, NV_*W].
+// A has arbitrary strides (element (i, p) at A[i*a_rs + p*a_cs]); its entries are broadcast, so a
+// transposed A costs nothing. B rows are W-aligned with stride ldb; C is W-aligned with stride ldc.
+enum class Store { overwrite, add, rescale_add };  // C = AB, C += AB, C = alpha_i C + AB
+
+template <class T, int MR_, int NV_, Store S>
+inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+                         const T* __restrict B, std::ptrdiff_t ldb, T* __restrict C, std::ptrdiff_t ldc,
+                         const T* __restrict alpha) {
+  constexpr int w = W<T>;
+  Vec<T> acc[MR_][NV_];
+#pragma GCC unroll 8
+  for (int i = 0; i < MR_; ++i)
+#pragma GCC unroll 4
+    for (int j = 0; j < NV_; ++j) acc[i][j] = Vec<T>(T(0));
+  for (int p = 0; p < K; ++p) {
+    const T* b = B + p * ldb;
+    Vec<T> bv[NV_];
+#pragma GCC unroll 4
+    for (int j = 0; j < NV_; ++j) bv[j] = Vec<T>::load_aligned(b + j * w);
+    const T* a = A + p * a_cs;
+#pragma GCC unroll 8
+    for (int i = 0; i < MR_; ++i) {
+      const Vec<T> ai(a[i * a_rs]);
+#pragma GCC unroll 4
+      for (int j = 0; j < NV_; ++j) acc[i][j] = xsimd::fma(ai, bv[j], acc[i][j]);
+    }
+  }
+#pragma GCC unroll 8
+  for (int i = 0; i < MR_; ++i) {
+    T* c = C + i * ldc;
+#pragma GCC unroll 4
+    for (int j = 0; j < NV_; ++j) {
+      if constexpr (S == Store::overwrite) {
+        acc[i][j].store_aligned(c + j * w);
+      } else if constexpr (S == Store::add) {
+        (Vec<T>::load_aligned(c + j * w) + acc[i][j]).store_aligned(c + j * w);
+      } else {
+        xsimd::fma(Vec<T>(alpha[i]), Vec<T>::load_aligned(c + j * w), acc[i][j]).store_aligned(c + j * w);
+      }
+    }
+  }
+}
+
+template <class T, int NV_, Store S>
+inline void strip(int mr, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
+                  std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
+  switch (mr) {
+    case 1: return micro_kernel<T, 1, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+    case 2: return micro_kernel<T, 2, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+    case 3: return micro_kernel<T, 3, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+    default:
+      if constexpr (MR<T> >= 6) {
+        switch (mr) {
+          case 4: return micro_kernel<T, 4, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+          case 5: return micro_kernel<T, 5, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+          default: return micro_kernel<T, 6, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+        }
+      }
+  }
+}
+
+// C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NR outside (the B panel
+// stays in L1), strips of MR rows inside. alpha [M] is read only by Store::rescale_add.
+template <class T, Store S>
+inline void gemm(int M, int N, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
+                 std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha = nullptr) {
+  constexpr int w = W<T>;
+  for (int n0 = 0; n0 < N; n0 += NR<T>) {
+    const int nv = std::min(NV, (N - n0) / w);
+    for (int m0 = 0; m0 < M; m0 += MR<T>) {
+      const int mr = std::min(MR<T>, M - m0);
+      const T* a = A + m0 * a_rs;
+      const T* b = B + n0;
+      T* c = C + m0 * ldc + n0;
+      const T* al = alpha == nullptr ? nullptr : alpha + m0;
+      switch (nv) {
+        case 4: strip<T, 4, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
+        case 3: strip<T, 3, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
+        case 2: strip<T, 2, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
+        default: strip<T, 1, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
+      }
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Packing one head's columns [0, Dh) of n source rows (row r at src + rows[r]*lds, or r*lds when
+// rows is null) into tile-friendly layouts.
+
+// The source rows are strided (e.g. one head of a fused [L, 3d] qkv buffer): the hardware
+// prefetcher does not follow them, so each row is fetched `ahead` rows in advance.
+template <class T>
+inline void prefetch_row(const T* src, std::ptrdiff_t lds, const int* rows, int r, int n, int Dh) {
+  constexpr int ahead = 16;
+  if (r + ahead >= n) return;
+  const char* p = reinterpret_cast<const char*>(src + (rows == nullptr ? r + ahead : rows[r + ahead]) * lds);
+  for (std::size_t off = 0; off < Dh * sizeof(T); off += 64) __builtin_prefetch(p + off);
+}
+
+// dst [Dh, ldd] = the rows transposed, columns [n, n_pad) zero (n_pad <= ldd).
+template <class T>
+inline void pack_transposed(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
+                            std::ptrdiff_t n_pad) {
+  const std::ptrdiff_t ldd = n_pad;
+  constexpr int blk = 16;  // 16 source rows at a time: reads stay in L1, writes are 16-wide runs
+  for (int r0 = 0; r0 < n; r0 += blk) {
+    const int r1 = std::min(n, r0 + blk);
+    for (int r = r0; r < r1; ++r) {
+      prefetch_row(src, lds, rows, r, n, Dh);
+      const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
+      for (int p = 0; p < Dh; ++p) dst[p * ldd + r] = sr[p];
+    }
+  }
+  for (int p = 0; p < Dh; ++p)
+    for (std::ptrdiff_t r = n; r < n_pad; ++r) dst[p * ldd + r] = T(0);
+}
+
+// dst [n_pad, DhP] = the rows, columns [Dh, DhP) and rows [n, n_pad) zero.
+template <class T>
+inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
+                      std::ptrdiff_t DhP, std::ptrdiff_t n_pad) {
+  for (std::ptrdiff_t r = 0; r < n_pad; ++r) {
+    T* d = dst + r * DhP;
+    std::ptrdiff_t p = 0;
+    if (r < n) {
+      prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
+      const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
+      for (; p < Dh; ++p) d[p] = sr[p];
+    }
+    for (; p < DhP; ++p) d[p] = T(0);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tile sizes. Forward: BQ query rows x BK keys of scores per tile (BQ a multiple of MR, BK of NR).
+// Backward (key blocks outside, query blocks inside): BKB keys x BQB queries.
+template <class T>
+struct Tiles {
+  static constexpr int BQ = 8 * MR<T>;
+  static constexpr int BK = 2 * NR<T>;
+  static constexpr int BKB = 8 * MR<T>;
+  static constexpr int BQB = NR<T>;
+};
+
+// Offsets (in elements, each W-aligned) of the buffers one head needs, carved out of the workspace.
+template <class T>
+struct ForwardLayout {
+  std::ptrdiff_t Nk, DhP;                      // padded key count, padded head width
+  std::ptrdiff_t kt, vp, s, o, m, l, alpha, rmax, total;
+  ForwardLayout(int Lk, int Dh) {
+    using Tl = Tiles<T>;
+    Nk = round_up(Lk, Tl::BK);
+    DhP = round_up(Dh, W<T>);
+    std::ptrdiff_t at = 0;
+    auto take = [&](std::ptrdiff_t n) {
+      const std::ptrdiff_t off = at;
+      at += round_up(n, W<T>);
+      return off;
+    };
+    kt = take(Dh * Nk);  // K_h^T of the valid keys [Dh, Nk]
+    vp = take(Nk * DhP);  // V_h of the valid keys [Nk, DhP]
+    s = take(std::ptrdiff_t{Tl::BQ} * Tl::BK);  // scores, then probabilities [BQ, BK]
+    o = take(std::ptrdiff_t{Tl::BQ} * DhP);     // unnormalized output [BQ, DhP]
+    m = take(Tl::BQ);
+    l = take(Tl::BQ);
+    alpha = take(Tl::BQ);
+    rmax = take(Tl::BQ);
+    total = at;
+  }
+};
+
+template <class T>
+struct BackwardLayout {
+  std::ptrdiff_t Nk, NqP, DhP;
+  std::ptrdiff_t qt, dot, qp, dop, dq, kp, vp, lse2, dd, st, dpt, dk, dv, total;
+  BackwardLayout(int Lq, int Lk, int Dh) {
+    using Tl = Tiles<T>;
+    Nk = round_up(Lk, Tl::BKB);
+    NqP = round_up(Lq, Tl::BQB);
+    DhP = round_up(Dh, W<T>);
+    std::ptrdiff_t at = 0;
+    auto take = [&](std::ptrdiff_t n) {
+      const std::ptrdiff_t off = at;
+      at += round_up(n, W<T>);
+      return off;
+    };
+    qt = take(Dh * NqP);   // Q_h^T [Dh, NqP]
+    dot = take(Dh * NqP);  // dO_h^T [Dh, NqP]
+    qp = take(NqP * DhP);  // Q_h [NqP, DhP]
+    dop = take(NqP * DhP);  // dO_h [NqP, DhP]
+    dq = take(NqP * DhP);   // dQ_h accumulator [NqP, DhP]
+    kp = take(Nk * DhP);    // K_h of the valid keys [Nk, DhP]
+    vp = take(Nk * DhP);    // V_h of the valid keys [Nk, DhP]
+    lse2 = take(NqP);       // lse in base 2, +inf on padding rows [NqP]
+    dd = take(NqP);         // D = rowsum(dO * O) [NqP]
+    st = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB);   // S^T, then P^T [BKB, BQB]
+    dpt = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB);  // dP^T, then dS^T [BKB, BQB]
+    dk = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dK accumulator of one key block
+    dv = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dV accumulator of one key block
+    total = at;
+  }
+};
+
+}  // namespace tjepa::detail::attn
