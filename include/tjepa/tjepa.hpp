@@ -29,10 +29,10 @@
 #include "tjepa/model/param_set.hpp"
 
 #include "tjepa/model/attention.hpp"
+#include "tjepa/model/attentive_probe.hpp"
 #include "tjepa/model/block.hpp"
 #include "tjepa/model/encoder.hpp"
 #include "tjepa/model/init.hpp"
-#include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/kernels/drop_path.hpp"
 #include "tjepa/model/kernels/gather.hpp"
 #include "tjepa/model/kernels/gelu.hpp"
@@ -43,6 +43,7 @@
 #include "tjepa/model/mlp.hpp"
 #include "tjepa/model/position_table.hpp"
 #include "tjepa/model/predictor.hpp"
+#include "tjepa/model/tokenizer.hpp"
 #include "tjepa/model/workspace.hpp"
 #include "tjepa/model/prefixed_params.hpp"
 

@@ -1,6 +1,7 @@
 #pragma once
-// Mlp (timm's): fc1 [hidden, d] → exact GELU → fc2 [d, hidden]. PyTorch names: <name>.fc1.*,
-// <name>.fc2.*. The fc1 bias is fused into the GELU pass, fc2's output into the residual add.
+// Mlp (timm's): fc1 [hidden, d] → exact GELU → fc2 [out, hidden] (out = d inside a block; the
+// probe's output head has its own out). PyTorch names: <name>.fc1.*, <name>.fc2.*.
+// The fc1 bias is fused into the GELU pass, fc2's output into the residual add.
 #include <algorithm>
 #include <string>
 
@@ -13,16 +14,17 @@ struct Mlp {
   LinearParams fc1, fc2;
 
   template <class T>
-  static Mlp add(ParamSet<T>& ps, const std::string& name, int dim, int hidden, bool bias) {
+  static Mlp add(ParamSet<T>& ps, const std::string& name, int dim, int hidden, bool bias, int out = 0) {
     Mlp m;
     m.fc1 = LinearParams::add(ps, name + ".fc1", dim, hidden, bias);
-    m.fc2 = LinearParams::add(ps, name + ".fc2", hidden, dim, bias);
+    m.fc2 = LinearParams::add(ps, name + ".fc2", hidden, out > 0 ? out : dim, bias);
     return m;
   }
   int dim() const { return fc1.in; }
   int hidden() const { return fc1.out; }
+  int out() const { return fc2.out; }
 
-  // x [M, d] → y [M, d] (y += when accumulate: the residual add). h_pre [M, hidden] receives
+  // x [M, d] → y [M, out] (y += when accumulate: the residual add). h_pre [M, hidden] receives
   // fc1's output + bias (kept for backward), h [M, hidden] the activation; h may equal h_pre.
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, bool accumulate) const {
@@ -34,7 +36,7 @@ struct Mlp {
       fc2.forward(ps, h, y, M);
   }
 
-  // dx [M, d] += ∂L/∂x given dy [M, d]. h, dh [M, hidden] are scratch (h is recomputed from
+  // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]. h, dh [M, hidden] are scratch (h is recomputed from
   // h_pre rather than kept: the largest activation of a block).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M) const {

@@ -287,6 +287,7 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
   T* const m = base + lay.m;
   T* const l = base + lay.l;
   T* const alpha = base + lay.alpha;
+  T* const rmax = base + lay.rmax;
   const int* keys = ws.keys.data();
   const T c = static_cast<T>(A::log2e / std::sqrt(static_cast<double>(Dh)));
   const std::ptrdiff_t Nk = lay.Nk, DhP = lay.DhP;
@@ -294,25 +295,17 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
 
   for (int h = 0; h < s.H; ++h) {
     const int c0 = h * Dh;
-    for (int jj = 0; jj < nk; ++jj) {
-      const T* kj = k + static_cast<std::ptrdiff_t>(keys[jj]) * s.ldk + c0;
-      const T* vj = v + static_cast<std::ptrdiff_t>(keys[jj]) * s.ldv + c0;
-      T* vrow = vp + jj * DhP;
-      for (int p = 0; p < Dh; ++p) {
-        kt[p * Nk + jj] = kj[p];
-        vrow[p] = vj[p];
-      }
-      for (std::ptrdiff_t p = Dh; p < DhP; ++p) vrow[p] = T(0);
-    }
-    for (int p = 0; p < Dh; ++p)
-      for (std::ptrdiff_t jj = nk; jj < Nk; ++jj) kt[p * Nk + jj] = T(0);
+    A::pack_transposed(k + c0, s.ldk, keys, nk, Dh, kt, Nk);
+    A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
 
     for (int q0 = 0; q0 < s.Lq; q0 += Tl::BQ) {
       const int mq = std::min(Tl::BQ, s.Lq - q0);
       const T* qblk = q + static_cast<std::ptrdiff_t>(q0) * s.ldq + c0;
-      for (int i = 0; i < mq; ++i) {
-        m[i] = ninf;
-        l[i] = T(0);
+      // Rows past mq keep m = 0, l = 1, so the vector updates below stay finite on them.
+      for (int i = 0; i < Tl::BQ; ++i) {
+        m[i] = i < mq ? ninf : T(0);
+        l[i] = T(1);
+        rmax[i] = T(0);
       }
       for (int kb = 0; kb < nk; kb += Tl::BK) {
         const int kv = std::min(Tl::BK, nk - kb);
@@ -324,18 +317,28 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
           for (int j = kv; j < nv; ++j) row[j] = ninf;  // padding keys of the last tile
           V mx = V::load_aligned(row);
           for (int j = w; j < nv; j += w) mx = xsimd::max(mx, V::load_aligned(row + j));
-          const T mnew = std::max(m[i], A::hmax(mx) * c);
-          alpha[i] = std::exp2(m[i] - mnew);  // 0 on the first tile (m = -inf)
-          const V mv(mnew), cv(c);
+          rmax[i] = A::hmax(mx);
+        }
+        // Per row, in base 2: m_new = max(m, c rowmax), alpha = 2^(m - m_new) (0 on the first tile).
+        for (int i = 0; i < Tl::BQ; i += w) {
+          const V mo = V::load_aligned(m + i);
+          const V mn = xsimd::max(mo, V::load_aligned(rmax + i) * V(c));
+          A::exp2(mo - mn).store_aligned(alpha + i);
+          mn.store_aligned(m + i);
+        }
+        for (int i = 0; i < mq; ++i) {
+          T* row = S + i * Tl::BK;
+          const V mv(m[i]), cv(c);
           V sum(T(0));
           for (int j = 0; j < nv; j += w) {
             const V p = A::exp2(xsimd::fms(V::load_aligned(row + j), cv, mv));
             p.store_aligned(row + j);
             sum += p;
           }
-          l[i] = l[i] * alpha[i] + xsimd::hadd(sum);
-          m[i] = mnew;
+          rmax[i] = xsimd::hadd(sum);  // now the row sum of this tile
         }
+        for (int i = 0; i < Tl::BQ; i += w)
+          xsimd::fma(V::load_aligned(l + i), V::load_aligned(alpha + i), V::load_aligned(rmax + i)).store_aligned(l + i);
         // O [mq, DhP] = alpha O + P V_blk
         if (kb == 0)
           A::gemm<T, A::Store::overwrite>(mq, static_cast<int>(DhP), kv, S, Tl::BK, 1, vp, DhP, O, DhP);

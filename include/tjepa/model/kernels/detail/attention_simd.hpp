@@ -184,6 +184,54 @@ inline void gemm(int M, int N, int K, const T* A, std::ptrdiff_t a_rs, std::ptrd
 }
 
 // ---------------------------------------------------------------------------------------------
+// Packing one head's columns [0, Dh) of n source rows (row r at src + rows[r]*lds, or r*lds when
+// rows is null) into tile-friendly layouts.
+
+// The source rows are strided (e.g. one head of a fused [L, 3d] qkv buffer): the hardware
+// prefetcher does not follow them, so each row is fetched `ahead` rows in advance.
+template <class T>
+inline void prefetch_row(const T* src, std::ptrdiff_t lds, const int* rows, int r, int n, int Dh) {
+  constexpr int ahead = 16;
+  if (r + ahead >= n) return;
+  const char* p = reinterpret_cast<const char*>(src + (rows == nullptr ? r + ahead : rows[r + ahead]) * lds);
+  for (std::size_t off = 0; off < Dh * sizeof(T); off += 64) __builtin_prefetch(p + off);
+}
+
+// dst [Dh, ldd] = the rows transposed, columns [n, n_pad) zero (n_pad <= ldd).
+template <class T>
+inline void pack_transposed(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
+                            std::ptrdiff_t n_pad) {
+  const std::ptrdiff_t ldd = n_pad;
+  constexpr int blk = 16;  // 16 source rows at a time: reads stay in L1, writes are 16-wide runs
+  for (int r0 = 0; r0 < n; r0 += blk) {
+    const int r1 = std::min(n, r0 + blk);
+    for (int r = r0; r < r1; ++r) {
+      prefetch_row(src, lds, rows, r, n, Dh);
+      const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
+      for (int p = 0; p < Dh; ++p) dst[p * ldd + r] = sr[p];
+    }
+  }
+  for (int p = 0; p < Dh; ++p)
+    for (std::ptrdiff_t r = n; r < n_pad; ++r) dst[p * ldd + r] = T(0);
+}
+
+// dst [n_pad, DhP] = the rows, columns [Dh, DhP) and rows [n, n_pad) zero.
+template <class T>
+inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
+                      std::ptrdiff_t DhP, std::ptrdiff_t n_pad) {
+  for (std::ptrdiff_t r = 0; r < n_pad; ++r) {
+    T* d = dst + r * DhP;
+    std::ptrdiff_t p = 0;
+    if (r < n) {
+      prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
+      const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
+      for (; p < Dh; ++p) d[p] = sr[p];
+    }
+    for (; p < DhP; ++p) d[p] = T(0);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Tile sizes. Forward: BQ query rows x BK keys of scores per tile (BQ a multiple of MR, BK of NR).
 // Backward (key blocks outside, query blocks inside): BKB keys x BQB queries.
 template <class T>
@@ -198,7 +246,7 @@ struct Tiles {
 template <class T>
 struct ForwardLayout {
   std::ptrdiff_t Nk, DhP;                      // padded key count, padded head width
-  std::ptrdiff_t kt, vp, s, o, m, l, alpha, total;
+  std::ptrdiff_t kt, vp, s, o, m, l, alpha, rmax, total;
   ForwardLayout(int Lk, int Dh) {
     using Tl = Tiles<T>;
     Nk = round_up(Lk, Tl::BK);
@@ -216,6 +264,7 @@ struct ForwardLayout {
     m = take(Tl::BQ);
     l = take(Tl::BQ);
     alpha = take(Tl::BQ);
+    rmax = take(Tl::BQ);
     total = at;
   }
 };
