@@ -66,3 +66,8 @@
 #include "tjepa/io/atomic_file.hpp"
 #include "tjepa/io/checkpoint.hpp"
 #include "tjepa/io/safetensors.hpp"
+
+#include "tjepa/train/health.hpp"
+#include "tjepa/train/jepa_model.hpp"
+#include "tjepa/train/jepa_step.hpp"
+#include "tjepa/train/loss.hpp"

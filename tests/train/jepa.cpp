@@ -1,0 +1,215 @@
+// The JEPA step end to end on a tiny model in double: the full loss against central differences
+// for every trainable parameter, tiling against one predictor pass per target, the optimizer step
+// with EMA, and the NaN stop.
+// g++ 12 reports a false (maybe-)uninitialized inside its AVX-512 intrinsics once Eigen's double
+// kernels are inlined (GCC bug 105593); see tests/model/modules.cpp.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
+#include <doctest/doctest.h>
+
+#include <tjepa/tjepa.hpp>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "../model/gradcheck.hpp"
+
+using namespace tjepa;
+
+namespace {
+
+// 9 tokens, d = 8, 2 heads, 2 encoder blocks, 1 predictor block; m·τ = 4 values per taxel.
+JepaConfig tiny_config(int depth = 2) {
+  JepaConfig c;
+  c.in_dim = 4;
+  c.encoder = EncoderConfig{9, 8, depth, 2, 2.0, true, 1e-6};
+  c.predictor = PredictorConfig{8, 8, 1, 2, 2.0, false, 1e-6};
+  return c;
+}
+
+// B = 2 samples, K = 4 context tokens, 3 targets: sizes 2, 3, 2 (two share a predictor pass),
+// overlapping each other, disjoint from the context.
+MaskBatch tiny_masks() {
+  MaskBatch m;
+  m.B = 2;
+  m.K = 4;
+  m.context = {0, 1, 4, 8, 2, 3, 6, 7};
+  TargetSet a{2, TargetKind::local, -1, {2, 3, 0, 1}};
+  TargetSet b{3, TargetKind::global, -1, {3, 5, 6, 4, 5, 8}};
+  TargetSet c{2, TargetKind::local, -1, {5, 7, 1, 8}};
+  m.targets = {a, b, c};
+  return m;
+}
+
+// Runs a scope on one OpenMP thread: the tiny model's thousands of forward passes would spend
+// their time in thread barriers (results do not depend on the thread count).
+struct SingleThread {
+#if defined(_OPENMP)
+  int previous = omp_get_max_threads();
+  SingleThread() { omp_set_num_threads(1); }
+  ~SingleThread() { omp_set_num_threads(previous); }
+#endif
+};
+
+std::vector<double> tiny_input(std::uint64_t seed, int B = 2) {
+  Rng rng(seed);
+  return test::normal_vector(static_cast<std::size_t>(B) * 9 * 4, rng);
+}
+
+}  // namespace
+
+TEST_SUITE("train") {
+  TEST_CASE("full JEPA loss: analytic gradient of every trainable parameter = central differences") {
+    const SingleThread one_thread;
+    JepaModel<double> model(tiny_config(), 1);
+    test::randomize(model.context, 2);
+    test::randomize(model.target, 3);
+    test::randomize(model.predictor_params, 4);
+    const auto x = tiny_input(5);
+    const MaskBatch masks = tiny_masks();
+    JepaStepConfig cfg;
+    cfg.drop_path = 0.0;
+    SUBCASE("MSE, target encoder's position rows (the reference)") {}
+    SUBCASE("drop-path 0.5 in both encoders, fixed noise seed") { cfg.drop_path = 0.5; }
+    SUBCASE("smooth-L1 against re-normalized targets, context encoder's position rows") {
+      cfg.loss = JepaLossKind::smooth_l1;
+      cfg.normalize_targets = true;
+      cfg.predictor_pos_from_context = true;
+    }
+    JepaWorkspace<double> w;
+    const std::uint64_t noise = 77;
+    auto loss = [&] { return jepa_loss(model, x.data(), 2, masks, w, cfg, noise, false).loss; };
+    const auto target_before = model.target;
+    model.context.zero_grad();
+    model.predictor_params.zero_grad();
+    const double l = jepa_loss(model, x.data(), 2, masks, w, cfg, noise, true).loss;
+    CHECK(l == doctest::Approx(loss()).epsilon(1e-13));
+    CHECK(l > 0);
+    test::check_param_gradients(model.context, loss);
+    test::check_param_gradients(model.predictor_params, loss);
+    // The target encoder gets no gradient and is not changed by the loss.
+    for (double g : model.target.grads()) CHECK(g == 0.0);
+    CHECK(std::equal(model.target.values().begin(), model.target.values().end(), target_before.values().begin()));
+    // Position rows get a gradient through the predictor only when it reads the context's table.
+    const auto pos = model.context.grad_span(model.encoder.pos_embed());
+    const bool pos_grad = std::any_of(pos.begin(), pos.end(), [](double g) { return g != 0.0; });
+    CHECK(pos_grad);  // the context encoder's own use of its rows always gives one
+  }
+
+  TEST_CASE("two backward passes accumulate twice the gradient") {
+    JepaModel<double> model(tiny_config(1), 11);
+    test::randomize(model.context, 12);
+    test::randomize(model.predictor_params, 13);
+    const auto x = tiny_input(14);
+    JepaWorkspace<double> w;
+    JepaStepConfig cfg;
+    model.context.zero_grad();
+    model.predictor_params.zero_grad();
+    (void)jepa_loss(model, x.data(), 2, tiny_masks(), w, cfg, 5, true);
+    const auto once = model.context;
+    (void)jepa_loss(model, x.data(), 2, tiny_masks(), w, cfg, 5, true);
+    for (std::size_t i = 0; i < once.grads().size(); ++i) CHECK(model.context.grads()[i] == doctest::Approx(2 * once.grads()[i]).epsilon(1e-12));
+  }
+
+  TEST_CASE("tiling targets gives the loss of one predictor pass per target, averaged over targets") {
+    JepaModel<double> model(tiny_config(), 21);
+    test::randomize(model.context, 22);
+    test::randomize(model.target, 23);
+    test::randomize(model.predictor_params, 24);
+    const auto x = tiny_input(25);
+    const MaskBatch masks = tiny_masks();
+    JepaStepConfig cfg;
+    cfg.drop_path = 0.0;
+    JepaWorkspace<double> w;
+    const auto r = jepa_loss(model, x.data(), 2, masks, w, cfg, 1, false);
+    // Each target on its own, the way the reference's formula reads.
+    const int B = 2, N = 9, d = 8;
+    Workspace<double> ws;
+    std::vector<double> tok(B * N * d), h(B * N * d), z(B * masks.K * d);
+    model.tokenizer.forward(model.target, x.data(), B, tok.data(), nullptr, ws);
+    model.encoder.forward(model.target, tok.data(), B, nullptr, N, h.data(), nullptr, ws);
+    model.tokenizer.forward(model.context, x.data(), B, tok.data(), nullptr, ws);
+    model.encoder.forward(model.context, tok.data(), B, masks.context.data(), masks.K, z.data(), nullptr, ws);
+    double mean = 0;
+    for (int j = 0; j < masks.num_targets(); ++j) {
+      const TargetSet& ts = masks.targets[j];
+      std::vector<double> p(B * ts.size * d);
+      model.predictor.forward(model.predictor_params, z.data(), B, masks.K,
+                              model.target.value(model.encoder.pos_embed()), N, ts.indices.data(), B, ts.size,
+                              p.data(), nullptr, ws);
+      double s = 0;
+      for (int b = 0; b < B; ++b)
+        for (int k = 0; k < ts.size; ++k)
+          for (int c = 0; c < d; ++c) {
+            const double e = p[(b * ts.size + k) * d + c] - h[(b * N + ts.row(b)[k]) * d + c];
+            s += e * e;
+          }
+      const double lj = s / (B * ts.size * d);
+      CHECK(r.target_losses[j] == doctest::Approx(lj).epsilon(1e-12));
+      mean += lj / masks.num_targets();
+    }
+    CHECK(r.loss == doctest::Approx(mean).epsilon(1e-12));
+    // The target-embedding std is the per-dimension std over all B·N embeddings, averaged.
+    double stdsum = 0;
+    for (int c = 0; c < d; ++c) {
+      double mu = 0, v = 0;
+      for (int i = 0; i < B * N; ++i) mu += h[i * d + c];
+      mu /= B * N;
+      for (int i = 0; i < B * N; ++i) v += (h[i * d + c] - mu) * (h[i * d + c] - mu);
+      stdsum += std::sqrt(v / (B * N - 1));
+    }
+    CHECK(r.target_std == doctest::Approx(stdsum / d).epsilon(1e-12));
+  }
+
+  TEST_CASE("a training step: scheduled AdamW on the trainable sets, then the EMA of the target encoder") {
+    JepaModel<double> model(tiny_config(1), 31);
+    test::randomize(model.predictor_params, 32);
+    const auto x = tiny_input(33);
+    AdamW<double> opt(model.trainable());
+    const auto schedule = TrainingSchedule::reference(10, 4, 2);
+    JepaWorkspace<double> w;
+    JepaStepConfig cfg;
+    const auto context0 = model.context;
+    const auto target0 = model.target;
+    const auto st = jepa_train_step(model, opt, schedule, 5, x.data(), 2, tiny_masks(), w, cfg, 9);
+    CHECK(st.step == 5);
+    CHECK(st.lr == doctest::Approx(schedule.lr(6)).epsilon(1e-15));
+    CHECK(st.weight_decay == doctest::Approx(schedule.wd(6)).epsilon(1e-15));
+    CHECK(st.momentum == doctest::Approx(schedule.momentum(5)).epsilon(1e-15));
+    CHECK(st.grad_norm > 0);
+    CHECK(st.target_std > 0);
+    CHECK(st.target_losses.size() == 3);
+    CHECK(opt.steps() == 1);
+    bool moved = false;
+    for (std::size_t i = 0; i < model.context.flat_size(); ++i) {
+      moved |= model.context.values()[i] != context0.values()[i];
+      CHECK(model.target.values()[i] == doctest::Approx(st.momentum * target0.values()[i] +
+                                                        (1 - st.momentum) * model.context.values()[i])
+                                            .epsilon(1e-14));
+    }
+    CHECK(moved);
+  }
+
+  TEST_CASE("a NaN stops the step with NumericError before any parameter changes") {
+    JepaModel<double> model(tiny_config(1), 41);
+    auto x = tiny_input(42);
+    x[7] = std::numeric_limits<double>::quiet_NaN();
+    AdamW<double> opt(model.trainable());
+    const auto schedule = TrainingSchedule::reference(10, 4, 2);
+    JepaWorkspace<double> w;
+    const auto before = model;
+    CHECK_THROWS_WITH_AS(jepa_train_step(model, opt, schedule, 0, x.data(), 2, tiny_masks(), w, JepaStepConfig{}, 1),
+                         doctest::Contains("JEPA step 0: the loss is nan"), NumericError);
+    CHECK(opt.steps() == 0);
+    for (auto [a, b] : {std::pair{&model.context, &before.context}, std::pair{&model.target, &before.target},
+                        std::pair{&model.predictor_params, &before.predictor_params}})
+      CHECK(std::equal(a->values().begin(), a->values().end(), b->values().begin()));
+    // Masks that do not fit the model are rejected.
+    MaskBatch bad = tiny_masks();
+    bad.context[3] = 9;
+    CHECK_THROWS_AS(jepa_loss(model, x.data(), 2, bad, w, JepaStepConfig{}, 1), ShapeError);
+  }
+}
