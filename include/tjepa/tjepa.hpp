@@ -71,3 +71,4 @@
 #include "tjepa/train/jepa_model.hpp"
 #include "tjepa/train/jepa_step.hpp"
 #include "tjepa/train/loss.hpp"
+#include "tjepa/train/trainer.hpp"
