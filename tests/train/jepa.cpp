@@ -33,6 +33,15 @@ JepaConfig tiny_config(int depth = 2) {
   return c;
 }
 
+// Every parameter of all three sets away from its degenerate init, so every gradient path counts.
+JepaModel<double> random_model(std::uint64_t seed, int depth = 2) {
+  JepaModel<double> model(tiny_config(depth), seed);
+  test::randomize(model.context, seed + 1);
+  test::randomize(model.target, seed + 2);
+  test::randomize(model.predictor_params, seed + 3);
+  return model;
+}
+
 // B = 2 samples, K = 4 context tokens, 3 targets: sizes 2, 3, 2 (two share a predictor pass),
 // overlapping each other, disjoint from the context.
 MaskBatch tiny_masks() {
@@ -111,6 +120,18 @@ JepaConfig blob_config() {
   return c;
 }
 
+// The reference schedule shortened: batches of 16, one warm-up epoch, a higher peak rate.
+TrainerConfig blob_trainer_config(int epochs, std::uint64_t seed) {
+  TrainerConfig tc;
+  tc.epochs = epochs;
+  tc.batch_size = 16;
+  tc.warmup_epochs = 1;
+  tc.ref_lr = 1e-3;
+  tc.seed = seed;
+  tc.step.drop_path = 0.0;
+  return tc;
+}
+
 struct TempPath {
   std::filesystem::path path;
   explicit TempPath(const std::string& name)
@@ -128,10 +149,7 @@ struct TempPath {
 TEST_SUITE("train") {
   TEST_CASE("full JEPA loss: analytic gradient of every trainable parameter = central differences") {
     const SingleThread one_thread;
-    JepaModel<double> model(tiny_config(), 1);
-    test::randomize(model.context, 2);
-    test::randomize(model.target, 3);
-    test::randomize(model.predictor_params, 4);
+    auto model = random_model(1);
     const auto x = tiny_input(5);
     const MaskBatch masks = tiny_masks();
     JepaStepConfig cfg;
@@ -164,9 +182,7 @@ TEST_SUITE("train") {
   }
 
   TEST_CASE("two backward passes accumulate twice the gradient") {
-    JepaModel<double> model(tiny_config(1), 11);
-    test::randomize(model.context, 12);
-    test::randomize(model.predictor_params, 13);
+    auto model = random_model(11, 1);
     const auto x = tiny_input(14);
     JepaWorkspace<double> w;
     JepaStepConfig cfg;
@@ -175,14 +191,12 @@ TEST_SUITE("train") {
     (void)jepa_loss(model, x.data(), 2, tiny_masks(), w, cfg, 5, true);
     const auto once = model.context;
     (void)jepa_loss(model, x.data(), 2, tiny_masks(), w, cfg, 5, true);
-    for (std::size_t i = 0; i < once.grads().size(); ++i) CHECK(model.context.grads()[i] == doctest::Approx(2 * once.grads()[i]).epsilon(1e-12));
+    for (std::size_t i = 0; i < once.grads().size(); ++i)
+      CHECK(model.context.grads()[i] == doctest::Approx(2 * once.grads()[i]).epsilon(1e-12));
   }
 
   TEST_CASE("tiling targets gives the loss of one predictor pass per target, averaged over targets") {
-    JepaModel<double> model(tiny_config(), 21);
-    test::randomize(model.context, 22);
-    test::randomize(model.target, 23);
-    test::randomize(model.predictor_params, 24);
+    auto model = random_model(21);
     const auto x = tiny_input(25);
     const MaskBatch masks = tiny_masks();
     JepaStepConfig cfg;
@@ -292,12 +306,7 @@ TEST_SUITE("train") {
   TEST_CASE("save, load, continue: the loss curve is bitwise that of an uninterrupted run") {
     const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
     const auto collator = blob_collator();
-    TrainerConfig tc;
-    tc.epochs = 3;
-    tc.batch_size = 16;
-    tc.warmup_epochs = 1;
-    tc.ref_lr = 1e-3;
-    tc.seed = 5;
+    TrainerConfig tc = blob_trainer_config(3, 5);
     tc.step.drop_path = 0.1;  // exercises the checkpointed noise generator
     TempPath ckpt("resume");
     tc.checkpoint = ckpt.path;
@@ -341,10 +350,7 @@ TEST_SUITE("train") {
   TEST_CASE("a NaN stops the trainer with NumericError and leaves the last checkpoint intact") {
     const auto source = blob_source(100, 2);
     const auto collator = blob_collator();
-    TrainerConfig tc;
-    tc.epochs = 2;
-    tc.batch_size = 16;
-    tc.warmup_epochs = 0;
+    TrainerConfig tc = blob_trainer_config(2, 0);
     TempPath ckpt("nan");
     tc.checkpoint = ckpt.path;
     tc.checkpoint_every = 2;
@@ -364,19 +370,15 @@ TEST_SUITE("train") {
   TEST_CASE("on a small synthetic set the loss falls and the target embeddings do not collapse") {
     const auto source = blob_source(1200, 3);  // 600 windows: 37 batches of 16 per epoch
     const auto collator = blob_collator();
-    TrainerConfig tc;
-    tc.epochs = 8;
-    tc.batch_size = 16;
-    tc.warmup_epochs = 1;
-    tc.ref_lr = 1e-3;
-    tc.seed = 11;
-    tc.step.drop_path = 0.0;
+    TrainerConfig tc = blob_trainer_config(8, 11);
+    tc.log_every = 100;
     JepaModel<float> model(blob_config(), 13);
     Trainer<float> trainer(model, source, collator, tc);
     std::ostringstream log;
     trainer.log = &log;
-    tc.log_every = 0;
     const auto stats = trainer.run();
+    CHECK(log.str().find("step 1/296 epoch 0 loss ") == 0);
+    CHECK(log.str().find("step 296/296 epoch 7 loss ") != std::string::npos);
     const std::size_t n = stats.size(), k = 20;
     auto mean = [&](std::size_t from, double JepaStepStats::*f) {
       double s = 0;
