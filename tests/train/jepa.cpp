@@ -195,7 +195,7 @@ TEST_SUITE("train") {
       CHECK(model.context.grads()[i] == doctest::Approx(2 * once.grads()[i]).epsilon(1e-12));
   }
 
-  TEST_CASE("tiling targets gives the loss of one predictor pass per target, averaged over targets") {
+  TEST_CASE("tiling targets gives the loss of one predictor pass per target averaged over targets") {
     auto model = random_model(21);
     const auto x = tiny_input(25);
     const MaskBatch masks = tiny_masks();
@@ -242,7 +242,7 @@ TEST_SUITE("train") {
     CHECK(r.target_std == doctest::Approx(stdsum / d).epsilon(1e-12));
   }
 
-  TEST_CASE("a training step: scheduled AdamW on the trainable sets, then the EMA of the target encoder") {
+  TEST_CASE("a training step: scheduled AdamW on the trainable sets then the EMA of the target encoder") {
     JepaModel<double> model(tiny_config(1), 31);
     test::randomize(model.predictor_params, 32);
     const auto x = tiny_input(33);
@@ -291,7 +291,7 @@ TEST_SUITE("train") {
     CHECK_THROWS_AS(jepa_loss(model, x.data(), 2, bad, w, JepaStepConfig{}, 1), ShapeError);
   }
 
-  TEST_CASE("windows reach the tokenizer axis-major, as the reference's patch embedding reads them") {
+  TEST_CASE("windows reach the tokenizer axis-major as the reference's patch embedding reads them") {
     WindowBatch b;
     b.batch = 1;
     b.taxels = 2;
@@ -303,7 +303,7 @@ TEST_SUITE("train") {
     CHECK(std::vector<double>(out.begin(), out.end()) == std::vector<double>{0, 2, 4, 1, 3, 5, 10, 12, 14, 11, 13, 15});
   }
 
-  TEST_CASE("save, load, continue: the loss curve is bitwise that of an uninterrupted run") {
+  TEST_CASE("save then load then continue: the loss curve is bitwise that of an uninterrupted run") {
     const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
     const auto collator = blob_collator();
     TrainerConfig tc = blob_trainer_config(3, 5);
