@@ -8,6 +8,7 @@
 #include <map>
 #include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 namespace {
@@ -266,4 +267,90 @@ TEST_SUITE("graph") {
       for (int i : t) CHECK(l.part[i] == l.group_part[gidx]);
     }
   }
+
+  TEST_CASE("Inspire hand: 1062 taxels, 17 regions, 4-neighbour regions bridged, one component") {
+    using tjepa::layouts::inspire::Side;
+    for (Side side : {Side::left, Side::right}) {
+      const auto s = tjepa::layouts::inspire_hand(side);
+      const auto& l = s.layout;
+      CHECK(l.size() == 1062);
+      CHECK(l.num_parts() == 1);
+      CHECK(l.part_names[0] == (side == Side::left ? "left" : "right"));
+      CHECK(l.num_groups() == 17);
+      CHECK(s.graph.num_components() == 1);
+      // Region shapes from REFERENCE §2, in the documented order.
+      const std::vector<std::tuple<std::string, int, int>> shapes = {
+          {"little_tip", 3, 3}, {"little_nail", 12, 8}, {"little_pad", 10, 8},
+          {"ring_tip", 3, 3},   {"ring_nail", 12, 8},   {"ring_pad", 10, 8},
+          {"middle_tip", 3, 3}, {"middle_nail", 12, 8}, {"middle_pad", 10, 8},
+          {"index_tip", 3, 3},  {"index_nail", 12, 8},  {"index_pad", 10, 8},
+          {"thumb_tip", 3, 3},  {"thumb_nail", 12, 8},  {"thumb_middle", 3, 3},
+          {"thumb_pad", 12, 8}, {"palm", 8, 14}};
+      std::size_t intra_expected = 0;
+      for (int gi = 0; gi < 17; ++gi) {
+        const auto& [name, rows, cols] = shapes[gi];
+        CHECK(l.group_names[gi] == name);
+        const auto t = l.taxels_of_group(gi);
+        CHECK(t.size() == static_cast<std::size_t>(rows * cols));
+        CHECK(*std::max_element(l.row.begin() + t.front(), l.row.begin() + t.back() + 1) == rows - 1);
+        CHECK(*std::max_element(l.col.begin() + t.front(), l.col.begin() + t.back() + 1) == cols - 1);
+        intra_expected += static_cast<std::size_t>(rows * (cols - 1) + cols * (rows - 1));
+      }
+      CHECK(intra_expected == 1874u);
+      std::size_t intra = 0;
+      std::map<std::pair<int, int>, int> bridges;
+      for (const auto& e : s.graph.edges()) {
+        if (l.group[e.src] == l.group[e.dst]) ++intra;
+        else ++bridges[{std::min(l.group[e.src], l.group[e.dst]), std::max(l.group[e.src], l.group[e.dst])}];
+        CHECK(e.weight == doctest::Approx(l.distance(e.src, e.dst)));
+      }
+      CHECK(intra == intra_expected);
+      CHECK(bridges.size() == 16u);  // 4 fingers x 3 + thumb 4
+      for (const auto& [pair, k] : bridges) CHECK(k == 4);
+      for (int f = 0; f < 4; ++f) {  // tip-nail, nail-pad, pad-palm
+        CHECK(bridges.count({3 * f, 3 * f + 1}) == 1);
+        CHECK(bridges.count({3 * f + 1, 3 * f + 2}) == 1);
+        CHECK(bridges.count({3 * f + 2, 16}) == 1);
+      }
+      for (int k = 12; k < 16; ++k) CHECK(bridges.count({k, k + 1}) == 1);
+    }
+  }
+
+  TEST_CASE("Inspire two hands: 2124 taxels in two parts, two components, regions named per hand") {
+    const auto s = tjepa::layouts::inspire_hands();
+    const auto& l = s.layout;
+    CHECK(l.size() == 2124);
+    CHECK(l.part_names == std::vector<std::string>{"left", "right"});
+    CHECK(l.num_groups() == 34);
+    CHECK(l.group_names[16] == "left/palm");
+    CHECK(l.group_names[17] == "right/little_tip");
+    CHECK(s.graph.num_components() == 2);
+    for (int i = 0; i < 2124; ++i) {
+      CHECK(l.part[i] == (i < 1062 ? 0 : 1));
+      CHECK(l.ids[i] == i);
+    }
+    CHECK(s.graph.component_size(s.graph.component(0)) == 1062);
+    CHECK(s.graph.num_edges() == 2u * (1874 + 64));
+    for (const auto& e : s.graph.edges()) CHECK(l.part[e.src] == l.part[e.dst]);
+    // The hands are drawn apart: the right hand lies 20 mm or more to the right of the left.
+    double left_max = -1e9, right_min = 1e9;
+    for (int i = 0; i < 1062; ++i) left_max = std::max(left_max, l.coord(i, 0));
+    for (int i = 1062; i < 2124; ++i) right_min = std::min(right_min, l.coord(i, 0));
+    CHECK(right_min - left_max > 20.0);
+  }
+
+  TEST_CASE("join_skins renumbers parts, groups and ids and rejects mismatched input") {
+    const tjepa::Skin parts[2] = {tjepa::layouts::grid_skin(), tjepa::layouts::two_part_skin()};
+    const std::string names[2] = {"sheet", "socks"};
+    const auto j = tjepa::join_skins(parts, names);
+    CHECK(j.size() == parts[0].size() + parts[1].size());
+    CHECK(j.layout.part_names == std::vector<std::string>{"sheet", "socks/left", "socks/right"});
+    CHECK(j.layout.group_names[12] == "socks/left/heel");
+    CHECK(j.graph.num_components() == 3);
+    CHECK(j.graph.num_edges() == parts[0].graph.num_edges() + parts[1].graph.num_edges());
+    CHECK(j.layout.ids[parts[0].size()] == parts[0].size());
+    const std::string one[1] = {"x"};
+    CHECK_THROWS_WITH_AS(tjepa::join_skins(parts, one), doctest::Contains("1 names for 2 skins"), tjepa::ShapeError);
+  }
 }
+
