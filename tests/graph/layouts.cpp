@@ -23,19 +23,6 @@ std::vector<int> sorted_neighbors(const tjepa::TaxelGraph& g, int i) {
   return v;
 }
 
-// True when the given nodes induce a connected subgraph of g.
-bool induces_connected(const tjepa::TaxelGraph& g, const std::vector<int>& nodes) {
-  if (nodes.empty()) return false;
-  std::set<int> in(nodes.begin(), nodes.end()), seen{nodes[0]};
-  std::vector<int> stack{nodes[0]};
-  while (!stack.empty()) {
-    const int u = stack.back();
-    stack.pop_back();
-    for (int v : g.neighbors(u))
-      if (in.count(v) && seen.insert(v).second) stack.push_back(v);
-  }
-  return seen.size() == in.size();
-}
 
 // A fresh scratch directory per test run, removed at exit.
 std::filesystem::path scratch() {
@@ -270,7 +257,7 @@ TEST_SUITE("graph") {
     CHECK(s.graph.num_components() == 1);
     for (int gidx = 0; gidx < 12; ++gidx) {
       CHECK(s.layout.taxels_of_group(gidx).size() == 16u);
-      CHECK(induces_connected(s.graph, s.layout.taxels_of_group(gidx)));
+      CHECK(tjepa::induces_connected(s.graph, s.layout.taxels_of_group(gidx)));
     }
     for (const auto& e : s.graph.edges()) CHECK(e.weight == 4.0);
     tjepa::layouts::GridSkinOptions o;
@@ -301,7 +288,7 @@ TEST_SUITE("graph") {
     for (int gidx = 0; gidx < 6; ++gidx) {
       const auto t = l.taxels_of_group(gidx);
       CHECK(t.size() >= 8u);
-      CHECK_MESSAGE(induces_connected(s.graph, t), l.group_names[gidx]);
+      CHECK_MESSAGE(tjepa::induces_connected(s.graph, t), l.group_names[gidx]);
       for (int i : t) CHECK(l.part[i] == l.group_part[gidx]);
     }
   }

@@ -21,19 +21,6 @@ std::size_t count(const std::string& s, const std::string& what) {
   return n;
 }
 
-// True when the given nodes induce a connected subgraph of g.
-bool induces_connected(const tjepa::TaxelGraph& g, const std::vector<int>& nodes) {
-  if (nodes.empty()) return false;
-  std::set<int> in(nodes.begin(), nodes.end()), seen{nodes[0]};
-  std::vector<int> stack{nodes[0]};
-  while (!stack.empty()) {
-    const int u = stack.back();
-    stack.pop_back();
-    for (int v : g.neighbors(u))
-      if (in.count(v) && seen.insert(v).second) stack.push_back(v);
-  }
-  return seen.size() == in.size();
-}
 
 std::string slurp(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);
@@ -62,6 +49,17 @@ TEST_SUITE("graph") {
     auto back = g.edges();
     CHECK(back.size() == 3);
     CHECK(back[0] == tjepa::Edge{0, 1, 1.0});
+  }
+
+  TEST_CASE("induces_connected") {
+    // A path 0-1-2-3 and an isolated 4.
+    std::vector<tjepa::Edge> e = {{0, 1, 1.0}, {1, 2, 1.0}, {2, 3, 1.0}};
+    tjepa::TaxelGraph g(5, e);
+    CHECK(tjepa::induces_connected(g, std::vector<int>{2, 0, 1}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{0, 2}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{3, 4}));
+    CHECK(tjepa::induces_connected(g, std::vector<int>{4}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{}));
   }
 
   TEST_CASE("TaxelGraph rejects bad input with a message that names it") {
@@ -173,7 +171,7 @@ TEST_SUITE("graph") {
         if (j >= gr.sizes[g]) CHECK(gr.members[g * gr.max_size + j] == -1);
       }
       std::vector<int> m(mem.begin(), mem.end());
-      CHECK(induces_connected(s.graph, m));
+      CHECK(tjepa::induces_connected(s.graph, m));
       for (int i : m) {
         ++times[i];
         CHECK(s.layout.group[i] == gr.region[g]);  // blocks never straddle regions
@@ -210,6 +208,12 @@ TEST_SUITE("graph") {
       regions_seen.insert(gg.group(g));
     }
     CHECK(regions_seen.size() == 34u);
+    // Per-token values spread back to taxels (to draw token masks on the layout).
+    std::vector<int> token_value(528);
+    for (int g = 0; g < 528; ++g) token_value[g] = 7 * g;
+    const auto taxel_value = gr.per_taxel<int>(token_value);
+    for (int i = 0; i < 2124; ++i) CHECK(taxel_value[i] == 7 * gr.token_of[i]);
+    CHECK_THROWS_AS(gr.per_taxel<int>(std::vector<int>(3)), tjepa::ShapeError);
     // Each 2 x 2 block of a 12 x 8 nail is a 6 x 4 grid of tokens: inner tokens have 4 neighbours
     // inside the region.
     const auto one = tjepa::layouts::deco50_grouping(tjepa::layouts::inspire_hand(tjepa::layouts::inspire::Side::left));
@@ -263,7 +267,7 @@ TEST_SUITE("graph") {
           CHECK(gr.sizes[g] <= hi);
           const auto mem = gr.members_of(g);
           std::vector<int> m(mem.begin(), mem.end());
-          CHECK(induces_connected(s.graph, m));
+          CHECK(tjepa::induces_connected(s.graph, m));
           for (int i : m) {
             ++times[i];
             CHECK(s.layout.part[i] == gr.part[g]);
@@ -309,7 +313,7 @@ TEST_SUITE("graph") {
           CHECK(gr.sizes[g] >= lo);
           CHECK(gr.sizes[g] <= hi);
           const auto mem = gr.members_of(g);
-          CHECK(induces_connected(s.graph, std::vector<int>(mem.begin(), mem.end())));
+          CHECK(tjepa::induces_connected(s.graph, std::vector<int>(mem.begin(), mem.end())));
           total += gr.sizes[g];
         }
         CHECK(total == s.size());

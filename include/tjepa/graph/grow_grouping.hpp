@@ -41,22 +41,10 @@ struct GrowState {
 
   // Whether group h stays connected without its taxel skip.
   bool connected_without(int h, int skip) const {
-    const auto& mem = groups[h];
-    int start = -1;
-    for (int v : mem)
-      if (v != skip) start = v;
-    if (start < 0) return false;
-    std::vector<int> seen{start}, stack{start};
-    while (!stack.empty()) {
-      const int u = stack.back();
-      stack.pop_back();
-      for (int v : g.neighbors(u))
-        if (v != skip && owner[v] == h && std::find(seen.begin(), seen.end(), v) == seen.end()) {
-          seen.push_back(v);
-          stack.push_back(v);
-        }
-    }
-    return seen.size() + 1 == mem.size();
+    std::vector<int> rest;
+    for (int v : groups[h])
+      if (v != skip) rest.push_back(v);
+    return induces_connected(g, rest);
   }
   void move(int v, int to) {
     auto& from = groups[owner[v]];
@@ -152,21 +140,6 @@ struct GrowState {
     return solve(solve, n == 32 ? ~0u : (1u << n) - 1);
   }
 
-  // Whether the taxels of `set` induce a connected subgraph.
-  bool connected_set(const std::vector<int>& set) const {
-    if (set.empty()) return false;
-    std::vector<int> seen{set[0]}, stack{set[0]};
-    while (!stack.empty()) {
-      const int x = stack.back();
-      stack.pop_back();
-      for (int v : g.neighbors(x))
-        if (std::find(set.begin(), set.end(), v) != set.end() && std::find(seen.begin(), seen.end(), v) == seen.end()) {
-          seen.push_back(v);
-          stack.push_back(v);
-        }
-    }
-    return seen.size() == set.size();
-  }
 
   // Moves taxel u out of group h into a neighbouring group; a group pushed over hi passes one of
   // its taxels on to a further group, breadth-first over groups, until one has room. Every group on
@@ -196,7 +169,7 @@ struct GrowState {
         std::vector<int> without;
         for (int y : with)
           if (y != x) without.push_back(y);
-        if (!connected_set(without)) continue;
+        if (!induces_connected(g, without)) continue;
         for (int v : g.neighbors(x)) {
           const int z = owner[v];
           if (z < 0 || std::find(visited.begin(), visited.end(), z) != visited.end()) continue;
