@@ -32,7 +32,7 @@ std::string slurp(const std::filesystem::path& p) {
 }  // namespace
 
 TEST_SUITE("graph") {
-  TEST_CASE("TaxelGraph stores a CSR with sorted neighbours, parts and components") {
+  TEST_CASE("TaxelGraph stores a CSR with sorted neighbours - parts and components") {
     // Two parts: a path 0-1-2 and an edge 3-4.
     std::vector<tjepa::Edge> e = {{1, 0, 1.0}, {1, 2, 2.0}, {4, 3, 0.5}};
     tjepa::TaxelGraph g(5, e, {0, 0, 0, 1, 1});
@@ -78,7 +78,7 @@ TEST_SUITE("graph") {
     CHECK_THROWS_AS(tjepa::TaxelGraph(3, none, {0, 1}), tjepa::ShapeError);
   }
 
-  TEST_CASE("SVG: one disc per taxel, one line per edge, bridges dashed, fills and highlights") {
+  TEST_CASE("SVG: one disc per taxel - one line per edge - bridges dashed - fills and highlights") {
     const auto skin = tjepa::layouts::allegro_xela();
     const int n = skin.size();
     const std::string svg = tjepa::svg_string(skin);
@@ -153,7 +153,7 @@ TEST_SUITE("graph") {
     CHECK(slurp(doc) == svg);
   }
 
-  TEST_CASE("DECO-50 grouping: 264 tokens per hand, 528 for two, sizes 4 and 5, lifted group graph") {
+  TEST_CASE("DECO-50 grouping: 264 tokens per hand - 528 for two - sizes 4 and 5 - lifted group graph") {
     const auto s = tjepa::layouts::inspire_hands();
     const auto gr = tjepa::layouts::deco50_grouping(s);
     CHECK(gr.num_groups() == 528);
@@ -221,7 +221,7 @@ TEST_SUITE("graph") {
     CHECK(one.graph.num_components() == 1);
   }
 
-  TEST_CASE("Grouping::gather_indices turns [N, tau, m] into [G, n_max*tau*m] with a zero sentinel") {
+  TEST_CASE("Grouping::gather_indices turns N x tau x m windows into token rows with a zero sentinel") {
     const auto s = tjepa::layouts::inspire_hands();
     const auto gr = tjepa::layouts::deco50_grouping(s);
     for (int m : {1, 3}) {
@@ -283,7 +283,7 @@ TEST_SUITE("graph") {
     }
   }
 
-  TEST_CASE("grow_grouping on random blob-shaped parts (irregular, with holes and thin arms)") {
+  TEST_CASE("grow_grouping on random blob-shaped parts - irregular - with holes and thin arms") {
     int attempted = 0, grouped = 0;
     for (std::uint64_t seed = 0; seed < 40; ++seed) {
       // A blob grown cell by cell from the centre of a 14 x 14 grid: connected, ragged.
