@@ -255,7 +255,16 @@ TEST_SUITE("graph") {
         {"allegro", tjepa::layouts::allegro_xela()},
         {"two_part", tjepa::layouts::two_part_skin()},
         {"grid", tjepa::layouts::grid_skin()},
-        {"inspire", tjepa::layouts::inspire_hands()}};
+        {"inspire", tjepa::layouts::inspire_hands()},
+        // Edges across the two parts must not pull groups across them.
+        {"two_part_knn_across", [] {
+           auto l = tjepa::layouts::two_part_skin().layout;
+           const int n0 = static_cast<int>(l.taxels_of_part(0).size());
+           auto e = tjepa::knn_edges(l, 4);
+           for (const auto& x : tjepa::knn_edges(l, n0, true))
+             if (l.part[x.src] != l.part[x.dst]) e.push_back(x);
+           return tjepa::make_skin(l, e);
+         }()}};
     for (const auto& [name, s] : skins) {
       for (auto [lo, hi] : {std::pair{4, 5}, std::pair{3, 4}, std::pair{6, 8}, std::pair{5, 6}, std::pair{8, 10}}) {
         INFO(name, " n_g in [", lo, ", ", hi, "]");
@@ -277,6 +286,7 @@ TEST_SUITE("graph") {
         CHECK(total == s.size());
         CHECK(std::all_of(times.begin(), times.end(), [](int t) { return t == 1; }));
         CHECK(gr.graph.num_components() == s.graph.num_components());
+        CHECK(gr.graph.num_parts() == s.layout.num_parts());
         // Deterministic.
         CHECK(tjepa::grow_grouping(s, lo, hi).members == gr.members);
       }
