@@ -27,5 +27,6 @@
 #include "tjepa/masks/global.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/masks/local.hpp"
+#include "tjepa/masks/svg.hpp"
 
 #include "tjepa/model/param_set.hpp"
