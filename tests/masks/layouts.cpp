@@ -8,7 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -55,11 +55,9 @@ void check_many(const tjepa::MaskCollator& col, int batches, int B, std::uint64_
   CHECK(never_global == 0);
 }
 
-std::string slurp(const std::filesystem::path& p) {
+std::string file_text(const std::filesystem::path& p) {
   std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
+  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
 }
 
 }  // namespace
@@ -170,6 +168,6 @@ TEST_SUITE("masks") {
       std::filesystem::create_directories(doc.parent_path());
       tjepa::write_svg(doc, skin, o);
     }
-    CHECK(slurp(doc) == svg);
+    CHECK(file_text(doc) == svg);
   }
 }

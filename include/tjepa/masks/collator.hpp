@@ -181,11 +181,7 @@ class MaskCollator {
 #pragma omp parallel for schedule(dynamic, 4) num_threads(threads)
 #endif
     for (int i = 0; i < B; ++i) {
-#ifdef _OPENMP
-      MaskWorkspace& ws = ws_[omp_get_thread_num()];
-#else
-      MaskWorkspace& ws = ws_[0];
-#endif
+      MaskWorkspace& ws = thread_workspace();
       try {
         Rng rng(seed ^ kSampleSalt, batch_index * static_cast<std::uint64_t>(B) + i);
         if (blocks)
@@ -214,11 +210,7 @@ class MaskCollator {
 #pragma omp parallel for schedule(static) num_threads(threads)
 #endif
     for (int i = 0; i < B; ++i) {
-#ifdef _OPENMP
-      MaskWorkspace& ws = ws_[omp_get_thread_num()];
-#else
-      MaskWorkspace& ws = ws_[0];
-#endif
+      MaskWorkspace& ws = thread_workspace();
       sorted_prefix(ctx_row(i), K, ws, out.context.data() + static_cast<std::size_t>(i) * K);
       if (blocks)
         for (int j = 0; j < T; ++j) {
@@ -237,6 +229,14 @@ class MaskCollator {
 
   static int size_from_ratio(int n, const RatioRange& r, Rng& rng) {
     return static_cast<int>(std::floor(n * rng.uniform(r.lo, r.hi)));
+  }
+
+  MaskWorkspace& thread_workspace() const {
+#ifdef _OPENMP
+    return ws_[omp_get_thread_num()];
+#else
+    return ws_[0];
+#endif
   }
 
   int num_threads(int B) const {
@@ -348,6 +348,10 @@ class MaskCollator {
                  std::to_string(sizes.context_block.h) + " x " + std::to_string(sizes.context_block.w) + " block");
   }
 
+  static std::string domain_name(const MaskDomain& d) {
+    return d.part() < 0 ? std::string("the sensor") : "part " + std::to_string(d.part());
+  }
+
   // Throws ConfigError unless the configuration can work on this graph.
   void validate(bool has_grid) {
     const int n = num_tokens();
@@ -405,12 +409,12 @@ class MaskCollator {
       const int tmax = static_cast<int>(std::floor(d.size() * c.target_ratio.hi));
       require<ConfigError>(tmin >= 1, "MaskConfig: target size t = floor(", d.size(), " * target_ratio.lo = ",
                            c.target_ratio.lo, ") = ", tmin, " for ",
-                           d.part() < 0 ? std::string("the sensor") : "part " + std::to_string(d.part()),
+                           domain_name(d),
                            ", expected t >= 1; raise target_ratio.lo");
       if (nl > 0)
         require<ConfigError>(d.largest_piece() >= tmax, "MaskConfig: local targets of up to t = ", tmax,
                              " tokens, but the largest connected piece of ",
-                             d.part() < 0 ? std::string("the sensor") : "part " + std::to_string(d.part()),
+                             domain_name(d),
                              " holds ", d.largest_piece(), "; lower target_ratio.hi");
     }
 
@@ -422,14 +426,11 @@ class MaskCollator {
     if (c.context_sampling == ContextSampling::local) {
       // The largest share each part can get (shares grow with c).
       const int cmax = static_cast<int>(std::floor(n * c.context_ratio.hi));
-      long long cum = 0;
-      int given = 0;
+      long long before = 0;
       for (int p = 0; p < graph_.num_parts(); ++p) {
         const MaskDomain& d = domains_[p + 1];
-        cum += d.size();
-        const int upto = static_cast<int>((2 * static_cast<long long>(cmax) * cum + n) / (2LL * n));
-        const int share = upto - given;
-        given = upto;
+        const int share = detail::local_context_share(cmax, before, before + d.size(), n);
+        before += d.size();
         require<ConfigError>(share <= d.largest_piece(), "MaskConfig: a local context gives part ", p,
                              " up to ", share, " tokens, but its largest connected piece holds ",
                              d.largest_piece(), "; lower context_ratio.hi or use the uniform context");
