@@ -394,6 +394,10 @@ TEST_SUITE("masks") {
     CHECK_THROWS_WITH_AS(make([](auto& c) { c.min_context_tokens = 250; }),
                          doctest::Contains("fewer than its minimum 250"), CE);
     CHECK_THROWS_WITH_AS(make([](auto& c) { c.max_tries = 0; }), doctest::Contains("max_tries"), CE);
+    CHECK_THROWS_WITH_AS(make([](auto& c) { c.min_context_ratio = std::nan(""); }),
+                         doctest::Contains("min_context_ratio = nan"), CE);
+    CHECK_THROWS_WITH_AS(make([](auto& c) { c.target_ratio = {0.1, std::nan("")}; }),
+                         doctest::Contains("target_ratio"), CE);
     CHECK_THROWS_WITH_AS(make([](auto& c) { c.scheme = tjepa::TargetScheme::ijepa_blocks; }),
                          doctest::Contains("needs a grid placement"), CE);
     // Local targets larger than any connected piece.

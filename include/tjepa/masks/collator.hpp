@@ -102,12 +102,9 @@ class MaskCollator {
   explicit MaskCollator(TaxelGraph graph, MaskConfig config = {},
                         std::optional<GridPlacement> grid = std::nullopt)
       : graph_(std::move(graph)), cfg_(config) {
-    const int n = graph_.num_nodes();
     pieces_ = part_pieces(graph_);
     domains_.emplace_back(graph_, pieces_, -1);
     for (int p = 0; p < graph_.num_parts(); ++p) domains_.emplace_back(graph_, pieces_, p);
-    min_context_ = std::max(cfg_.min_context_tokens,
-                            static_cast<int>(std::ceil(cfg_.min_context_ratio * n - 1e-9)));
     if (grid) blocks_ = BlockMasker(std::move(*grid));
     validate(grid.has_value());
   }
@@ -363,6 +360,7 @@ class MaskCollator {
                          c.min_context_tokens, ", expected >= 0");
     require<ConfigError>(c.min_context_ratio >= 0.0 && c.min_context_ratio < 1.0,
                          "MaskConfig: min_context_ratio = ", c.min_context_ratio, ", expected in [0, 1)");
+    min_context_ = std::max(c.min_context_tokens, static_cast<int>(std::ceil(c.min_context_ratio * n - 1e-9)));
     require<ConfigError>(min_context_ >= 1 && min_context_ <= n, "MaskConfig: the context minimum max(",
                          c.min_context_tokens, ", ceil(", c.min_context_ratio, " * ", n, ")) = ",
                          min_context_, ", expected in [1, N = ", n, "]");
