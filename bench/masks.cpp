@@ -27,6 +27,12 @@ void BM_MasksAllegro(benchmark::State& state) {
 }
 BENCHMARK(BM_MasksAllegro)->Arg(256)->Unit(benchmark::kMillisecond);
 
+void BM_MasksDeco50Grouped(benchmark::State& state) {
+  static const tjepa::Grouping grouping = tjepa::layouts::deco50_grouping(tjepa::layouts::inspire_hands());
+  run_collator(state, grouping.graph, {});
+}
+BENCHMARK(BM_MasksDeco50Grouped)->Arg(256)->Unit(benchmark::kMillisecond);
+
 void BM_MasksAllegroLocalContext(benchmark::State& state) {
   static const tjepa::Skin skin = tjepa::layouts::allegro_xela();
   tjepa::MaskConfig cfg;

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -28,6 +29,8 @@ std::vector<NamedSkin> builtin_skins() {
   v.push_back({"allegro_xela", tjepa::layouts::allegro_xela()});
   v.push_back({"grid_skin", tjepa::layouts::grid_skin()});
   v.push_back({"two_part_skin", tjepa::layouts::two_part_skin()});
+  v.push_back({"inspire_hand_left", tjepa::layouts::inspire_hand(tjepa::layouts::inspire::Side::left)});
+  v.push_back({"inspire_hands", tjepa::layouts::inspire_hands()});
   return v;
 }
 
@@ -66,7 +69,7 @@ TEST_SUITE("masks") {
   TEST_CASE("collator properties on every built-in layout, default configuration") {
     for (const auto& [name, skin] : builtin_skins()) {
       CAPTURE(name);
-      tjepa::MaskCollator col(skin.graph);
+      tjepa::MaskCollator col(skin.graph, one_thread());
       CHECK(col.per_part() == (skin.graph.num_parts() >= 2));
       check_many(col, 60, 32, 2026);
     }
@@ -75,7 +78,7 @@ TEST_SUITE("masks") {
   TEST_CASE("Allegro: 18 pads, every global target covers all of them; local masks connected") {
     const auto skin = tjepa::layouts::allegro_xela();
     REQUIRE(skin.graph.num_nodes() == 368);
-    tjepa::MaskCollator col(skin.graph);
+    tjepa::MaskCollator col(skin.graph, one_thread());
     CHECK(col.min_context() == 56);  // max(32, ceil(0.15 * 368))
     for (std::uint64_t s = 0; s < 20; ++s) {
       const auto b = col.sample(16, 7, s);
@@ -97,7 +100,7 @@ TEST_SUITE("masks") {
       CAPTURE(name);
       for (int variant = 0; variant < 4; ++variant) {
         CAPTURE(variant);
-        tjepa::MaskConfig cfg;
+        auto cfg = one_thread();
         cfg.part_targets = tjepa::PartTargets::whole;
         if (variant == 0) cfg.num_local = 4, cfg.num_global = 0;
         if (variant == 1) cfg.num_local = 0, cfg.num_global = 4;
@@ -118,10 +121,47 @@ TEST_SUITE("masks") {
     }
   }
 
+  TEST_CASE("the grouped two-hand graph (DECO-50, 528 tokens): per-hand targets, every region covered") {
+    const auto hands = tjepa::layouts::inspire_hands();
+    const auto grouping = tjepa::layouts::deco50_grouping(hands);
+    const tjepa::TaxelGraph& g = grouping.graph;
+    REQUIRE(g.num_nodes() == 528);
+    REQUIRE(g.num_parts() == 2);
+    tjepa::MaskCollator col(g, one_thread());
+    REQUIRE(col.per_part());
+    CHECK(col.min_context() == 80);  // max(32, ceil(0.15 * 528))
+    check_many(col, 60, 32, 4242);
+    for (std::uint64_t s = 0; s < 20; ++s) {
+      const auto b = col.sample(16, 5, s);
+      REQUIRE(b.num_targets() == 4);
+      for (int j = 0; j < 4; ++j) {
+        const auto& ts = b.targets[j];
+        CHECK(ts.part == j / 2);
+        CHECK(ts.kind == (j % 2 == 0 ? tjepa::TargetKind::local : tjepa::TargetKind::global));
+        CHECK(ts.size >= 26);  // floor(264 * 0.10)
+        CHECK(ts.size <= 47);  // floor(264 * 0.18)
+        if (ts.kind != tjepa::TargetKind::global) continue;
+        const int regions = col.domain(ts.part).num_groups();
+        CHECK(regions == 17);
+        for (int i = 0; i < b.B; ++i) {
+          std::set<int> seen;
+          for (int v : ts.row(i)) seen.insert(g.group(v));
+          CHECK(static_cast<int>(seen.size()) == regions);
+        }
+      }
+    }
+    // The picture paints each token's taxels.
+    const auto b = col.sample(1, 9, 0);
+    const auto o = tjepa::mask_svg_options(b, 0, hands.size(), &grouping);
+    for (int v : b.context_row(0))
+      for (int i : grouping.members_of(v)) CHECK(o.fill[i] == tjepa::kMaskContextColor);
+    CHECK(o.highlights[1].taxels.size() >= 4 * static_cast<std::size_t>(b.targets[1].size));
+  }
+
   TEST_CASE("I-JEPA blocks on the Allegro atlas reach the last row and column") {
     const auto skin = tjepa::layouts::allegro_xela();
     const auto grid = tjepa::GridPlacement::from_layout(skin.layout, tjepa::layouts::allegro::kPhalanxPitch);
-    tjepa::MaskConfig cfg;
+    auto cfg = one_thread();
     cfg.scheme = tjepa::TargetScheme::ijepa_blocks;
     cfg.min_context_tokens = 16;
     cfg.min_context_ratio = 0.0;
@@ -142,7 +182,7 @@ TEST_SUITE("masks") {
 
   TEST_CASE("mask pictures: every context and target token gets its colour") {
     const auto skin = tjepa::layouts::allegro_xela();
-    tjepa::MaskCollator col(skin.graph);
+    tjepa::MaskCollator col(skin.graph, one_thread());
     const auto b = col.sample(2, 3, 0);
     const auto o = tjepa::mask_svg_options(b, 1, skin.size());
     for (int v : b.context_row(1)) CHECK(o.fill[v] == tjepa::kMaskContextColor);
@@ -157,7 +197,7 @@ TEST_SUITE("masks") {
     // TJEPA_UPDATE_DOCS=1 rewrites the committed picture; otherwise it must match.
     const std::filesystem::path doc = std::filesystem::path(TJEPA_SOURCE_DIR) / "docs" / "masks_allegro.svg";
     const auto skin = tjepa::layouts::allegro_xela();
-    tjepa::MaskCollator col(skin.graph);
+    tjepa::MaskCollator col(skin.graph, one_thread());
     const auto b = col.sample(1, 2026, 0);
     tjepa::SvgOptions o = tjepa::mask_svg_options(b, 0, skin.size());
     o.title = "One sample on the Allegro hand: context " + std::to_string(b.K) +

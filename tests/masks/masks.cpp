@@ -178,7 +178,7 @@ TEST_SUITE("masks") {
 
   TEST_CASE("collator on a one-part grid: shapes, sizes, disjointness, minimum, coverage") {
     GridSpec s{20, 20, 5, 5, 1.0};  // 400 tokens, 16 groups
-    tjepa::MaskConfig cfg;
+    auto cfg = one_thread();
     tjepa::MaskCollator col(grid_graph(s), cfg);
     CHECK(col.num_targets() == 4);
     CHECK(col.min_context() == 60);  // max(32, ceil(0.15 * 400))
@@ -209,7 +209,7 @@ TEST_SUITE("masks") {
 
   TEST_CASE("collator on a two-part graph: per-part targets of floor(n_part * s) tokens") {
     auto g = two_part_graph({16, 16, 4, 4, 1.0}, {12, 10, 4, 5, 1.0});  // 256 + 120
-    tjepa::MaskCollator col(g);
+    tjepa::MaskCollator col(g, one_thread());
     REQUIRE(col.per_part());
     REQUIRE(col.num_targets() == 4);
     std::vector<int> hits(g.num_nodes(), 0);
@@ -255,7 +255,7 @@ TEST_SUITE("masks") {
         {2, 2, tjepa::PartTargets::automatic, tjepa::ContextSampling::local, tjepa::GlobalSampling::stratified},
     };
     for (const Case& k : cases) {
-      tjepa::MaskConfig cfg;
+      auto cfg = one_thread();
       cfg.num_local = k.nl;
       cfg.num_global = k.ng;
       cfg.part_targets = k.pt;
@@ -302,7 +302,7 @@ TEST_SUITE("masks") {
 
   TEST_CASE("I-JEPA blocks on a full grid: exact h x w, reach the last row and column") {
     GridSpec s{14, 14, 7, 7, 1.0};
-    tjepa::MaskConfig cfg;
+    auto cfg = one_thread();
     cfg.scheme = tjepa::TargetScheme::ijepa_blocks;
     cfg.min_context_tokens = 10;
     cfg.min_context_ratio = 0.0;
@@ -363,7 +363,7 @@ TEST_SUITE("masks") {
     CHECK(gp.cols == 11);
     CHECK(gp.row[30 + 7] == 1);
     CHECK(gp.col[30 + 7] == 8);
-    tjepa::MaskConfig cfg;
+    auto cfg = one_thread();
     cfg.scheme = tjepa::TargetScheme::ijepa_blocks;
     cfg.min_context_tokens = 5;
     cfg.min_context_ratio = 0;
@@ -374,7 +374,7 @@ TEST_SUITE("masks") {
   TEST_CASE("bad configurations throw with a message that names the problem") {
     auto g = grid_graph({20, 20, 5, 5, 1.0});
     auto make = [&](auto edit) {
-      tjepa::MaskConfig c;
+      auto c = one_thread();
       edit(c);
       return tjepa::MaskCollator(g, c);
     };
@@ -408,7 +408,7 @@ TEST_SUITE("masks") {
     CHECK_THROWS_WITH_AS(tjepa::MaskCollator(split, c), doctest::Contains("largest connected piece"), CE);
     // A context that cannot keep its minimum once the targets are removed: fails after the
     // tries, saying why.
-    tjepa::MaskConfig tight;
+    auto tight = one_thread();
     tight.context_ratio = {0.5, 0.5};
     tight.target_ratio = {0.17, 0.18};
     tight.min_context_tokens = 190;
