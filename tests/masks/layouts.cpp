@@ -66,7 +66,7 @@ std::string file_text(const std::filesystem::path& p) {
 }  // namespace
 
 TEST_SUITE("masks") {
-  TEST_CASE("collator properties on every built-in layout, default configuration") {
+  TEST_CASE("collator properties on every built-in layout with the default configuration") {
     for (const auto& [name, skin] : builtin_skins()) {
       CAPTURE(name);
       tjepa::MaskCollator col(skin.graph, one_thread());
@@ -75,7 +75,7 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("Allegro: 18 pads, every global target covers all of them; local masks connected") {
+  TEST_CASE("Allegro: every global target covers all 18 pads and sizes stay in range") {
     const auto skin = tjepa::layouts::allegro_xela();
     REQUIRE(skin.graph.num_nodes() == 368);
     tjepa::MaskCollator col(skin.graph, one_thread());
@@ -95,7 +95,7 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("ablations on the built-in layouts: 4L, 4G, local context, uniform global") {
+  TEST_CASE("ablations on the built-in layouts: 4L and 4G and local context and uniform global") {
     for (const auto& [name, skin] : builtin_skins()) {
       CAPTURE(name);
       for (int variant = 0; variant < 4; ++variant) {
@@ -121,7 +121,7 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("the grouped two-hand graph (DECO-50, 528 tokens): per-hand targets, every region covered") {
+  TEST_CASE("the grouped two-hand graph (DECO-50 with 528 tokens): per-hand targets cover every region") {
     const auto hands = tjepa::layouts::inspire_hands();
     const auto grouping = tjepa::layouts::deco50_grouping(hands);
     const tjepa::TaxelGraph& g = grouping.graph;

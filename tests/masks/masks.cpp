@@ -99,7 +99,7 @@ TEST_SUITE("masks") {
     CHECK(shapes.size() == 6);  // C(4, 2)
   }
 
-  TEST_CASE("global masks: stratified covers every group, then uniform; t < G picks t groups") {
+  TEST_CASE("global masks: stratified covers every group then fills uniformly and t < G picks t groups") {
     GridSpec s{12, 12, 3, 4, 1.0};  // 4 x 3 = 12 groups of 12 tokens
     auto g = grid_graph(s);
     const auto pieces = tjepa::part_pieces(g);
@@ -147,7 +147,7 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("contexts: uniform drops the excluded tokens; local grows one region per part") {
+  TEST_CASE("contexts: uniform drops the excluded tokens and local grows one region per part") {
     auto g = two_part_graph({6, 6, 3, 3, 1.0}, {4, 6, 2, 3, 1.0});  // 36 + 24 tokens
     const auto pieces = tjepa::part_pieces(g);
     std::vector<tjepa::MaskDomain> parts{{g, pieces, 0}, {g, pieces, 1}};
@@ -176,7 +176,7 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("collator on a one-part grid: shapes, sizes, disjointness, minimum, coverage") {
+  TEST_CASE("collator on a one-part grid: shapes and sizes and disjointness and minimum and coverage") {
     GridSpec s{20, 20, 5, 5, 1.0};  // 400 tokens, 16 groups
     auto cfg = one_thread();
     tjepa::MaskCollator col(grid_graph(s), cfg);
@@ -239,7 +239,7 @@ TEST_SUITE("masks") {
     for (int v = 0; v < g.num_nodes(); ++v) CHECK(hits[v] > 0);
   }
 
-  TEST_CASE("ablations: 4 local, 4 global, uniform global, local context, whole-sensor targets") {
+  TEST_CASE("ablations on a two-part graph: 4 local or 4 global or local context or whole-sensor targets") {
     auto g = two_part_graph({16, 16, 4, 4, 1.0}, {14, 14, 7, 7, 1.0});  // 256 + 196
     struct Case {
       int nl, ng;
@@ -274,7 +274,7 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("determinism: same seed same masks, independent of the thread count") {
+  TEST_CASE("determinism: same seed gives the same masks whatever the thread count") {
     auto g = two_part_graph({16, 16, 4, 4, 1.0}, {12, 10, 4, 5, 1.0});
     tjepa::MaskConfig one, four;
     one.num_threads = 1;
@@ -300,7 +300,7 @@ TEST_SUITE("masks") {
     CHECK(full.targets[0].indices == again.targets[0].indices);
   }
 
-  TEST_CASE("I-JEPA blocks on a full grid: exact h x w, reach the last row and column") {
+  TEST_CASE("I-JEPA blocks on a full grid are exact h x w rectangles that reach the last row and column") {
     GridSpec s{14, 14, 7, 7, 1.0};
     auto cfg = one_thread();
     cfg.scheme = tjepa::TargetScheme::ijepa_blocks;
