@@ -31,6 +31,15 @@ void BM_InspireHandsPlusGrouping(benchmark::State& state) {
 }
 BENCHMARK(BM_InspireHandsPlusGrouping)->Unit(benchmark::kMillisecond);
 
+void BM_InspireHandsOnly(benchmark::State& state) {
+  for (auto _ : state) {
+    auto skin = tjepa::layouts::inspire_hands();
+    benchmark::DoNotOptimize(skin.graph.num_edges());
+  }
+  state.SetItemsProcessed(state.iterations() * 2124);
+}
+BENCHMARK(BM_InspireHandsOnly)->Unit(benchmark::kMillisecond);
+
 void BM_InspireGatherIndices(benchmark::State& state) {
   const auto grouping = tjepa::layouts::deco50_grouping(tjepa::layouts::inspire_hands());
   for (auto _ : state) benchmark::DoNotOptimize(grouping.gather_indices(3, 1).data());

@@ -23,19 +23,6 @@ std::vector<int> sorted_neighbors(const tjepa::TaxelGraph& g, int i) {
   return v;
 }
 
-// True when the given nodes induce a connected subgraph of g.
-bool induces_connected(const tjepa::TaxelGraph& g, const std::vector<int>& nodes) {
-  if (nodes.empty()) return false;
-  std::set<int> in(nodes.begin(), nodes.end()), seen{nodes[0]};
-  std::vector<int> stack{nodes[0]};
-  while (!stack.empty()) {
-    const int u = stack.back();
-    stack.pop_back();
-    for (int v : g.neighbors(u))
-      if (in.count(v) && seen.insert(v).second) stack.push_back(v);
-  }
-  return seen.size() == in.size();
-}
 
 // A fresh scratch directory per test run, removed at exit.
 std::filesystem::path scratch() {
@@ -80,7 +67,7 @@ int group_id(const tjepa::TaxelLayout& l, const std::string& name) {
 }  // namespace
 
 TEST_SUITE("graph") {
-  TEST_CASE("grid pads: 4- and 8-neighbour edges between live cells, pitch weights") {
+  TEST_CASE("grid pads: 4- and 8-neighbour edges between live cells - pitch weights") {
     tjepa::GridPad pad(3, 4, 2.0, 3.0);
     auto e4 = tjepa::grid_edges(pad, pad.cell_index());
     CHECK(e4.size() == 3u * 3 + 2u * 4);
@@ -135,7 +122,7 @@ TEST_SUITE("graph") {
     CHECK_THROWS_WITH_AS(nothing.build(), doctest::Contains("empty layout"), tjepa::DataError);
   }
 
-  TEST_CASE("TaxelLayout::validate names duplicate ids, NaN coordinates and foreign groups") {
+  TEST_CASE("TaxelLayout::validate names duplicate ids - NaN coordinates and foreign groups") {
     tjepa::LayoutBuilder b;
     const int p = b.add_part("p");
     b.add_grid_pad("g", p, tjepa::GridPad(2, 2));
@@ -158,7 +145,7 @@ TEST_SUITE("graph") {
     CHECK_THROWS_WITH_AS(range.validate(), doctest::Contains("has group 7"), tjepa::DataError);
   }
 
-  TEST_CASE("Allegro/Xela: 368 taxels, 18 pads in the reference order, 570 + 68 edges, 1 component") {
+  TEST_CASE("Allegro/Xela: 368 taxels - 18 pads in the reference order - 570 + 68 edges - 1 component") {
     const auto skin = tjepa::layouts::allegro_xela();
     const auto& l = skin.layout;
     const auto& g = skin.graph;
@@ -270,7 +257,7 @@ TEST_SUITE("graph") {
     CHECK(s.graph.num_components() == 1);
     for (int gidx = 0; gidx < 12; ++gidx) {
       CHECK(s.layout.taxels_of_group(gidx).size() == 16u);
-      CHECK(induces_connected(s.graph, s.layout.taxels_of_group(gidx)));
+      CHECK(tjepa::induces_connected(s.graph, s.layout.taxels_of_group(gidx)));
     }
     for (const auto& e : s.graph.edges()) CHECK(e.weight == 4.0);
     tjepa::layouts::GridSkinOptions o;
@@ -286,7 +273,7 @@ TEST_SUITE("graph") {
     CHECK(s8.layout.taxels_of_group(8).size() == 1u);  // the 1 x 1 corner block
   }
 
-  TEST_CASE("generic two-part skin: two irregular parts, two components, connected groups") {
+  TEST_CASE("generic two-part skin: two irregular parts - two components - connected groups") {
     const auto s = tjepa::layouts::two_part_skin();
     const auto& l = s.layout;
     CHECK(l.num_parts() == 2);
@@ -301,12 +288,12 @@ TEST_SUITE("graph") {
     for (int gidx = 0; gidx < 6; ++gidx) {
       const auto t = l.taxels_of_group(gidx);
       CHECK(t.size() >= 8u);
-      CHECK_MESSAGE(induces_connected(s.graph, t), l.group_names[gidx]);
+      CHECK_MESSAGE(tjepa::induces_connected(s.graph, t), l.group_names[gidx]);
       for (int i : t) CHECK(l.part[i] == l.group_part[gidx]);
     }
   }
 
-  TEST_CASE("Inspire hand: 1062 taxels, 17 regions, 4-neighbour regions bridged, one component") {
+  TEST_CASE("Inspire hand: 1062 taxels - 17 regions - 4-neighbour regions bridged - one component") {
     using tjepa::layouts::inspire::Side;
     for (Side side : {Side::left, Side::right}) {
       const auto s = tjepa::layouts::inspire_hand(side);
@@ -354,7 +341,7 @@ TEST_SUITE("graph") {
     }
   }
 
-  TEST_CASE("Inspire two hands: 2124 taxels in two parts, two components, regions named per hand") {
+  TEST_CASE("Inspire two hands: 2124 taxels in two parts - two components - regions named per hand") {
     const auto s = tjepa::layouts::inspire_hands();
     const auto& l = s.layout;
     CHECK(l.size() == 2124);
@@ -377,7 +364,7 @@ TEST_SUITE("graph") {
     CHECK(right_min - left_max > 20.0);
   }
 
-  TEST_CASE("join_skins renumbers parts, groups and ids and rejects mismatched input") {
+  TEST_CASE("join_skins renumbers parts - groups and ids and rejects mismatched input") {
     const tjepa::Skin parts[2] = {tjepa::layouts::grid_skin(), tjepa::layouts::two_part_skin()};
     const std::string names[2] = {"sheet", "socks"};
     const auto j = tjepa::join_skins(parts, names);
@@ -410,7 +397,7 @@ TEST_SUITE("graph") {
     }
   }
 
-  TEST_CASE("CSV: header, comments, blank lines, extra and reordered columns, quotes, custom names") {
+  TEST_CASE("CSV: header - comments - blank lines - extra and reordered columns - quotes - custom names") {
     const auto nodes = write_text("n.csv",
                                   "# a small skin\n"
                                   "\n"
@@ -465,7 +452,7 @@ TEST_SUITE("graph") {
     CHECK(hl.coord(1, 1) == 3.0);
   }
 
-  TEST_CASE("CSV errors name the file, the line and the problem") {
+  TEST_CASE("CSV errors name the file - the line and the problem") {
     auto fails = [](const std::filesystem::path& nodes, const std::string& what) {
       INFO(what);
       CHECK_THROWS_WITH_AS(tjepa::read_layout_csv(nodes), doctest::Contains(what.c_str()), tjepa::FileError);
@@ -497,7 +484,7 @@ TEST_SUITE("graph") {
     CHECK(tjepa::read_edges_csv(write_text("none.csv", "# no edges\n"), l).empty());
   }
 
-  TEST_CASE("kNN and radius graphs from coordinates, inside parts unless asked") {
+  TEST_CASE("kNN and radius graphs from coordinates - inside parts unless asked") {
     const auto grid = tjepa::layouts::grid_skin();  // 12 x 16 at 4 mm
     const auto r4 = tjepa::radius_edges(grid.layout, 4.0);
     CHECK(r4.size() == grid.graph.num_edges());

@@ -21,19 +21,6 @@ std::size_t count(const std::string& s, const std::string& what) {
   return n;
 }
 
-// True when the given nodes induce a connected subgraph of g.
-bool induces_connected(const tjepa::TaxelGraph& g, const std::vector<int>& nodes) {
-  if (nodes.empty()) return false;
-  std::set<int> in(nodes.begin(), nodes.end()), seen{nodes[0]};
-  std::vector<int> stack{nodes[0]};
-  while (!stack.empty()) {
-    const int u = stack.back();
-    stack.pop_back();
-    for (int v : g.neighbors(u))
-      if (in.count(v) && seen.insert(v).second) stack.push_back(v);
-  }
-  return seen.size() == in.size();
-}
 
 std::string slurp(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);
@@ -45,7 +32,7 @@ std::string slurp(const std::filesystem::path& p) {
 }  // namespace
 
 TEST_SUITE("graph") {
-  TEST_CASE("TaxelGraph stores a CSR with sorted neighbours, parts and components") {
+  TEST_CASE("TaxelGraph stores a CSR with sorted neighbours - parts and components") {
     // Two parts: a path 0-1-2 and an edge 3-4.
     std::vector<tjepa::Edge> e = {{1, 0, 1.0}, {1, 2, 2.0}, {4, 3, 0.5}};
     tjepa::TaxelGraph g(5, e, {0, 0, 0, 1, 1});
@@ -64,6 +51,17 @@ TEST_SUITE("graph") {
     CHECK(back[0] == tjepa::Edge{0, 1, 1.0});
   }
 
+  TEST_CASE("induces_connected") {
+    // A path 0-1-2-3 and an isolated 4.
+    std::vector<tjepa::Edge> e = {{0, 1, 1.0}, {1, 2, 1.0}, {2, 3, 1.0}};
+    tjepa::TaxelGraph g(5, e);
+    CHECK(tjepa::induces_connected(g, std::vector<int>{2, 0, 1}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{0, 2}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{3, 4}));
+    CHECK(tjepa::induces_connected(g, std::vector<int>{4}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{}));
+  }
+
   TEST_CASE("TaxelGraph rejects bad input with a message that names it") {
     std::vector<tjepa::Edge> none;
     CHECK_THROWS_WITH_AS(tjepa::TaxelGraph(0, none), doctest::Contains("empty layout"), tjepa::DataError);
@@ -80,7 +78,7 @@ TEST_SUITE("graph") {
     CHECK_THROWS_AS(tjepa::TaxelGraph(3, none, {0, 1}), tjepa::ShapeError);
   }
 
-  TEST_CASE("SVG: one disc per taxel, one line per edge, bridges dashed, fills and highlights") {
+  TEST_CASE("SVG: one disc per taxel - one line per edge - bridges dashed - fills and highlights") {
     const auto skin = tjepa::layouts::allegro_xela();
     const int n = skin.size();
     const std::string svg = tjepa::svg_string(skin);
@@ -155,7 +153,7 @@ TEST_SUITE("graph") {
     CHECK(slurp(doc) == svg);
   }
 
-  TEST_CASE("DECO-50 grouping: 264 tokens per hand, 528 for two, sizes 4 and 5, lifted group graph") {
+  TEST_CASE("DECO-50 grouping: 264 tokens per hand - 528 for two - sizes 4 and 5 - lifted group graph") {
     const auto s = tjepa::layouts::inspire_hands();
     const auto gr = tjepa::layouts::deco50_grouping(s);
     CHECK(gr.num_groups() == 528);
@@ -173,7 +171,7 @@ TEST_SUITE("graph") {
         if (j >= gr.sizes[g]) CHECK(gr.members[g * gr.max_size + j] == -1);
       }
       std::vector<int> m(mem.begin(), mem.end());
-      CHECK(induces_connected(s.graph, m));
+      CHECK(tjepa::induces_connected(s.graph, m));
       for (int i : m) {
         ++times[i];
         CHECK(s.layout.group[i] == gr.region[g]);  // blocks never straddle regions
@@ -210,6 +208,12 @@ TEST_SUITE("graph") {
       regions_seen.insert(gg.group(g));
     }
     CHECK(regions_seen.size() == 34u);
+    // Per-token values spread back to taxels (to draw token masks on the layout).
+    std::vector<int> token_value(528);
+    for (int g = 0; g < 528; ++g) token_value[g] = 7 * g;
+    const auto taxel_value = gr.per_taxel<int>(token_value);
+    for (int i = 0; i < 2124; ++i) CHECK(taxel_value[i] == 7 * gr.token_of[i]);
+    CHECK_THROWS_AS(gr.per_taxel<int>(std::vector<int>(3)), tjepa::ShapeError);
     // Each 2 x 2 block of a 12 x 8 nail is a 6 x 4 grid of tokens: inner tokens have 4 neighbours
     // inside the region.
     const auto one = tjepa::layouts::deco50_grouping(tjepa::layouts::inspire_hand(tjepa::layouts::inspire::Side::left));
@@ -217,7 +221,7 @@ TEST_SUITE("graph") {
     CHECK(one.graph.num_components() == 1);
   }
 
-  TEST_CASE("Grouping::gather_indices turns [N, tau, m] into [G, n_max*tau*m] with a zero sentinel") {
+  TEST_CASE("Grouping::gather_indices turns N x tau x m windows into token rows with a zero sentinel") {
     const auto s = tjepa::layouts::inspire_hands();
     const auto gr = tjepa::layouts::deco50_grouping(s);
     for (int m : {1, 3}) {
@@ -251,7 +255,16 @@ TEST_SUITE("graph") {
         {"allegro", tjepa::layouts::allegro_xela()},
         {"two_part", tjepa::layouts::two_part_skin()},
         {"grid", tjepa::layouts::grid_skin()},
-        {"inspire", tjepa::layouts::inspire_hands()}};
+        {"inspire", tjepa::layouts::inspire_hands()},
+        // Edges across the two parts must not pull groups across them.
+        {"two_part_knn_across", [] {
+           auto l = tjepa::layouts::two_part_skin().layout;
+           const int n0 = static_cast<int>(l.taxels_of_part(0).size());
+           auto e = tjepa::knn_edges(l, 4);
+           for (const auto& x : tjepa::knn_edges(l, n0, true))
+             if (l.part[x.src] != l.part[x.dst]) e.push_back(x);
+           return tjepa::make_skin(l, e);
+         }()}};
     for (const auto& [name, s] : skins) {
       for (auto [lo, hi] : {std::pair{4, 5}, std::pair{3, 4}, std::pair{6, 8}, std::pair{5, 6}, std::pair{8, 10}}) {
         INFO(name, " n_g in [", lo, ", ", hi, "]");
@@ -263,7 +276,7 @@ TEST_SUITE("graph") {
           CHECK(gr.sizes[g] <= hi);
           const auto mem = gr.members_of(g);
           std::vector<int> m(mem.begin(), mem.end());
-          CHECK(induces_connected(s.graph, m));
+          CHECK(tjepa::induces_connected(s.graph, m));
           for (int i : m) {
             ++times[i];
             CHECK(s.layout.part[i] == gr.part[g]);
@@ -273,13 +286,14 @@ TEST_SUITE("graph") {
         CHECK(total == s.size());
         CHECK(std::all_of(times.begin(), times.end(), [](int t) { return t == 1; }));
         CHECK(gr.graph.num_components() == s.graph.num_components());
+        CHECK(gr.graph.num_parts() == s.layout.num_parts());
         // Deterministic.
         CHECK(tjepa::grow_grouping(s, lo, hi).members == gr.members);
       }
     }
   }
 
-  TEST_CASE("grow_grouping on random blob-shaped parts (irregular, with holes and thin arms)") {
+  TEST_CASE("grow_grouping on random blob-shaped parts - irregular - with holes and thin arms") {
     int attempted = 0, grouped = 0;
     for (std::uint64_t seed = 0; seed < 40; ++seed) {
       // A blob grown cell by cell from the centre of a 14 x 14 grid: connected, ragged.
@@ -309,7 +323,7 @@ TEST_SUITE("graph") {
           CHECK(gr.sizes[g] >= lo);
           CHECK(gr.sizes[g] <= hi);
           const auto mem = gr.members_of(g);
-          CHECK(induces_connected(s.graph, std::vector<int>(mem.begin(), mem.end())));
+          CHECK(tjepa::induces_connected(s.graph, std::vector<int>(mem.begin(), mem.end())));
           total += gr.sizes[g];
         }
         CHECK(total == s.size());

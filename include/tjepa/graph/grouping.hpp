@@ -51,6 +51,17 @@ struct Grouping {
     return {members.data() + static_cast<std::size_t>(g) * max_size, static_cast<std::size_t>(sizes[g])};
   }
 
+  // Per-taxel values [N] from per-token values [G] (e.g. a mask's colours, to draw it on the layout).
+  template <class T>
+  std::vector<T> per_taxel(std::span<const T> per_token) const {
+    require<ShapeError>(static_cast<int>(per_token.size()) == num_groups(), "Grouping::per_taxel: ",
+                        per_token.size(), " values, expected one per token (", num_groups(), ")");
+    std::vector<T> out;
+    out.reserve(token_of.size());
+    for (int t : token_of) out.push_back(per_token[t]);
+    return out;
+  }
+
   // [G, n_max·τ·m] indices into a window x flattened from [N, τ, m] (x[i, t, a] at i·τ·m + t·m + a):
   // token g's row lists its members' τ·m values one member after the other, in members order.
   // Padded slots (size < n_max) hold the sentinel N·τ·m: append one zero to the flattened window
@@ -102,8 +113,7 @@ inline Grouping make_grouping(const Skin& skin, const std::vector<std::vector<in
   for (int i = 0; i < n; ++i)
     require<DataError>(out.token_of[i] >= 0, "make_grouping: taxel ", l.ids[i], " is in no group");
 
-  // Part, region, and connectivity of each group (a traversal restricted to the group's taxels).
-  std::vector<int> stack, seen_mark(n, -1);
+  // Part, region, and connectivity of each group.
   std::map<int, int> votes;
   for (int g = 0; g < G; ++g) {
     const auto& mem = groups[g];
@@ -118,20 +128,7 @@ inline Grouping make_grouping(const Skin& skin, const std::vector<std::vector<in
     for (const auto& [region, count] : votes)
       if (best < 0 || count > votes[best]) best = region;
     out.region[g] = best;
-    int reached = 1;
-    seen_mark[mem[0]] = g;
-    stack.assign(1, mem[0]);
-    while (!stack.empty()) {
-      const int u = stack.back();
-      stack.pop_back();
-      for (int v : tg.neighbors(u))
-        if (out.token_of[v] == g && seen_mark[v] != g) {
-          seen_mark[v] = g;
-          ++reached;
-          stack.push_back(v);
-        }
-    }
-    require<DataError>(reached == out.sizes[g], "make_grouping: group ", g, " (", out.sizes[g],
+    require<DataError>(induces_connected(tg, mem), "make_grouping: group ", g, " (", out.sizes[g],
                        " taxels, first id ", l.ids[mem[0]], ") is not connected in the taxel graph");
   }
 

@@ -10,6 +10,7 @@
 //      takes taxels from neighbouring groups that can spare one without falling apart, is re-cut
 //      together with nearby groups (a small exact search), or is dissolved, its taxels pushed
 //      into neighbouring groups along chains of groups that pass a taxel on until one has room.
+// A sweep whose pockets cannot be repaired is retried from other start taxels (up to 11).
 // Deterministic. Throws when a piece has fewer than min_size taxels, when no count of groups of
 // min..max taxels sums to its size, or when repair fails (a pathological shape).
 #include <algorithm>
@@ -33,30 +34,23 @@ inline bool coverable(int n, int lo, int hi) {
   return static_cast<long long>(k) * lo <= n;
 }
 
-// Grouping state over one skin: the groups as taxel lists, and each taxel's group.
+// Grouping state over one skin: the groups as taxel lists, and each taxel's group. Groups never
+// take taxels of another part, even where an edge crosses parts.
 struct GrowState {
   const TaxelGraph& g;
+  const std::vector<int>& part;
   std::vector<std::vector<int>>& groups;
   std::vector<int>& owner;
 
+  // The group of taxel v if it may join u's group (same part), else -1.
+  int peer(int u, int v) const { return part[u] == part[v] ? owner[v] : -1; }
+
   // Whether group h stays connected without its taxel skip.
   bool connected_without(int h, int skip) const {
-    const auto& mem = groups[h];
-    int start = -1;
-    for (int v : mem)
-      if (v != skip) start = v;
-    if (start < 0) return false;
-    std::vector<int> seen{start}, stack{start};
-    while (!stack.empty()) {
-      const int u = stack.back();
-      stack.pop_back();
-      for (int v : g.neighbors(u))
-        if (v != skip && owner[v] == h && std::find(seen.begin(), seen.end(), v) == seen.end()) {
-          seen.push_back(v);
-          stack.push_back(v);
-        }
-    }
-    return seen.size() + 1 == mem.size();
+    std::vector<int> rest;
+    for (int v : groups[h])
+      if (v != skip) rest.push_back(v);
+    return induces_connected(g, rest);
   }
   void move(int v, int to) {
     auto& from = groups[owner[v]];
@@ -152,21 +146,6 @@ struct GrowState {
     return solve(solve, n == 32 ? ~0u : (1u << n) - 1);
   }
 
-  // Whether the taxels of `set` induce a connected subgraph.
-  bool connected_set(const std::vector<int>& set) const {
-    if (set.empty()) return false;
-    std::vector<int> seen{set[0]}, stack{set[0]};
-    while (!stack.empty()) {
-      const int x = stack.back();
-      stack.pop_back();
-      for (int v : g.neighbors(x))
-        if (std::find(set.begin(), set.end(), v) != set.end() && std::find(seen.begin(), seen.end(), v) == seen.end()) {
-          seen.push_back(v);
-          stack.push_back(v);
-        }
-    }
-    return seen.size() == set.size();
-  }
 
   // Moves taxel u out of group h into a neighbouring group; a group pushed over hi passes one of
   // its taxels on to a further group, breadth-first over groups, until one has room. Every group on
@@ -178,9 +157,9 @@ struct GrowState {
     std::vector<Step> steps;
     std::vector<int> visited{h};
     for (int v : g.neighbors(u))
-      if (owner[v] >= 0 && owner[v] != h && std::find(visited.begin(), visited.end(), owner[v]) == visited.end()) {
-        visited.push_back(owner[v]);
-        steps.push_back({owner[v], u, -1});
+      if (const int a = peer(u, v); a >= 0 && a != h && std::find(visited.begin(), visited.end(), a) == visited.end()) {
+        visited.push_back(a);
+        steps.push_back({a, u, -1});
       }
     for (std::size_t q = 0; q < steps.size(); ++q) {
       const Step st = steps[q];
@@ -196,9 +175,9 @@ struct GrowState {
         std::vector<int> without;
         for (int y : with)
           if (y != x) without.push_back(y);
-        if (!connected_set(without)) continue;
+        if (!induces_connected(g, without)) continue;
         for (int v : g.neighbors(x)) {
-          const int z = owner[v];
+          const int z = peer(x, v);
           if (z < 0 || std::find(visited.begin(), visited.end(), z) != visited.end()) continue;
           visited.push_back(z);
           steps.push_back({z, x, static_cast<int>(q)});
@@ -213,7 +192,7 @@ struct GrowState {
     std::vector<int> out;
     for (int u : groups[h])
       for (int v : g.neighbors(u))
-        if (owner[v] >= 0 && owner[v] != h) out.push_back(owner[v]);
+        if (const int a = peer(u, v); a >= 0 && a != h) out.push_back(a);
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
     return out;
@@ -231,7 +210,7 @@ inline Grouping grow_grouping(const Skin& skin, int min_size, int max_size,
   const int n = l.size();
   std::vector<std::vector<int>> groups;
   std::vector<int> owner(n, -1), piece_mark(n, -1), rank(n, -1), cand_links(n, 0);
-  detail::GrowState st{tg, groups, owner};
+  detail::GrowState st{tg, l.part, groups, owner};
 
   // Breadth-first order from s over taxels of s's part; returns the order.
   auto bfs = [&](int s, int mark) {
@@ -342,7 +321,7 @@ inline Grouping grow_grouping(const Skin& skin, int min_size, int max_size,
           // Take a taxel bordering h from a neighbouring group that can spare it.
           for (std::size_t k = 0; k < groups[h].size() && !changed; ++k)
             for (int v : tg.neighbors(groups[h][k])) {
-              const int a = owner[v];
+              const int a = st.peer(groups[h][k], v);
               if (a < 0 || a == h || static_cast<int>(groups[a].size()) <= min_size || !st.connected_without(a, v)) continue;
               st.move(v, h);
               changed = true;
