@@ -27,4 +27,13 @@
 #include "tjepa/graph/colors.hpp"
 #include "tjepa/graph/svg.hpp"
 
+#include "tjepa/masks/collator.hpp"
+#include "tjepa/masks/config.hpp"
+#include "tjepa/masks/context.hpp"
+#include "tjepa/masks/domain.hpp"
+#include "tjepa/masks/global.hpp"
+#include "tjepa/masks/ijepa_blocks.hpp"
+#include "tjepa/masks/local.hpp"
+#include "tjepa/masks/svg.hpp"
+
 #include "tjepa/model/param_set.hpp"
