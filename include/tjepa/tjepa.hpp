@@ -6,12 +6,15 @@
 #include "tjepa/core/eigen.hpp"
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
+#include "tjepa/core/atomic_write.hpp"
 
 #include "tjepa/layout/taxel_layout.hpp"
 #include "tjepa/layout/grid_pad.hpp"
 #include "tjepa/layout/layout_builder.hpp"
 #include "tjepa/layout/allegro_xela.hpp"
 #include "tjepa/layout/generic.hpp"
+#include "tjepa/layout/inspire.hpp"
+#include "tjepa/layout/csv.hpp"
 
 #include "tjepa/data/grouped_gather.hpp"
 #include "tjepa/data/labels.hpp"
@@ -27,6 +30,13 @@
 #include "tjepa/graph/taxel_graph.hpp"
 #include "tjepa/graph/skin.hpp"
 #include "tjepa/graph/bridges.hpp"
+#include "tjepa/graph/coordinate_graphs.hpp"
+#include "tjepa/graph/join.hpp"
+#include "tjepa/graph/grouping.hpp"
+#include "tjepa/graph/block_grouping.hpp"
+#include "tjepa/graph/grow_grouping.hpp"
+#include "tjepa/graph/colors.hpp"
+#include "tjepa/graph/svg.hpp"
 
 #include "tjepa/masks/collator.hpp"
 #include "tjepa/masks/config.hpp"
@@ -35,6 +45,7 @@
 #include "tjepa/masks/global.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/masks/local.hpp"
+#include "tjepa/masks/svg.hpp"
 
 #include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
