@@ -117,7 +117,7 @@ struct Predictor {
   // dout [B, t, d_in] → parameter gradients, dctx [Bc, K, d_in] += and dpos [N, pd] += (either
   // may be nullptr: the default reads the target encoder's table, which takes no gradient).
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dout, T* dctx, T* dpos, const PredictorCache<T>& c,
+  void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dctx, std::type_identity_t<T>* dpos, const PredictorCache<T>& c,
                 Workspace<T>& ws) const {
     const int pd = config.dim, Bc = c.Bc, K = c.K, B = c.B, t = c.t, L = K + t;
     const std::size_t M = std::size_t(B) * L, Mt = std::size_t(B) * t;
