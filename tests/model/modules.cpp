@@ -178,6 +178,45 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
+  TEST_CASE("BlockStack keeping only the last rows: same outputs as the full stack, gradients") {
+    ParamSet<double> ps;
+    const BlockConfig bc{12, 3, 2.0, true, false, true, 1e-6};
+    auto stack = BlockStack::add(ps, "blocks.", 2, bc);
+    ps.allocate();
+    test::randomize(ps, 15);
+    const int B = 3, L = 6, kf = 2, d = 12, Lk = L - kf;
+    Rng rng(16);
+    auto x = test::normal_vector(std::size_t(B) * L * d, rng);
+    std::vector<std::uint8_t> valid(std::size_t(B) * L, 1);
+    valid[1] = valid[L + 4] = 0;
+    DropPath dp;
+    SUBCASE("no drop-path") {}
+    SUBCASE("drop-path 0.5") { dp = {0.5, 17}; }
+    Workspace<double> ws;
+    std::vector<double> full(x.size()), kept(std::size_t(B) * Lk * d);
+    stack.forward(ps, x.data(), full.data(), B, L, valid.data(), dp, nullptr, ws);
+    stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, nullptr, ws, kf);
+    double diff = 0;
+    for (int b = 0; b < B; ++b)
+      for (std::size_t i = 0; i < std::size_t(Lk) * d; ++i)
+        diff = std::max(diff, std::abs(kept[std::size_t(b) * Lk * d + i] - full[(std::size_t(b) * L + kf) * d + i]));
+    CHECK(diff < 1e-12);
+    auto w = test::normal_vector(kept.size(), rng);
+    auto loss = [&] {
+      stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, nullptr, ws, kf);
+      return test::dot(w.data(), kept.data(), kept.size());
+    };
+    BlockStackCache<double> cache;
+    ps.zero_grad();
+    stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, &cache, ws, kf);
+    CHECK(test::dot(w.data(), kept.data(), kept.size()) == doctest::Approx(loss()).epsilon(1e-13));
+    std::vector<double> dx(x.size(), 0.0);
+    std::copy(w.begin(), w.end(), dx.begin());
+    stack.backward(ps, dx.data(), cache, ws);
+    CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
+    test::check_param_gradients(ps, loss);
+  }
+
   TEST_CASE("Encoder and Predictor backward accumulate: two passes give twice the gradient") {
     ParamSet<double> ps;
     Encoder enc(ps, EncoderConfig{6, 12, 2, 3, 4.0, true, 1e-6});
