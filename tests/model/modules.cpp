@@ -295,6 +295,19 @@ TEST_SUITE("nn") {
       CHECK(own > 1e-6);
       test::check_param_gradients(ps, loss);
     }
+    SUBCASE("batch 1, long sequence: query blocks over threads equal the reference kernel") {
+      const int L1 = 100;
+      auto x1 = test::normal_vector(std::size_t(L1) * d, rng);
+      std::vector<double> qkv1(std::size_t(L1) * 3 * d), att1(std::size_t(L1) * d), y1(att1.size());
+      std::vector<double> ref_att(att1.size()), ref_lse(std::size_t(3) * L1), lse1(ref_lse.size());
+      attn.forward(ps, x1.data(), 1, L1, nullptr, qkv1.data(), att1.data(), lse1.data(), y1.data(), false, ws);
+      ref::attention_forward(AttentionShape::fused_self(L1, 3, d / 3), qkv1.data(), qkv1.data() + d,
+                             qkv1.data() + 2 * d, nullptr, ref_att.data(), ref_lse.data());
+      double diff = 0;
+      for (std::size_t i = 0; i < att1.size(); ++i) diff = std::max(diff, std::abs(att1[i] - ref_att[i]));
+      for (std::size_t i = 0; i < lse1.size(); ++i) diff = std::max(diff, std::abs(lse1[i] - ref_lse[i]));
+      CHECK(diff < 1e-12);
+    }
     SUBCASE("mlp") {
       const int M = B * L;
       auto w = test::normal_vector(std::size_t(M) * 7, rng);

@@ -52,16 +52,24 @@ struct SelfAttention {
                T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws, int q_from = 0) const {
     const int d = dim(), Dh = d / heads, Lq = L - q_from;
     qkv.forward(ps, x, qkv_buf, B * L);
-    const AttentionShape s = head_shape(L, q_from);
+    // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
+    // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads).
+    const int pairs = B * heads, threads = detail::max_threads();
+    const int chunks = pairs >= 2 * threads ? 1 : std::max(1, std::min((2 * threads + pairs - 1) / pairs, Lq / 32));
+    const int rows_per = (Lq + chunks - 1) / chunks;
     AttentionWorkspace<T>* aws = ws.attention_per_thread();
-    TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
-    for (int bh = 0; bh < B * heads; ++bh) {
-      const int b = bh / heads, h = bh % heads;
+    TJEPA_OMP(omp parallel for schedule(dynamic) if (pairs * chunks > 1))
+    for (int task = 0; task < pairs * chunks; ++task) {
+      const int bh = task / chunks, b = bh / heads, h = bh % heads;
+      const int r0 = (task % chunks) * rows_per, r1 = std::min(Lq, r0 + rows_per);
+      if (r0 >= r1) continue;
+      AttentionShape s = head_shape(L, q_from);
+      s.Lq = r1 - r0;
       const T* k = qkv_buf + std::size_t(b) * L * 3 * d + d + std::size_t(h) * Dh;
-      attention_forward(s, k - d + std::size_t(q_from) * 3 * d, k, k + d,
+      attention_forward(s, k - d + std::size_t(q_from + r0) * 3 * d, k, k + d,
                         key_valid ? key_valid + std::size_t(b) * L : nullptr,
-                        att + std::size_t(b) * Lq * d + std::size_t(h) * Dh, lse ? lse + std::size_t(bh) * L : nullptr,
-                        aws[detail::thread_id()]);
+                        att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
+                        lse ? lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()]);
     }
     if (accumulate)
       proj.forward_accumulate(ps, att, y, B * Lq);
