@@ -43,19 +43,27 @@ std::vector<float> random_floats(std::size_t n, std::uint64_t seed) {
   return v;
 }
 
+// A ViT-Tiny encoder on L tokens with initialized parameters, and a batch of B token rows.
+struct EncoderSetup {
+  ParamSet<float> ps;
+  Encoder enc;
+  std::vector<float> tokens, out;
+  Workspace<float> ws;
+  EncoderSetup(int B, int L) : enc(ps, EncoderConfig{L, dim, depth, heads, 4.0, true, 1e-6}) {
+    ps.allocate();
+    init_params(ps, 1);
+    tokens = random_floats(std::size_t(B) * L * dim, 2);
+    out.resize(tokens.size());
+  }
+};
+
 // Encoder inference (target-encoder path: all tokens, no cache), batch B.
 void BM_EncoderForward(benchmark::State& state) {
   const int L = int(state.range(0)), B = int(state.range(1));
-  ParamSet<float> ps;
-  Encoder enc(ps, EncoderConfig{L, dim, depth, heads, 4.0, true, 1e-6});
-  ps.allocate();
-  init_params(ps, 1);
-  auto tokens = random_floats(std::size_t(B) * L * dim, 2);
-  std::vector<float> out(tokens.size());
-  Workspace<float> ws;
+  EncoderSetup e(B, L);
   for (auto _ : state) {
-    enc.forward(ps, tokens.data(), B, nullptr, L, out.data(), nullptr, ws);
-    benchmark::DoNotOptimize(out.data());
+    e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), nullptr, e.ws);
+    benchmark::DoNotOptimize(e.out.data());
   }
   state.counters["GFLOP/s"] =
       benchmark::Counter(encoder_forward_flops(B, L) * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
@@ -66,20 +74,15 @@ BENCHMARK(BM_EncoderForward)->Args({368, 1})->Args({528, 1})->Unit(benchmark::kM
 // backward to parameters and tokens, batch 8.
 void BM_EncoderForwardBackward(benchmark::State& state) {
   const int L = int(state.range(0)), B = int(state.range(1));
-  ParamSet<float> ps;
-  Encoder enc(ps, EncoderConfig{L, dim, depth, heads, 4.0, true, 1e-6});
-  ps.allocate();
-  init_params(ps, 1);
-  auto tokens = random_floats(std::size_t(B) * L * dim, 2);
-  auto dout = random_floats(tokens.size(), 3);
-  std::vector<float> out(tokens.size()), dtokens(tokens.size());
-  Workspace<float> ws;
+  EncoderSetup e(B, L);
+  auto dout = random_floats(e.tokens.size(), 3);
+  std::vector<float> dtokens(e.tokens.size());
   EncoderCache<float> cache;
   std::uint64_t step = 0;
   for (auto _ : state) {
-    ps.zero_grad();
-    enc.forward(ps, tokens.data(), B, nullptr, L, out.data(), &cache, ws, {DropPath{0.3, ++step}, nullptr});
-    enc.backward(ps, dout.data(), dtokens.data(), cache, ws);
+    e.ps.zero_grad();
+    e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), &cache, e.ws, {DropPath{0.3, ++step}, nullptr});
+    e.enc.backward(e.ps, dout.data(), dtokens.data(), cache, e.ws);
     benchmark::DoNotOptimize(dtokens.data());
   }
   state.counters["GFLOP/s"] =
@@ -112,6 +115,55 @@ void BM_PredictorForwardBackward(benchmark::State& state) {
       benchmark::Counter(encoder_train_flops(B, K + t, 4) * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_PredictorForwardBackward)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The model work of one JEPA training step on Sparsh-skin shapes, batch 8 (no loss, optimizer
+// or masks: those are the training stage's): tokenizer (368 taxels, m·τ = 30) forward+backward,
+// target encoder forward on all 368 tokens (drop-path 0.3, no cache), context encoder
+// forward+backward on 258 tokens, predictor forward+backward on 4 tiled targets of 51 tokens.
+// Compare with PyTorch's 1368 ms per training step.
+void BM_JepaStepModel(benchmark::State& state) {
+  const int N = 368, B = 8, K = 258, t = 51, R = 4, in = 30;
+  ParamSet<float> ps, target, pps;
+  Tokenizer tok = Tokenizer::per_taxel(ps, N, in, dim);
+  Encoder enc(ps, EncoderConfig{N, dim, depth, heads, 4.0, true, 1e-6});
+  Tokenizer::per_taxel(target, N, in, dim);
+  Encoder(target, EncoderConfig{N, dim, depth, heads, 4.0, true, 1e-6});
+  Predictor pred(pps, PredictorConfig{dim, dim, 4, heads, 4.0, false, 1e-6});
+  for (auto* p : {&ps, &target, &pps}) {
+    p->allocate();
+    init_params(*p, 1);
+  }
+  auto x = random_floats(std::size_t(B) * N * in, 2), dout = random_floats(std::size_t(B) * R * t * dim, 3);
+  std::vector<int> ctx(std::size_t(B) * K), tg(std::size_t(B) * R * t);
+  for (std::size_t i = 0; i < ctx.size(); ++i) ctx[i] = int((i * 7) % N);
+  for (std::size_t i = 0; i < tg.size(); ++i) tg[i] = int((i * 37) % N);
+  std::vector<float> tokens(std::size_t(B) * N * dim), ttokens(tokens.size()), z(tokens.size());
+  std::vector<float> zc(std::size_t(B) * K * dim), dzc(zc.size()), dtokens(tokens.size()), out(dout.size());
+  Workspace<float> ws;
+  TokenizerCache<float> tc;
+  EncoderCache<float> ec;
+  PredictorCache<float> pc;
+  std::uint64_t step = 0;
+  for (auto _ : state) {
+    ps.zero_grad();
+    pps.zero_grad();
+    ++step;
+    tok.forward(target, x.data(), B, ttokens.data(), nullptr, ws);
+    enc.forward(target, ttokens.data(), B, nullptr, N, z.data(), nullptr, ws, {DropPath{0.3, step}, nullptr});
+    tok.forward(ps, x.data(), B, tokens.data(), &tc, ws);
+    enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), &ec, ws, {DropPath{0.3, step + (1u << 30)}, nullptr});
+    pred.forward(pps, zc.data(), B, K, target.value(enc.pos_embed()), N, tg.data(), B * R, t, out.data(), &pc, ws);
+    std::fill(dzc.begin(), dzc.end(), 0.0f);
+    pred.backward(pps, dout.data(), dzc.data(), nullptr, pc, ws);
+    std::fill(dtokens.begin(), dtokens.end(), 0.0f);
+    enc.backward(ps, dzc.data(), dtokens.data(), ec, ws);
+    tok.backward(ps, dtokens.data(), nullptr, tc, ws);
+    benchmark::DoNotOptimize(ps.grads().data());
+  }
+  const double flops = encoder_forward_flops(B, N) + encoder_train_flops(B, K) + encoder_train_flops(B * R, K + t, 4);
+  state.counters["GFLOP/s"] = benchmark::Counter(flops * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_JepaStepModel)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Grouped tokenizer of DECO-50: 2124 taxels in 528 groups per window (per hand: 252 2×2 groups
 // of 4, and the six 3×3 regions split into 4 + 5), τ = 3 frames, m = 1; forward only (arg 0) or
