@@ -192,36 +192,48 @@ struct BlockStack {
       const Block& blk = blocks[std::size_t(i)];
       const std::size_t o = std::size_t(i) * Md, r = std::size_t(i) * M;
       const int q_from = i == D - 1 ? kf : 0;
-      const int Mq = B * (L - q_from);
       const std::size_t per_sample = std::size_t(L - q_from) * d;
       T* gq = q_from > 0 ? g : dx;  // ∂L/∂x_out, then ∂L/∂x_mid, of this block's query rows
       const T* s1 = drop ? c.scales.data() + std::size_t(2 * i) * B : nullptr;
       const T* s2 = drop ? c.scales.data() + std::size_t(2 * i + 1) * B : nullptr;
-      // x_out = x_mid + s2 · mlp(ln2),  ln2 = norm2(x_mid)
-      const T* g2 = gq;
-      if (s2) {
-        std::fill(dbranch, dbranch + std::size_t(Mq) * d, T(0));
-        drop_path_backward(dbranch, gq, s2, B, per_sample);
-        g2 = dbranch;
-      }
-      std::fill(dln, dln + std::size_t(Mq) * d, T(0));
-      blk.mlp.backward(ps, g2, c.ln2.data() + o, c.h_pre.data() + std::size_t(i) * M * hid, h, dh, dln, Mq);
-      blk.norm2.backward(ps, dln, c.x_mid.data() + o, c.mean2.data() + r, c.rstd2.data() + r, gq, Mq);
-      // x_mid = x_in[query rows] + s1 · attn(ln1),  ln1 = norm1(x_in)
-      const T* g1 = gq;
-      if (s1) {
-        std::fill(dbranch, dbranch + std::size_t(Mq) * d, T(0));
-        drop_path_backward(dbranch, gq, s1, B, per_sample);
-        g1 = dbranch;
-      }
-      std::fill(dln, dln + Md, T(0));
-      blk.attn.backward(ps, g1, c.ln1.data() + o, B, L, kv, c.qkv.data() + 3 * o, c.att.data() + o,
-                        c.lse.data() + std::size_t(i) * B * H * L, dqkv, datt, dln, ws, q_from);
+      const int Lq = L - q_from;
+      // x_out = x_mid + s2 · mlp(ln2), ln2 = norm2(x_mid): only samples whose branch was kept.
+      for_each_kept_run(s2, B, [&](int b0, int b1) {
+        const int n = b1 - b0, rows = n * Lq;
+        const std::size_t q = std::size_t(b0) * Lq;
+        const T* g2 = gq + q * d;
+        if (s2) {
+          std::fill(dbranch + q * d, dbranch + (q + rows) * d, T(0));
+          drop_path_backward(dbranch + q * d, gq + q * d, s2 + b0, n, per_sample);
+          g2 = dbranch + q * d;
+        }
+        std::fill(dln + q * d, dln + (q + rows) * d, T(0));
+        blk.mlp.backward(ps, g2, c.ln2.data() + o + q * d, c.h_pre.data() + std::size_t(i) * M * hid + q * hid,
+                         h + q * hid, dh + q * hid, dln + q * d, rows);
+        blk.norm2.backward(ps, dln + q * d, c.x_mid.data() + o + q * d, c.mean2.data() + r + q,
+                           c.rstd2.data() + r + q, gq + q * d, rows);
+      });
+      // x_mid = x_in[query rows] + s1 · attn(ln1), ln1 = norm1(x_in)
       if (q_from > 0) {
         std::fill(dx, dx + Md, T(0));
         scatter_kept_rows(dx, gq, B, L, q_from, d);
       }
-      blk.norm1.backward(ps, dln, c.xs.data() + o, c.mean1.data() + r, c.rstd1.data() + r, dx, int(M));
+      for_each_kept_run(s1, B, [&](int b0, int b1) {
+        const int n = b1 - b0;
+        const std::size_t f = std::size_t(b0) * L, q = std::size_t(b0) * Lq;
+        const T* g1 = gq + q * d;
+        if (s1) {
+          std::fill(dbranch + q * d, dbranch + (q + std::size_t(n) * Lq) * d, T(0));
+          drop_path_backward(dbranch + q * d, gq + q * d, s1 + b0, n, per_sample);
+          g1 = dbranch + q * d;
+        }
+        std::fill(dln + f * d, dln + (f + std::size_t(n) * L) * d, T(0));
+        blk.attn.backward(ps, g1, c.ln1.data() + o + f * d, n, L, kv ? kv + f : nullptr, c.qkv.data() + 3 * o + f * 3 * d,
+                          c.att.data() + o + q * d, c.lse.data() + std::size_t(i) * B * H * L + std::size_t(b0) * H * L,
+                          dqkv + f * 3 * d, datt + q * d, dln + f * d, ws, q_from);
+        blk.norm1.backward(ps, dln + f * d, c.xs.data() + o + f * d, c.mean1.data() + r + f, c.rstd1.data() + r + f,
+                           dx + f * d, n * L);
+      });
     }
   }
 
@@ -247,31 +259,57 @@ struct BlockStack {
     }
   }
 
+  // Calls f(b0, b1) for each maximal run of samples [b0, b1) whose branch is kept (scale ≠ 0),
+  // or once for all samples without drop-path: a dropped branch is never computed.
+  template <class T, class F>
+  static void for_each_kept_run(const T* scale, int B, F&& f) {
+    if (!scale) {
+      f(0, B);
+      return;
+    }
+    for (int b = 0; b < B;) {
+      if (scale[b] == T(0)) {
+        ++b;
+        continue;
+      }
+      int e = b;
+      while (e < B && scale[e] != T(0)) ++e;
+      f(b, e);
+      b = e;
+    }
+  }
+
   // One block, x_in [B, L, d] → x_out [B, L - q_from, d]: attention queries, proj, norm2 and MLP
   // for the rows [q_from, L) of each sample only. With q_from = 0, x_out may alias x_in when
-  // buf.x_mid does too.
+  // buf.x_mid does too. Under drop-path each branch runs on the samples that keep it.
   template <class T>
   static void block_forward(const ParamSet<T>& ps, const Block& blk, const T* x_in, T* x_out, int B, int L,
                             int q_from, const std::uint8_t* key_valid, const BlockBuffers<T>& buf, T* branch,
                             Workspace<T>& ws) {
-    const int d = blk.attn.dim(), Mq = B * (L - q_from);
-    const std::size_t Mqd = std::size_t(Mq) * d, per_sample = std::size_t(L - q_from) * d;
-    blk.norm1.forward(ps, x_in, buf.ln1, buf.mean1, buf.rstd1, B * L);
+    const int d = blk.attn.dim(), H = blk.attn.heads, hid = blk.mlp.hidden(), Lq = L - q_from;
+    const std::size_t per_sample = std::size_t(Lq) * d;
     keep_rows(buf.x_mid, x_in, B, L, q_from, d);
-    if (buf.scale1) {
-      blk.attn.forward(ps, buf.ln1, B, L, key_valid, buf.qkv, buf.att, buf.lse, branch, false, ws, q_from);
-      drop_path_forward(buf.x_mid, branch, buf.scale1, B, per_sample);
-    } else {
-      blk.attn.forward(ps, buf.ln1, B, L, key_valid, buf.qkv, buf.att, buf.lse, buf.x_mid, true, ws, q_from);
-    }
-    blk.norm2.forward(ps, buf.x_mid, buf.ln2, buf.mean2, buf.rstd2, Mq);
-    if (x_out != buf.x_mid) std::copy(buf.x_mid, buf.x_mid + Mqd, x_out);
-    if (buf.scale2) {
-      blk.mlp.forward(ps, buf.ln2, buf.h_pre, buf.h, branch, Mq, false);
-      drop_path_forward(x_out, branch, buf.scale2, B, per_sample);
-    } else {
-      blk.mlp.forward(ps, buf.ln2, buf.h_pre, buf.h, x_out, Mq, true);
-    }
+    for_each_kept_run(buf.scale1, B, [&](int b0, int b1) {
+      const int n = b1 - b0;
+      const std::size_t f = std::size_t(b0) * L, q = std::size_t(b0) * Lq;
+      blk.norm1.forward(ps, x_in + f * d, buf.ln1 + f * d, buf.mean1 ? buf.mean1 + f : nullptr,
+                        buf.rstd1 ? buf.rstd1 + f : nullptr, n * L);
+      T* y = buf.scale1 ? branch + q * d : buf.x_mid + q * d;
+      blk.attn.forward(ps, buf.ln1 + f * d, n, L, key_valid ? key_valid + f : nullptr, buf.qkv + f * 3 * d,
+                       buf.att + q * d, buf.lse ? buf.lse + std::size_t(b0) * H * L : nullptr, y, !buf.scale1, ws,
+                       q_from);
+      if (buf.scale1) drop_path_forward(buf.x_mid + q * d, branch + q * d, buf.scale1 + b0, n, per_sample);
+    });
+    if (x_out != buf.x_mid) std::copy(buf.x_mid, buf.x_mid + std::size_t(B) * per_sample, x_out);
+    for_each_kept_run(buf.scale2, B, [&](int b0, int b1) {
+      const int n = b1 - b0, rows = n * Lq;
+      const std::size_t q = std::size_t(b0) * Lq;
+      blk.norm2.forward(ps, buf.x_mid + q * d, buf.ln2 + q * d, buf.mean2 ? buf.mean2 + q : nullptr,
+                        buf.rstd2 ? buf.rstd2 + q : nullptr, rows);
+      T* y = buf.scale2 ? branch + q * d : x_out + q * d;
+      blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, !buf.scale2);
+      if (buf.scale2) drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
+    });
   }
 };
 
