@@ -295,7 +295,7 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
 
   for (int h = 0; h < s.H; ++h) {
     const int c0 = h * Dh;
-    A::pack_transposed(k + c0, s.ldk, keys, nk, Dh, kt, Nk);
+    A::pack_transposed(k + c0, s.ldk, keys, nk, Dh, kt, Nk, Tl::BK);
     A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
 
     for (int q0 = 0; q0 < s.Lq; q0 += Tl::BQ) {
@@ -311,7 +311,7 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
         const int kv = std::min(Tl::BK, nk - kb);
         const int nv = static_cast<int>(A::round_up(kv, w));
         // S [mq, nv] = Q_blk K_blk^T (unscaled)
-        A::gemm<T, A::Store::overwrite>(mq, nv, Dh, qblk, s.ldq, 1, kt + kb, Nk, S, Tl::BK);
+        A::gemm<T, A::Store::overwrite>(mq, nv, Dh, qblk, s.ldq, 1, kt + kb * Dh, Tl::BK, S, Tl::BK);
         for (int i = 0; i < mq; ++i) {
           T* row = S + i * Tl::BK;
           for (int j = kv; j < nv; ++j) row[j] = ninf;  // padding keys of the last tile

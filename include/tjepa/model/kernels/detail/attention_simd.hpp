@@ -86,6 +86,22 @@ struct Exp2Traits<double> {
 template <class T>
 inline Vec<T> exp2(Vec<T> x) {
   using Tr = Exp2Traits<T>;
+#if defined(__AVX512F__)
+  if constexpr (sizeof(Vec<T>) == 64) {
+    // AVX-512: round with vrndscale, multiply by 2^n with vscalef (which also flushes 2^-150 and
+    // below to 0), no integer domain crossing. The low clamp keeps f finite for x = -inf.
+    x = xsimd::max(x, Vec<T>(Tr::lo - 24));
+    if constexpr (std::is_same_v<T, float>) {
+      const __m512 n = _mm512_roundscale_ps(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+      const __m512 p = Tr::poly(Vec<T>(_mm512_sub_ps(x, n)));
+      return Vec<T>(_mm512_scalef_ps(p, n));
+    } else {
+      const __m512d n = _mm512_roundscale_pd(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+      const __m512d p = Tr::poly(Vec<T>(_mm512_sub_pd(x, n)));
+      return Vec<T>(_mm512_scalef_pd(p, n));
+    }
+  }
+#endif
   using IV = xsimd::batch<typename Tr::Int>;
   x = xsimd::min(xsimd::max(x, Vec<T>(Tr::lo)), Vec<T>(Tr::hi));  // also maps -inf to lo
   const Vec<T> t = x + Vec<T>(Tr::magic);                         // low bits of t hold round(x)
@@ -197,22 +213,22 @@ inline void prefetch_row(const T* src, std::ptrdiff_t lds, const int* rows, int 
   for (std::size_t off = 0; off < Dh * sizeof(T); off += 64) __builtin_prefetch(p + off);
 }
 
-// dst [Dh, ldd] = the rows transposed, columns [n, n_pad) zero (n_pad <= ldd).
+// The rows transposed, in panels of `panel` rows: dst [n_pad / panel][Dh][panel], so the B operand
+// of one tile (row r of the source is column r % panel of panel r / panel) is contiguous; columns
+// [n, n_pad) are zero. n_pad is a multiple of panel.
 template <class T>
 inline void pack_transposed(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
-                            std::ptrdiff_t n_pad) {
-  const std::ptrdiff_t ldd = n_pad;
-  constexpr int blk = 16;  // 16 source rows at a time: reads stay in L1, writes are 16-wide runs
-  for (int r0 = 0; r0 < n; r0 += blk) {
-    const int r1 = std::min(n, r0 + blk);
-    for (int r = r0; r < r1; ++r) {
-      prefetch_row(src, lds, rows, r, n, Dh);
+                            std::ptrdiff_t n_pad, int panel) {
+  for (std::ptrdiff_t r = 0; r < n_pad; ++r) {
+    T* d = dst + (r / panel) * Dh * panel + r % panel;
+    if (r < n) {
+      prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
       const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
-      for (int p = 0; p < Dh; ++p) dst[p * ldd + r] = sr[p];
+      for (int p = 0; p < Dh; ++p) d[p * panel] = sr[p];
+    } else {
+      for (int p = 0; p < Dh; ++p) d[p * panel] = T(0);
     }
   }
-  for (int p = 0; p < Dh; ++p)
-    for (std::ptrdiff_t r = n; r < n_pad; ++r) dst[p * ldd + r] = T(0);
 }
 
 // dst [n_pad, DhP] = the rows, columns [Dh, DhP) and rows [n, n_pad) zero.
@@ -236,7 +252,7 @@ inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, 
 // Backward (key blocks outside, query blocks inside): BKB keys x BQB queries.
 template <class T>
 struct Tiles {
-  static constexpr int BQ = 8 * MR<T>;
+  static constexpr int BQ = 16 * MR<T>;
   static constexpr int BK = 2 * NR<T>;
   static constexpr int BKB = 8 * MR<T>;
   static constexpr int BQB = NR<T>;
@@ -257,7 +273,7 @@ struct ForwardLayout {
       at += round_up(n, W<T>);
       return off;
     };
-    kt = take(Dh * Nk);  // K_h^T of the valid keys [Dh, Nk]
+    kt = take(Dh * Nk);  // K_h^T of the valid keys in panels of BK keys [Nk / BK][Dh][BK]
     vp = take(Nk * DhP);  // V_h of the valid keys [Nk, DhP]
     s = take(std::ptrdiff_t{Tl::BQ} * Tl::BK);  // scores, then probabilities [BQ, BK]
     o = take(std::ptrdiff_t{Tl::BQ} * DhP);     // unnormalized output [BQ, DhP]
