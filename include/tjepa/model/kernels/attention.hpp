@@ -392,41 +392,25 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
 
   for (int h = 0; h < s.H; ++h) {
     const int c0 = h * Dh;
+    A::pack_rows(q + c0, s.ldq, nullptr, Lq, Dh, qp, DhP, NqP);
+    A::pack_rows(dout + c0, s.ldo, nullptr, Lq, Dh, dop, DhP, NqP);
+    A::pack_transposed(qp, DhP, nullptr, Lq, Dh, qt, NqP, Tl::BQB);
+    A::pack_transposed(dop, DhP, nullptr, Lq, Dh, dot, NqP, Tl::BQB);
+    A::pack_rows(k + c0, s.ldk, keys, nk, Dh, kp, DhP, nk);
+    A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
+    std::fill(dqa, dqa + NqP * DhP, T(0));
     for (std::ptrdiff_t i = 0; i < NqP; ++i) {
-      T* qrow = qp + i * DhP;
-      T* dorow = dop + i * DhP;
-      T* dqrow = dqa + i * DhP;
-      for (std::ptrdiff_t p = 0; p < DhP; ++p) dqrow[p] = T(0);
       if (i >= Lq) {
-        for (std::ptrdiff_t p = 0; p < DhP; ++p) qrow[p] = dorow[p] = T(0);
-        for (int p = 0; p < Dh; ++p) qt[p * NqP + i] = dot[p * NqP + i] = T(0);
         lse2[i] = std::numeric_limits<T>::infinity();  // P = 0 on padding queries
         dd[i] = T(0);
         continue;
       }
-      const T* qi = q + i * s.ldq + c0;
-      const T* doi = dout + i * s.ldo + c0;
+      const T* doi = dop + i * DhP;
       const T* oi = out + i * s.ldo + c0;
       T D = T(0);
-      for (int p = 0; p < Dh; ++p) {
-        qrow[p] = qt[p * NqP + i] = qi[p];
-        dorow[p] = dot[p * NqP + i] = doi[p];
-        D += doi[p] * oi[p];
-      }
-      for (std::ptrdiff_t p = Dh; p < DhP; ++p) qrow[p] = dorow[p] = T(0);
+      for (int p = 0; p < Dh; ++p) D += doi[p] * oi[p];
       lse2[i] = lse[static_cast<std::ptrdiff_t>(h) * Lq + i] * T(A::log2e);
       dd[i] = D;
-    }
-    for (int jj = 0; jj < nk; ++jj) {
-      const T* kj = k + static_cast<std::ptrdiff_t>(keys[jj]) * s.ldk + c0;
-      const T* vj = v + static_cast<std::ptrdiff_t>(keys[jj]) * s.ldv + c0;
-      T* krow = kp + jj * DhP;
-      T* vrow = vp + jj * DhP;
-      for (int p = 0; p < Dh; ++p) {
-        krow[p] = kj[p];
-        vrow[p] = vj[p];
-      }
-      for (std::ptrdiff_t p = Dh; p < DhP; ++p) krow[p] = vrow[p] = T(0);
     }
 
     for (int kb = 0; kb < nk; kb += Tl::BKB) {
@@ -436,8 +420,8 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
       for (int qb = 0; qb < Lq; qb += Tl::BQB) {
         const int nq = std::min(Tl::BQB, Lq - qb);
         const int nv = static_cast<int>(A::round_up(nq, w));
-        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, kblk, DhP, 1, qt + qb, NqP, st, Tl::BQB);   // S^T
-        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, vblk, DhP, 1, dot + qb, NqP, dpt, Tl::BQB);  // dP^T
+        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, kblk, DhP, 1, qt + qb * Dh, Tl::BQB, st, Tl::BQB);   // S^T
+        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, vblk, DhP, 1, dot + qb * Dh, Tl::BQB, dpt, Tl::BQB);  // dP^T
         const V cv(c);
         for (int r = 0; r < mk; ++r) {
           T* srow = st + r * Tl::BQB;

@@ -300,8 +300,8 @@ struct BackwardLayout {
       at += round_up(n, W<T>);
       return off;
     };
-    qt = take(Dh * NqP);   // Q_h^T [Dh, NqP]
-    dot = take(Dh * NqP);  // dO_h^T [Dh, NqP]
+    qt = take(Dh * NqP);   // Q_h^T in panels of BQB queries [NqP / BQB][Dh][BQB]
+    dot = take(Dh * NqP);  // dO_h^T, same layout
     qp = take(NqP * DhP);  // Q_h [NqP, DhP]
     dop = take(NqP * DhP);  // dO_h [NqP, DhP]
     dq = take(NqP * DhP);   // dQ_h accumulator [NqP, DhP]
