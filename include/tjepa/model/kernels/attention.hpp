@@ -229,15 +229,6 @@ int compact_keys(const AttentionShape& s, const std::uint8_t* key_valid, Attenti
   return n;
 }
 
-template <class T>
-T hmax(Vec<T> x) {
-  alignas(64) T buf[W<T>];
-  x.store_aligned(buf);
-  T m = buf[0];
-  for (int i = 1; i < W<T>; ++i) m = std::max(m, buf[i]);
-  return m;
-}
-
 inline constexpr double log2e = 1.4426950408889634074;
 inline constexpr double ln2 = 0.6931471805599453094;
 

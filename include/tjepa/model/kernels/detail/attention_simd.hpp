@@ -112,6 +112,25 @@ inline Vec<T> exp2(Vec<T> x) {
   return Tr::poly(f) * xsimd::bitwise_cast<Vec<T>>(e);
 }
 
+// Largest lane of a batch: a shuffle tree on AVX-512 (a scalar chain of 16 max would be
+// latency-bound), a store and a loop elsewhere.
+template <class T>
+inline T hmax(Vec<T> x) {
+#if defined(__AVX512F__)
+  if constexpr (sizeof(Vec<T>) == 64) {
+    if constexpr (std::is_same_v<T, float>)
+      return _mm512_reduce_max_ps(x);
+    else
+      return _mm512_reduce_max_pd(x);
+  }
+#endif
+  alignas(64) T buf[W<T>];
+  x.store_aligned(buf);
+  T m = buf[0];
+  for (int i = 1; i < W<T>; ++i) m = std::max(m, buf[i]);
+  return m;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Micro-kernel: C[MR_, NV_*W] (op)= A[MR_, K] B[K, NV_*W].
 // A has arbitrary strides (element (i, p) at A[i*a_rs + p*a_cs]); its entries are broadcast, so a
