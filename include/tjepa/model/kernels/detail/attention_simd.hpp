@@ -10,6 +10,14 @@
 
 #include <xsimd/xsimd.hpp>
 
+// g++ 12 reports false "(may be) used uninitialized" warnings inside its own AVX-512 intrinsics
+// (the self-initialized _mm512_undefined_* operands of max/min/shift) once they are inlined here.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
+
 namespace tjepa::detail::attn {
 
 template <class T>
@@ -112,23 +120,42 @@ inline Vec<T> exp2(Vec<T> x) {
   return Tr::poly(f) * xsimd::bitwise_cast<Vec<T>>(e);
 }
 
-// Largest lane of a batch: a shuffle tree on AVX-512 (a scalar chain of 16 max would be
-// latency-bound), a store and a loop elsewhere.
-template <class T>
-inline T hmax(Vec<T> x) {
-#if defined(__AVX512F__)
-  if constexpr (sizeof(Vec<T>) == 64) {
-    if constexpr (std::is_same_v<T, float>)
-      return _mm512_reduce_max_ps(x);
-    else
-      return _mm512_reduce_max_pd(x);
+// One key tile of the forward's online softmax on transposed scores st [kv, ld] (key r in row r,
+// queries along the row, nb vectors of them): with mx = max over the tile's keys,
+//   m_new = max(m, c mx), alpha = 2^(m - m_new), P^T = 2^(c S^T - m_new), l = alpha l + sum_r P^T,
+// all in base 2 (c = scale * log2 e); P^T replaces S^T, alpha is left for rescaling the output.
+// Full = true fixes nb = NBmax at compile time so the per-query vectors live in registers.
+template <class T, int NBmax, bool Full>
+inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* l, T* alpha) {
+  const int nb = Full ? NBmax : nb_rt;
+  constexpr int w = W<T>;
+  const Vec<T> cv(c);
+  Vec<T> mx[NBmax], mn[NBmax], sum[NBmax];
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j) mx[j] = Vec<T>::load_aligned(st + j * w);
+  for (int r = 1; r < kv; ++r)
+#pragma GCC unroll 8
+    for (int j = 0; j < nb; ++j) mx[j] = xsimd::max(mx[j], Vec<T>::load_aligned(st + r * ld + j * w));
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j) {
+    const Vec<T> mo = Vec<T>::load_aligned(m + j * w);
+    mn[j] = xsimd::max(mo, mx[j] * cv);
+    exp2(mo - mn[j]).store_aligned(alpha + j * w);  // 0 on the first tile (m = -inf)
+    mn[j].store_aligned(m + j * w);
+    sum[j] = Vec<T>(T(0));
   }
-#endif
-  alignas(64) T buf[W<T>];
-  x.store_aligned(buf);
-  T m = buf[0];
-  for (int i = 1; i < W<T>; ++i) m = std::max(m, buf[i]);
-  return m;
+  for (int r = 0; r < kv; ++r) {
+    T* row = st + r * ld;
+#pragma GCC unroll 8
+    for (int j = 0; j < nb; ++j) {
+      const Vec<T> p = exp2(xsimd::fms(Vec<T>::load_aligned(row + j * w), cv, mn[j]));
+      p.store_aligned(row + j * w);
+      sum[j] += p;
+    }
+  }
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j)
+    xsimd::fma(Vec<T>::load_aligned(l + j * w), Vec<T>::load_aligned(alpha + j * w), sum[j]).store_aligned(l + j * w);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -145,25 +172,25 @@ inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std:
   Vec<T> acc[MR_][NV_];
 #pragma GCC unroll 8
   for (int i = 0; i < MR_; ++i)
-#pragma GCC unroll 4
+#pragma GCC unroll 8
     for (int j = 0; j < NV_; ++j) acc[i][j] = Vec<T>(T(0));
   for (int p = 0; p < K; ++p) {
     const T* b = B + p * ldb;
     Vec<T> bv[NV_];
-#pragma GCC unroll 4
+#pragma GCC unroll 8
     for (int j = 0; j < NV_; ++j) bv[j] = Vec<T>::load_aligned(b + j * w);
     const T* a = A + p * a_cs;
 #pragma GCC unroll 8
     for (int i = 0; i < MR_; ++i) {
       const Vec<T> ai(a[i * a_rs]);
-#pragma GCC unroll 4
+#pragma GCC unroll 8
       for (int j = 0; j < NV_; ++j) acc[i][j] = xsimd::fma(ai, bv[j], acc[i][j]);
     }
   }
 #pragma GCC unroll 8
   for (int i = 0; i < MR_; ++i) {
     T* c = C + i * ldc;
-#pragma GCC unroll 4
+#pragma GCC unroll 8
     for (int j = 0; j < NV_; ++j) {
       if constexpr (S == Store::overwrite) {
         acc[i][j].store_aligned(c + j * w);
@@ -176,7 +203,7 @@ inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std:
   }
 }
 
-template <class T, int NV_, Store S>
+template <class T, int NV_, Store S, int MRm>
 inline void strip(int mr, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
                   std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
   switch (mr) {
@@ -184,35 +211,41 @@ inline void strip(int mr, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t
     case 2: return micro_kernel<T, 2, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
     case 3: return micro_kernel<T, 3, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
     default:
-      if constexpr (MR<T> >= 6) {
+      if constexpr (MRm >= 4) {
         switch (mr) {
           case 4: return micro_kernel<T, 4, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-          case 5: return micro_kernel<T, 5, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-          default: return micro_kernel<T, 6, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+          default:
+            if constexpr (MRm >= 6) {
+              if (mr == 5) return micro_kernel<T, 5, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+              return micro_kernel<T, 6, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+            }
         }
       }
   }
 }
 
-// C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NR outside (the B panel
-// stays in L1), strips of MR rows inside. alpha [M] is read only by Store::rescale_add.
-template <class T, Store S>
+// C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NVm vectors outside (the B
+// panel stays in L1), strips of MRm rows inside. alpha [M] is read only by Store::rescale_add.
+// MRm * NVm accumulators must fit the register file (MRm in {3, 4, 6}, NVm <= 6).
+template <class T, Store S, int MRm = MR<T>, int NVm = NV>
 inline void gemm(int M, int N, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
                  std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha = nullptr) {
   constexpr int w = W<T>;
-  for (int n0 = 0; n0 < N; n0 += NR<T>) {
-    const int nv = std::min(NV, (N - n0) / w);
-    for (int m0 = 0; m0 < M; m0 += MR<T>) {
-      const int mr = std::min(MR<T>, M - m0);
+  for (int n0 = 0; n0 < N; n0 += NVm * w) {
+    const int nv = std::min(NVm, (N - n0) / w);
+    for (int m0 = 0; m0 < M; m0 += MRm) {
+      const int mr = std::min(MRm, M - m0);
       const T* a = A + m0 * a_rs;
       const T* b = B + n0;
       T* c = C + m0 * ldc + n0;
       const T* al = alpha == nullptr ? nullptr : alpha + m0;
       switch (nv) {
-        case 4: strip<T, 4, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        case 3: strip<T, 3, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        case 2: strip<T, 2, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        default: strip<T, 1, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
+        case 6: if constexpr (NVm >= 6) { strip<T, 6, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break; } [[fallthrough]];
+        case 5: if constexpr (NVm >= 5) { strip<T, 5, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break; } [[fallthrough]];
+        case 4: strip<T, 4, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
+        case 3: strip<T, 3, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
+        case 2: strip<T, 2, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
+        default: strip<T, 1, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
       }
     }
   }
@@ -267,12 +300,13 @@ inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, 
 }
 
 // ---------------------------------------------------------------------------------------------
-// Tile sizes. Forward: BQ query rows x BK keys of scores per tile (BQ a multiple of MR, BK of NR).
+// Tile sizes. Forward: BK keys x BQ queries of transposed scores per tile (both multiples of MR,
+// BQ of W).
 // Backward (key blocks outside, query blocks inside): BKB keys x BQB queries.
 template <class T>
 struct Tiles {
   static constexpr int BQ = 16 * MR<T>;
-  static constexpr int BK = 2 * NR<T>;
+  static constexpr int BK = 8 * MR<T>;
   static constexpr int BKB = 8 * MR<T>;
   static constexpr int BQB = NR<T>;
 };
@@ -280,11 +314,11 @@ struct Tiles {
 // Offsets (in elements, each W-aligned) of the buffers one head needs, carved out of the workspace.
 template <class T>
 struct ForwardLayout {
-  std::ptrdiff_t Nk, DhP;                      // padded key count, padded head width
-  std::ptrdiff_t kt, vp, s, o, m, l, alpha, rmax, total;
-  ForwardLayout(int Lk, int Dh) {
+  std::ptrdiff_t NqP, DhP;  // padded query count, padded head width
+  std::ptrdiff_t qt, kp, vp, st, o, m, l, alpha, total;
+  ForwardLayout(int Lq, int Lk, int Dh) {
     using Tl = Tiles<T>;
-    Nk = round_up(Lk, Tl::BK);
+    NqP = round_up(Lq, Tl::BQ);
     DhP = round_up(Dh, W<T>);
     std::ptrdiff_t at = 0;
     auto take = [&](std::ptrdiff_t n) {
@@ -292,14 +326,14 @@ struct ForwardLayout {
       at += round_up(n, W<T>);
       return off;
     };
-    kt = take(Dh * Nk);  // K_h^T of the valid keys in panels of BK keys [Nk / BK][Dh][BK]
-    vp = take(Nk * DhP);  // V_h of the valid keys [Nk, DhP]
-    s = take(std::ptrdiff_t{Tl::BQ} * Tl::BK);  // scores, then probabilities [BQ, BK]
-    o = take(std::ptrdiff_t{Tl::BQ} * DhP);     // unnormalized output [BQ, DhP]
-    m = take(Tl::BQ);
-    l = take(Tl::BQ);
-    alpha = take(Tl::BQ);
-    rmax = take(Tl::BQ);
+    qt = take(Dh * NqP);                           // Q_h^T in panels of BQ queries [NqP / BQ][Dh][BQ]
+    kp = take(std::ptrdiff_t{Lk} * DhP);            // K_h of the valid keys [Lk, DhP]
+    vp = take(std::ptrdiff_t{Lk} * DhP);            // V_h of the valid keys [Lk, DhP]
+    st = take(std::ptrdiff_t{Tl::BK} * Tl::BQ);     // S^T, then P^T, of one tile [BK, BQ]
+    o = take(std::ptrdiff_t{Tl::BQ} * DhP);         // unnormalized output of a query block [BQ, DhP]
+    m = take(Tl::BQ);                               // running max (base 2) [BQ]
+    l = take(Tl::BQ);                               // running sum [BQ]
+    alpha = take(Tl::BQ);                           // rescale factor of the current tile [BQ]
     total = at;
   }
 };
@@ -337,3 +371,7 @@ struct BackwardLayout {
 };
 
 }  // namespace tjepa::detail::attn
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
