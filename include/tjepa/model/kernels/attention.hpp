@@ -23,6 +23,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
 #include <limits>
 #include <utility>
 #include <vector>
@@ -72,8 +73,22 @@ inline void check_attention_shape(const AttentionShape& s, const char* where) {
 }
 
 namespace detail {
-inline void require_ptr(const void* p, const char* where, const char* name) {
-  require<ShapeError>(p != nullptr, where, ": ", name, " is null, expected a buffer");
+// Throws ShapeError naming the first null buffer among (pointer, name) pairs.
+inline void require_buffers(const char* where, std::initializer_list<std::pair<const void*, const char*>> buffers) {
+  for (const auto& [p, name] : buffers)
+    require<ShapeError>(p != nullptr, where, ": ", name, " is null, expected a buffer");
+}
+template <class T>
+void check_forward_args(const char* where, const AttentionShape& s, const T* q, const T* k, const T* v, const T* out) {
+  check_attention_shape(s, where);
+  require_buffers(where, {{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"}});
+}
+template <class T>
+void check_backward_args(const char* where, const AttentionShape& s, const T* q, const T* k, const T* v, const T* out,
+                         const T* lse, const T* dout, const T* dq, const T* dk, const T* dv) {
+  check_attention_shape(s, where);
+  require_buffers(where, {{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"}, {lse, "lse"}, {dout, "dout"},
+                          {dq, "dq"}, {dk, "dk"}, {dv, "dv"}});
 }
 }  // namespace detail
 
@@ -102,11 +117,7 @@ namespace ref {
 template <class T>
 void attention_forward(const AttentionShape& s, const T* q, const T* k, const T* v,
                        const std::uint8_t* key_valid, T* out, T* lse) {
-  check_attention_shape(s, "ref::attention_forward");
-  detail::require_ptr(q, "ref::attention_forward", "q");
-  detail::require_ptr(k, "ref::attention_forward", "k");
-  detail::require_ptr(v, "ref::attention_forward", "v");
-  detail::require_ptr(out, "ref::attention_forward", "out");
+  detail::check_forward_args("ref::attention_forward", s, q, k, v, out);
   const double scale = 1.0 / std::sqrt(static_cast<double>(s.Dh));
   std::vector<double> p(static_cast<std::size_t>(s.Lk));
   std::vector<double> o(static_cast<std::size_t>(s.Dh));
@@ -156,11 +167,7 @@ template <class T>
 void attention_backward(const AttentionShape& s, const T* q, const T* k, const T* v,
                         const std::uint8_t* key_valid, const T* out, const T* lse, const T* dout,
                         T* dq, T* dk, T* dv) {
-  const char* where = "ref::attention_backward";
-  check_attention_shape(s, where);
-  for (auto [p, n] : {std::pair<const void*, const char*>{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"},
-                      {lse, "lse"}, {dout, "dout"}, {dq, "dq"}, {dk, "dk"}, {dv, "dv"}})
-    detail::require_ptr(p, where, n);
+  detail::check_backward_args("ref::attention_backward", s, q, k, v, out, lse, dout, dq, dk, dv);
   const double scale = 1.0 / std::sqrt(static_cast<double>(s.Dh));
   // Each gradient entry is summed in double and added to its output once, so that two backward
   // passes give exactly twice the gradient.
@@ -252,12 +259,7 @@ void AttentionWorkspace<T>::reserve(const AttentionShape& shape) {
 template <class T>
 void attention_forward(const AttentionShape& s, const T* q, const T* k, const T* v,
                        const std::uint8_t* key_valid, T* out, T* lse, AttentionWorkspace<T>& ws) {
-  const char* where = "attention_forward";
-  check_attention_shape(s, where);
-  detail::require_ptr(q, where, "q");
-  detail::require_ptr(k, where, "k");
-  detail::require_ptr(v, where, "v");
-  detail::require_ptr(out, where, "out");
+  detail::check_forward_args("attention_forward", s, q, k, v, out);
   namespace A = detail::attn;
   using V = A::Vec<T>;
   using Tl = A::Tiles<T>;
@@ -329,11 +331,7 @@ template <class T>
 void attention_backward(const AttentionShape& s, const T* q, const T* k, const T* v,
                         const std::uint8_t* key_valid, const T* out, const T* lse, const T* dout,
                         T* dq, T* dk, T* dv, AttentionWorkspace<T>& ws) {
-  const char* where = "attention_backward";
-  check_attention_shape(s, where);
-  for (auto [p, n] : {std::pair<const void*, const char*>{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"},
-                      {lse, "lse"}, {dout, "dout"}, {dq, "dq"}, {dk, "dk"}, {dv, "dv"}})
-    detail::require_ptr(p, where, n);
+  detail::check_backward_args("attention_backward", s, q, k, v, out, lse, dout, dq, dk, dv);
   namespace A = detail::attn;
   using V = A::Vec<T>;
   using Tl = A::Tiles<T>;

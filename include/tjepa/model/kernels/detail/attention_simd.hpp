@@ -48,6 +48,7 @@ template <>
 struct Exp2Traits<float> {
   using Int = std::int32_t;
   static constexpr float lo = -127.0f, hi = 127.0f;
+  static constexpr float flush = -151.0f;  // 2^flush rounds to 0 (smallest subnormal 2^-149)
   static constexpr float magic = 0x1.8p23f;  // adding it rounds to an integer in the low bits
   static constexpr Int bias = 127;
   static constexpr int mant = 23;
@@ -66,6 +67,7 @@ template <>
 struct Exp2Traits<double> {
   using Int = std::int64_t;
   static constexpr double lo = -1023.0, hi = 1023.0;
+  static constexpr double flush = -1076.0;  // 2^flush rounds to 0 (smallest subnormal 2^-1074)
   static constexpr double magic = 0x1.8p52;
   static constexpr Int bias = 1023;
   static constexpr int mant = 52;
@@ -98,7 +100,7 @@ inline Vec<T> exp2(Vec<T> x) {
   if constexpr (sizeof(Vec<T>) == 64) {
     // AVX-512: round with vrndscale, multiply by 2^n with vscalef (which also flushes 2^-150 and
     // below to 0), no integer domain crossing. The low clamp keeps f finite for x = -inf.
-    x = xsimd::max(x, Vec<T>(Tr::lo - 24));
+    x = xsimd::max(x, Vec<T>(Tr::flush));
     if constexpr (std::is_same_v<T, float>) {
       const __m512 n = _mm512_roundscale_ps(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
       const __m512 p = Tr::poly(Vec<T>(_mm512_sub_ps(x, n)));
