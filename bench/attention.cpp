@@ -83,33 +83,30 @@ void set_counters(benchmark::State& state, const Batch& b, double flops_per_samp
 
 double forward_flops(const Batch& b) { return 4.0 * b.L * double(b.L) * b.H * b.Dh; }
 
-void BM_AttentionForward(benchmark::State& state) {
-  Batch b(static_cast<int>(state.range(1)), static_cast<int>(state.range(0)));
+// Times `step(sample)` over the batch, parallel over samples with OpenMP.
+template <class Step>
+void run_batch(benchmark::State& state, Batch& b, double flops_per_sample, Step step) {
   for (auto _ : state) {
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static) if (b.B > 1)
 #endif
-    for (int i = 0; i < b.B; ++i) b.forward(i);
-    benchmark::DoNotOptimize(b.out.data());
+    for (int i = 0; i < b.B; ++i) step(i);
     benchmark::ClobberMemory();
   }
-  set_counters(state, b, forward_flops(b));
+  set_counters(state, b, flops_per_sample);
+}
+
+void BM_AttentionForward(benchmark::State& state) {
+  Batch b(static_cast<int>(state.range(1)), static_cast<int>(state.range(0)));
+  run_batch(state, b, forward_flops(b), [&b](int i) { b.forward(i); });
 }
 
 void BM_AttentionForwardBackward(benchmark::State& state) {
   Batch b(static_cast<int>(state.range(1)), static_cast<int>(state.range(0)));
-  for (auto _ : state) {
-#ifdef _OPENMP
-#pragma omp parallel for schedule(static) if (b.B > 1)
-#endif
-    for (int i = 0; i < b.B; ++i) {
-      b.forward(i);
-      b.backward(i);
-    }
-    benchmark::DoNotOptimize(b.dqkv.data());
-    benchmark::ClobberMemory();
-  }
-  set_counters(state, b, 3.5 * forward_flops(b));
+  run_batch(state, b, 3.5 * forward_flops(b), [&b](int i) {
+    b.forward(i);
+    b.backward(i);
+  });
 }
 
 // Batch 1 runs on one thread and is timed in CPU time (robust to other processes on a shared

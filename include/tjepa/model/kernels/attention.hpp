@@ -30,14 +30,17 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
-#include "tjepa/model/kernels/detail/attention_simd.hpp"
 
-// See detail/attention_simd.hpp: g++ 12 false positives inside its AVX-512 intrinsics.
+// g++ 12 reports false "(may be) used uninitialized" warnings inside its own AVX-512 intrinsics
+// (the self-initialized _mm512_undefined_* operands of max/min/shift) once they are inlined into
+// the kernels below and in detail/.
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #endif
+
+#include "tjepa/model/kernels/detail/attention_simd.hpp"
 
 namespace tjepa {
 

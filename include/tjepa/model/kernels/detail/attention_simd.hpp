@@ -1,5 +1,6 @@
 #pragma once
-// SIMD internals of the fast attention kernels: a vectorized exp2, register-blocked GEMM
+// SIMD internals of the fast attention kernels (included only by ../attention.hpp, inside its
+// g++ warning suppression): a vectorized exp2, register-blocked GEMM
 // micro-kernels on tiles, and the tile sizes. Everything uses xsimd's default architecture (the best
 // one the translation unit is compiled for: AVX-512, AVX2 or plain SSE2).
 #include <algorithm>
@@ -9,14 +10,6 @@
 #include <type_traits>
 
 #include <xsimd/xsimd.hpp>
-
-// g++ 12 reports false "(may be) used uninitialized" warnings inside its own AVX-512 intrinsics
-// (the self-initialized _mm512_undefined_* operands of max/min/shift) once they are inlined here.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 
 namespace tjepa::detail::attn {
 
@@ -313,7 +306,18 @@ struct Tiles {
   static constexpr int BQB = NR<T>;
 };
 
-// Offsets (in elements, each W-aligned) of the buffers one head needs, carved out of the workspace.
+// Hands out consecutive W-aligned offsets (in elements) of one workspace buffer.
+template <class T>
+struct Carver {
+  std::ptrdiff_t at = 0;
+  std::ptrdiff_t take(std::ptrdiff_t n) {
+    const std::ptrdiff_t off = at;
+    at += round_up(n, W<T>);
+    return off;
+  }
+};
+
+// Offsets of the buffers one head needs, carved out of the workspace.
 template <class T>
 struct ForwardLayout {
   std::ptrdiff_t NqP, DhP;  // padded query count, padded head width
@@ -322,12 +326,8 @@ struct ForwardLayout {
     using Tl = Tiles<T>;
     NqP = round_up(Lq, Tl::BQ);
     DhP = round_up(Dh, W<T>);
-    std::ptrdiff_t at = 0;
-    auto take = [&](std::ptrdiff_t n) {
-      const std::ptrdiff_t off = at;
-      at += round_up(n, W<T>);
-      return off;
-    };
+    Carver<T> c;
+    auto take = [&c](std::ptrdiff_t n) { return c.take(n); };
     qt = take(Dh * NqP);                           // Q_h^T in panels of BQ queries [NqP / BQ][Dh][BQ]
     kp = take(std::ptrdiff_t{Lk} * DhP);            // K_h of the valid keys [Lk, DhP]
     vp = take(std::ptrdiff_t{Lk} * DhP);            // V_h of the valid keys [Lk, DhP]
@@ -336,7 +336,7 @@ struct ForwardLayout {
     m = take(Tl::BQ);                               // running max (base 2) [BQ]
     l = take(Tl::BQ);                               // running sum [BQ]
     alpha = take(Tl::BQ);                           // rescale factor of the current tile [BQ]
-    total = at;
+    total = c.at;
   }
 };
 
@@ -349,12 +349,8 @@ struct BackwardLayout {
     Nk = round_up(Lk, Tl::BKB);
     NqP = round_up(Lq, Tl::BQB);
     DhP = round_up(Dh, W<T>);
-    std::ptrdiff_t at = 0;
-    auto take = [&](std::ptrdiff_t n) {
-      const std::ptrdiff_t off = at;
-      at += round_up(n, W<T>);
-      return off;
-    };
+    Carver<T> c;
+    auto take = [&c](std::ptrdiff_t n) { return c.take(n); };
     qt = take(Dh * NqP);   // Q_h^T in panels of BQB queries [NqP / BQB][Dh][BQB]
     dot = take(Dh * NqP);  // dO_h^T, same layout
     qp = take(NqP * DhP);  // Q_h [NqP, DhP]
@@ -368,12 +364,8 @@ struct BackwardLayout {
     dpt = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB);  // dP^T, then dS^T [BKB, BQB]
     dk = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dK accumulator of one key block
     dv = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dV accumulator of one key block
-    total = at;
+    total = c.at;
   }
 };
 
 }  // namespace tjepa::detail::attn
-
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
