@@ -302,7 +302,7 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
       for (int kb = 0; kb < nk; kb += BK) {
         const int kv = std::min(BK, nk - kb);
         // S^T [kv, nb*w] = K_tile Q_blk^T (unscaled); query columns past mq are 0 (zero padding).
-        A::gemm<T, A::Store::overwrite>(kv, nb * w, Dh, kp + kb * DhP, DhP, 1, qtb, BQ, st, BQ);
+        A::gemm<T, A::Store::overwrite, A::MR_st<T>, A::NV_st<T>>(kv, nb * w, Dh, kp + kb * DhP, DhP, 1, qtb, BQ, st, BQ);
         if (nb == NB)  // a full query block: the statistics stay in registers
           A::online_softmax_tile<T, NB, true>(st, BQ, kv, nb, c, m, l, alpha);
         else

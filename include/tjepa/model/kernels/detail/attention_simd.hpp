@@ -26,6 +26,12 @@ inline constexpr int MR = sizeof(Vec<T>) >= 64 ? 6 : 3;
 inline constexpr int NV = 4;
 template <class T>
 inline constexpr int NR = NV * W<T>;  // columns of one micro-panel
+// The forward's S^T tile is BQ = 6 W queries wide: on AVX-512 an 8 x 3 block covers it in two
+// full panels (a 6 x 4 block would leave a half-empty 6 x 2 one).
+template <class T>
+inline constexpr int MR_st = sizeof(Vec<T>) >= 64 ? 8 : MR<T>;
+template <class T>
+inline constexpr int NV_st = sizeof(Vec<T>) >= 64 ? 3 : NV;
 
 inline constexpr std::ptrdiff_t round_up(std::ptrdiff_t n, std::ptrdiff_t m) { return (n + m - 1) / m * m; }
 
@@ -198,30 +204,22 @@ inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std:
   }
 }
 
-template <class T, int NV_, Store S, int MRm>
-inline void strip(int mr, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
-                  std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
-  switch (mr) {
-    case 1: return micro_kernel<T, 1, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-    case 2: return micro_kernel<T, 2, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-    case 3: return micro_kernel<T, 3, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-    default:
-      if constexpr (MRm >= 4) {
-        switch (mr) {
-          case 4: return micro_kernel<T, 4, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-          default:
-            if constexpr (MRm >= 6) {
-              if (mr == 5) return micro_kernel<T, 5, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-              return micro_kernel<T, 6, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-            }
-        }
-      }
+// Runs the micro-kernel of mr rows (1 <= mr <= MRm) and nv vectors (1 <= nv <= NVm).
+template <class T, Store S, int MRm, int NVm>
+inline void micro_dispatch(int mr, int nv, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
+                           std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
+  if constexpr (MRm > 1) {
+    if (mr < MRm) return micro_dispatch<T, S, MRm - 1, NVm>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
   }
+  if constexpr (NVm > 1) {
+    if (nv < NVm) return micro_dispatch<T, S, MRm, NVm - 1>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+  }
+  micro_kernel<T, MRm, NVm, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
 }
 
 // C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NVm vectors outside (the B
 // panel stays in L1), strips of MRm rows inside. alpha [M] is read only by Store::rescale_add.
-// MRm * NVm accumulators must fit the register file (MRm in {3, 4, 6}, NVm <= 6).
+// MRm * NVm accumulators must fit the register file.
 template <class T, Store S, int MRm = MR<T>, int NVm = NV>
 inline void gemm(int M, int N, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
                  std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha = nullptr) {
@@ -234,14 +232,7 @@ inline void gemm(int M, int N, int K, const T* A, std::ptrdiff_t a_rs, std::ptrd
       const T* b = B + n0;
       T* c = C + m0 * ldc + n0;
       const T* al = alpha == nullptr ? nullptr : alpha + m0;
-      switch (nv) {
-        case 6: if constexpr (NVm >= 6) { strip<T, 6, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break; } [[fallthrough]];
-        case 5: if constexpr (NVm >= 5) { strip<T, 5, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break; } [[fallthrough]];
-        case 4: strip<T, 4, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        case 3: strip<T, 3, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        case 2: strip<T, 2, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        default: strip<T, 1, S, MRm>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-      }
+      micro_dispatch<T, S, MRm, NVm>(mr, nv, K, a, a_rs, a_cs, b, ldb, c, ldc, al);
     }
   }
 }
