@@ -9,8 +9,11 @@
 // thread).
 #include <benchmark/benchmark.h>
 
+#include <cmath>
 #include <cstdint>
 #include <vector>
+
+#include <Eigen/Core>
 
 #ifdef _OPENMP
 #include <omp.h>
@@ -108,6 +111,36 @@ void BM_AttentionForwardBackward(benchmark::State& state) {
     b.backward(i);
   });
 }
+
+// Baseline: what PyTorch's manual attention does (and what the I-JEPA code runs), with Eigen on one
+// sample: per head S = Q K^T / sqrt(Dh) materialized [L, L], row softmax (Eigen's vectorized exp),
+// out = S V. O(L^2) memory.
+void BM_AttentionNaiveEigen(benchmark::State& state) {
+  Batch b(1, static_cast<int>(state.range(0)));
+  const int L = b.L, d = b.H * b.Dh;
+  using RM = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  using Strided = Eigen::Map<const RM, Eigen::Unaligned, Eigen::OuterStride<>>;
+  RM S(L, L), O(L, b.Dh);
+  const float scale = 1.0f / std::sqrt(static_cast<float>(b.Dh));
+  Eigen::setNbThreads(1);  // one thread, like the fused kernel at batch 1
+  for (auto _ : state) {
+    for (int h = 0; h < b.H; ++h) {
+      const Strided Q(b.qkv.data() + h * b.Dh, L, b.Dh, Eigen::OuterStride<>(3 * d));
+      const Strided K(b.qkv.data() + d + h * b.Dh, L, b.Dh, Eigen::OuterStride<>(3 * d));
+      const Strided V(b.qkv.data() + 2 * d + h * b.Dh, L, b.Dh, Eigen::OuterStride<>(3 * d));
+      S.noalias() = (Q * K.transpose()) * scale;
+      for (int i = 0; i < L; ++i) {
+        auto row = S.row(i).array();
+        row = (row - row.maxCoeff()).exp();
+        row /= row.sum();
+      }
+      O.noalias() = S * V;
+      benchmark::DoNotOptimize(O.data());
+    }
+  }
+  set_counters(state, b, forward_flops(b));
+}
+BENCHMARK(BM_AttentionNaiveEigen)->ArgNames({"L"})->Arg(368)->Arg(528)->Arg(2124)->Unit(benchmark::kMillisecond);
 
 // Batch 1 runs on one thread and is timed in CPU time (robust to other processes on a shared
 // machine); batch 8 may use several threads and is timed in wall-clock time.
