@@ -16,9 +16,14 @@
 // P = exp(S - lse) = 0 in backward with no special case.)
 //
 // tjepa::ref:: is the spec: plain loops, materializes each row of scores, accumulates in double.
-// tjepa:: is the fast path: flash-style (online softmax over key tiles, only per-row statistics
-// lse and D = rowsum(dO * O) kept; never an Lq x Lk matrix), SIMD through xsimd, scratch in a
-// caller-owned AttentionWorkspace. Backward adds (+=) into dq, dk, dv.
+// tjepa:: is the fast path: flash-style (online softmax over key tiles; only the per-query
+// statistics lse and D = rowsum(dO * O) are kept, never an Lq x Lk matrix), register-blocked
+// micro-kernels and a polynomial exp2 through xsimd (AVX-512, AVX2 or SSE2, whatever the
+// translation unit is compiled for), the same code in float and double. Its scratch lives in a
+// caller-owned AttentionWorkspace of O((Lq + Lk) * Dh) elements (one head's packed operands plus
+// fixed-size tiles; at L = 2124, Dh = 64 about 3.8 MiB in float).
+// Backward adds (+=) into dq, dk, dv: every entry is summed completely first and added once, so
+// two backward calls give exactly twice the gradient.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
