@@ -339,7 +339,7 @@ TEST_SUITE("nn") {
     const double tol = std::is_same_v<T, float> ? 2e-5 : 1e-12;
     std::uint64_t seed = 100;
     for (int L : {1, 7, 17, 131}) {
-      for (int Dh : {64, 13}) {
+      for (int Dh : {64, 13, 80}) {
         for (bool masked : {false, true}) {
           CAPTURE(L);
           CAPTURE(Dh);
