@@ -145,6 +145,7 @@ void BM_AttentionNaiveEigen(benchmark::State& state) {
     }
   }
   set_counters(state, b, forward_flops(b));
+  state.counters["ws_MiB"] = static_cast<double>(S.size() * sizeof(float)) / (1 << 20);  // the [L, L] scores
 }
 BENCHMARK(BM_AttentionNaiveEigen)->ArgNames({"L"})->Arg(368)->Arg(528)->Arg(2124)->Unit(benchmark::kMillisecond);
 
