@@ -262,7 +262,7 @@ void check_fast_vs_ref(const Problem<T>& p, double tol) {
 }  // namespace
 
 TEST_SUITE("nn") {
-  TEST_CASE("ref attention equals a naive softmax(QK^T/sqrt(Dh))V, self and cross, masked") {
+  TEST_CASE("ref attention equals a naive softmax(QK^T/sqrt(Dh))V for self and cross attention with masks") {
     for (bool masked : {false, true}) {
       auto self = make_problem<double>(13, 13, 3, 8, true, masked, 1);
       tjepa::AttentionWorkspace<double> ws;
@@ -275,7 +275,7 @@ TEST_SUITE("nn") {
     }
   }
 
-  TEST_CASE_TEMPLATE("attention with every key masked gives 0 output, +inf lse and 0 gradient", T, float, double) {
+  TEST_CASE_TEMPLATE("attention with every key masked gives 0 output and +inf lse and 0 gradient", T, float, double) {
     for (Impl impl : {Impl::ref, Impl::fast}) {
       auto p = make_problem<T>(7, 9, 2, 5, false, true, 3);
       std::fill(p.valid.begin(), p.valid.end(), std::uint8_t{0});
@@ -317,7 +317,7 @@ TEST_SUITE("nn") {
     }
   }
 
-  TEST_CASE("attention rejects bad shapes and null buffers, naming the argument") {
+  TEST_CASE("attention rejects bad shapes and null buffers and names the argument") {
     std::vector<float> b(64, 0.0f), lse(8, 0.0f);
     tjepa::AttentionWorkspace<float> ws;
     AttentionShape s{2, 2, 2, 4, 8, 8, 8, 8};
@@ -335,7 +335,7 @@ TEST_SUITE("nn") {
                          doctest::Contains("lse is null"), tjepa::ShapeError);
   }
 
-  TEST_CASE_TEMPLATE("fast attention matches the reference on awkward sizes, strides, masks, cross", T, float, double) {
+  TEST_CASE_TEMPLATE("fast attention matches the reference on awkward sizes and strides with masks and cross attention", T, float, double) {
     const double tol = std::is_same_v<T, float> ? 2e-5 : 1e-12;
     std::uint64_t seed = 100;
     for (int L : {1, 7, 17, 131}) {
