@@ -6,6 +6,13 @@
 #include "tjepa/core/eigen.hpp"
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
+#include "tjepa/core/atomic_write.hpp"
+
+#include "tjepa/layout/taxel_layout.hpp"
+#include "tjepa/layout/grid_pad.hpp"
+#include "tjepa/layout/layout_builder.hpp"
+#include "tjepa/layout/allegro_xela.hpp"
+#include "tjepa/layout/generic.hpp"
 
 #include "tjepa/data/grouped_gather.hpp"
 #include "tjepa/data/labels.hpp"
@@ -19,5 +26,9 @@
 #include "tjepa/data/window_source.hpp"
 
 #include "tjepa/graph/taxel_graph.hpp"
+#include "tjepa/graph/skin.hpp"
+#include "tjepa/graph/bridges.hpp"
+#include "tjepa/graph/colors.hpp"
+#include "tjepa/graph/svg.hpp"
 
 #include "tjepa/model/param_set.hpp"
