@@ -238,13 +238,14 @@ TEST_SUITE("data") {
     cfg.dropout_frames_max = 5;
     tjepa::SimulatedSkin sim(test_geometry(), cfg, 11);
     const tjepa::Recording rec = sim.record_baseline(4000);
-    std::size_t zero_taxel_frames = 0;
+    std::size_t zero_taxel_frames = 0, partial = 0;
     for (int t = 0; t < rec.frames(); ++t)
       for (int i = 0; i < rec.taxels(); ++i) {
         const int zeros = (rec(t, i, 0) == 0.0f) + (rec(t, i, 1) == 0.0f) + (rec(t, i, 2) == 0.0f);
-        CHECK((zeros == 0 || zeros == 3));
+        partial += zeros == 1 || zeros == 2;
         zero_taxel_frames += zeros == 3;
       }
+    CHECK(partial == 0);
     // Expected fraction: rate × mean length (3 frames), a little less where drop-outs overlap.
     const double frac = static_cast<double>(zero_taxel_frames) / (static_cast<double>(rec.frames()) * rec.taxels());
     CHECK(frac > 0.5 * 2e-3 * 3);
@@ -259,20 +260,25 @@ TEST_SUITE("data") {
       CHECK(pre.baseline()[3 * i] == doctest::Approx(sim.offsets()[3 * i]).epsilon(0.01));
   }
 
-  TEST_CASE("simulated skin: geometry from any layout-like type, and bad input") {
-    struct Layout {
-      int dim = 2;
-      std::vector<double> coords = {0, 0, 4, 0, 0, 4, 4, 4};
-      std::vector<int> group = {0, 0, 0, 0};
-    } layout;
-    const auto g = tjepa::SkinGeometry::from_layout(layout);
-    CHECK(g.size() == 4);
-    CHECK(g.position[3][1] == 4.0);
-    tjepa::SimulatedSkin sim(g, {}, 5);
-    CHECK(sim.record(50).recording.taxels() == 4);
-    layout.dim = 0;
-    CHECK_THROWS_WITH_AS(tjepa::SkinGeometry::from_layout(layout), doctest::Contains("needs taxel coordinates"),
-                         tjepa::ConfigError);
+  TEST_CASE("simulated skin: runs on the built-in Allegro/Xela layout; bad input") {
+    const tjepa::Skin hand = tjepa::layouts::allegro_xela();
+    tjepa::SimulatedSkin sim(hand.layout, tjepa::SimConfig{}, 5);
+    CHECK(sim.taxels() == 368);
+    CHECK(sim.num_pads() == 18);
+    const auto rec = sim.record(4000);
+    CHECK(rec.recording.taxels() == 368);
+    std::set<int> pads;
+    for (const auto& l : rec.labels)
+      if (l.pad >= 0) pads.insert(l.pad);
+    CHECK(pads.size() >= 15);  // ~60 contact events over 18 pads
+    // A grid layout converts the same way; a layout without coordinates cannot be simulated.
+    const auto g = tjepa::SkinGeometry::from_layout(tjepa::layouts::grid_skin().layout);
+    CHECK(g.size() == 12 * 16);
+    CHECK(g.position[17][0] == doctest::Approx(4.0));
+    tjepa::TaxelLayout bare = hand.layout;
+    bare.dim = 0;
+    bare.coords.clear();
+    CHECK_THROWS_WITH_AS(tjepa::SimulatedSkin(bare, tjepa::SimConfig{}, 0), doctest::Contains("no coordinates"), tjepa::ConfigError);
     tjepa::SimConfig bad;
     bad.force_min = 5;
     bad.force_max = 1;

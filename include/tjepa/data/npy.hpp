@@ -27,7 +27,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
-#include "tjepa/data/detail/atomic_write.hpp"
+#include "tjepa/core/atomic_write.hpp"
 #include "tjepa/data/detail/float_storage.hpp"
 #include "tjepa/data/detail/mapped_file.hpp"
 #include "tjepa/data/recording.hpp"
@@ -354,7 +354,7 @@ void write_npy(const std::filesystem::path& path, std::span<const T> values, std
   const std::size_t total = (prefix + dict.size() + 1 + 63) / 64 * 64;
   dict.append(total - prefix - dict.size() - 1, ' ');
   dict.push_back('\n');
-  detail::write_file_atomically(path, [&](std::ostream& out) {
+  write_file_atomic_with(path, [&](std::ostream& out) {
     const char magic[8] = {'\x93', 'N', 'U', 'M', 'P', 'Y', static_cast<char>(v2 ? 2 : 1), 0};
     out.write(magic, 8);
     const std::size_t len = dict.size();

@@ -55,6 +55,7 @@
 #include "tjepa/core/random.hpp"
 #include "tjepa/data/labels.hpp"
 #include "tjepa/data/recording.hpp"
+#include "tjepa/layout/taxel_layout.hpp"
 
 namespace tjepa {
 
@@ -66,22 +67,16 @@ struct SkinGeometry {
   int size() const { return static_cast<int>(position.size()); }
   int num_pads() const { return pad.empty() ? 0 : *std::max_element(pad.begin(), pad.end()) + 1; }
 
-  // From any layout type with `dim` (2 or 3), `coords` ([N·dim] mm) and `group` ([N]) members,
-  // e.g. TaxelLayout.
-  template <class Layout>
-  static SkinGeometry from_layout(const Layout& layout) {
-    require<ConfigError>(layout.dim == 2 || layout.dim == 3, "SkinGeometry::from_layout: the layout has dim = ",
-                         layout.dim, "; the simulated skin needs taxel coordinates (dim 2 or 3)");
+  // From a layout with 2-D or 3-D coordinates; the pads are its groups.
+  static SkinGeometry from_layout(const TaxelLayout& layout) {
+    layout.validate();
+    require<ConfigError>(layout.has_coords(), "SkinGeometry::from_layout: the layout has no coordinates; the "
+                                              "simulated skin needs taxel positions (dim 2 or 3)");
     SkinGeometry g;
-    const std::size_t n = layout.group.size();
-    require<ShapeError>(layout.coords.size() == n * static_cast<std::size_t>(layout.dim),
-                        "SkinGeometry::from_layout: ", layout.coords.size(), " coordinates for ", n, " taxels of dim ",
-                        layout.dim);
-    g.position.resize(n);
-    for (std::size_t i = 0; i < n; ++i)
-      for (int a = 0; a < 3; ++a)
-        g.position[i][a] = a < layout.dim ? static_cast<double>(layout.coords[i * layout.dim + a]) : 0.0;
-    g.pad.assign(layout.group.begin(), layout.group.end());
+    g.position.resize(static_cast<std::size_t>(layout.size()));
+    for (int i = 0; i < layout.size(); ++i)
+      for (int a = 0; a < 3; ++a) g.position[i][a] = layout.coord(i, a);
+    g.pad = layout.group;
     return g;
   }
 };
@@ -228,6 +223,9 @@ class SimulatedSkin {
     dropout_left_.assign(n, 0);
     next_dropout_ = draw_dropout_gap();
   }
+
+  SimulatedSkin(const TaxelLayout& layout, SimConfig config = {}, std::uint64_t seed = 0)
+      : SimulatedSkin(SkinGeometry::from_layout(layout), std::move(config), seed) {}
 
   const SkinGeometry& geometry() const { return geo_; }
   const SimConfig& config() const { return cfg_; }
