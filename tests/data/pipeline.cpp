@@ -211,7 +211,8 @@ TEST_SUITE("data") {
       double z = 0;
       for (int i : sim.pad_taxels(l.pad)) z += f[3 * i + 2] - sim.offsets()[3 * i + 2];
       zsum.push_back(z);
-      if (l.force[2] > 1.0f && l.pad != 2) {
+      // Compact indenters on the flat pads: the centroid is not cut off by the pad's edge.
+      if (l.force[2] > 1.0f && l.pad != 2 && l.indenter <= 1) {
         const auto cc = centroid(sim, f, l.pad);
         dist.push_back(std::hypot(cc[0] - l.location[0], cc[1] - l.location[1]));
         cx.push_back(cc[0]);
@@ -225,11 +226,11 @@ TEST_SUITE("data") {
     CHECK(contact > 1000);
     CHECK(contact < 2900);
     CHECK(corr(fn, zsum) > 0.7);
-    REQUIRE(dist.size() > 100);
+    REQUIRE(dist.size() > 50);
     std::sort(dist.begin(), dist.end());
-    CHECK(dist[dist.size() / 2] < 2.5);  // median distance between response centroid and label, mm
+    CHECK(dist[dist.size() / 2] < 2.0);  // median distance between response centroid and label, mm
     CHECK(corr(cx, lx) > 0.95);
-    CHECK(corr(cy, ly) > 0.9);
+    CHECK(corr(cy, ly) > 0.95);
   }
 
   TEST_CASE("simulated skin: drop-outs are exact zeros on all axes at about the configured rate") {

@@ -5,13 +5,13 @@
 // Model, per contact event (one at a time; events follow each other with free gaps):
 //   * An indenter of one of four shapes lands on a random pad at a random point (a random taxel of
 //     the pad, jittered by up to half the pad's pitch):
-//       sphere       radius R ∈ [3, 12] mm: Hertz contact, radius a = (3·F·R / 4E*)^(1/3) grows with
+//       sphere       radius R ∈ [4, 15] mm: Hertz contact, radius a = (3·F·R / 4E*)^(1/3) grows with
 //                    force; pressure variance a²/5 per axis (that of √(1 − r²/a²)).
-//       flat         cylinder punch of radius R ∈ [1.5, 6] mm: contact radius R at any force, pressure
+//       flat         cylinder punch of radius R ∈ [3, 8] mm: contact radius R at any force, pressure
 //                    concentrated at the rim (a centre lobe plus a ring of six lobes at 0.7·R).
-//       edge         a ridge of half-length L ∈ [3, 10] mm at a random angle: five lobes along the
+//       edge         a ridge of half-length L ∈ [6, 15] mm at a random angle: five lobes along the
 //                    line, line-contact half-width b = √(4·F'·1 mm / πE*), F' = F / 2L.
-//       multi-point  three small spheres (R = 1.5 mm) at a radius s ∈ [3, 6] mm around the centre,
+//       multi-point  three small spheres (R = 1.5 mm) at a radius s ∈ [5, 9] mm around the centre,
 //                    each carrying F/3.
 //     The pressure is a mixture of 2-D Gaussian lobes in the pad's plane, so the elastomer cover
 //     (thickness h: a Gaussian blur of std h) is exact: each lobe's covariance grows by h²·I.
@@ -510,7 +510,7 @@ class SimulatedSkin {
   Event draw_event() {
     Event e;
     e.shape = static_cast<IndenterShape>(rng_.below(num_indenter_shapes));
-    static constexpr double size_lo[] = {3.0, 1.5, 3.0, 3.0}, size_hi[] = {12.0, 6.0, 10.0, 6.0};
+    static constexpr double size_lo[] = {4.0, 3.0, 6.0, 5.0}, size_hi[] = {15.0, 8.0, 15.0, 9.0};
     const int s = static_cast<int>(e.shape);
     e.size = rng_.uniform(size_lo[s], size_hi[s]);
     e.orientation = rng_.uniform(0.0, std::numbers::pi);
