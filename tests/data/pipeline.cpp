@@ -453,4 +453,41 @@ TEST_SUITE("data") {
                          tjepa::DataError);
     CHECK_THROWS_AS(tjepa::check_group_index(std::vector<int>{0, 1, 2}, 2, 2, 5), tjepa::ShapeError);
   }
+
+  TEST_CASE("simulate_dataset: train and validation sources with statistics fitted on training data only") {
+    tjepa::SimulatedDatasetOptions opt;
+    opt.train_windows = 300;
+    opt.validation_windows = 50;
+    auto data = tjepa::simulate_dataset(tjepa::layouts::allegro_xela().layout, opt, 9);
+    CHECK(data.train.size() == 300);
+    CHECK(data.validation.size() == 50);
+    CHECK(data.train.has_labels());
+    CHECK(data.preprocessor.ready());
+    // The statistics are those of the training recording: refitting on it reproduces them.
+    // The statistics are the training recording's, not the validation recording's.
+    tjepa::Preprocessor direct = tjepa::Preprocessor::from_state(data.preprocessor.state());
+    direct.fit(data.train.recordings()[0]);
+    CHECK(direct.mean() == data.preprocessor.mean());
+    CHECK(direct.std() == data.preprocessor.std());
+    direct.fit(data.validation.recordings()[0]);
+    CHECK(direct.mean() != data.preprocessor.mean());
+    // Standardized training batches: per-axis mean near 0 and std near 1 over the non-drop-out values.
+    tjepa::WindowBatch b;
+    const auto order = data.train.epoch_order(1, 0);
+    data.train.gather(std::span<const std::int64_t>(order).subspan(0, 128), b);
+    double s[3] = {0, 0, 0}, q[3] = {0, 0, 0};
+    for (std::size_t k = 0; k < b.x.size(); ++k) {
+      s[k % 3] += b.x[k];
+      q[k % 3] += static_cast<double>(b.x[k]) * b.x[k];
+    }
+    const double n = static_cast<double>(b.x.size()) / 3;
+    for (int a = 0; a < 3; ++a) {
+      CHECK(std::abs(s[a] / n) < 0.1);
+      CHECK(std::sqrt(q[a] / n) == doctest::Approx(1.0).epsilon(0.1));
+    }
+    // Same seed, same data.
+    auto again = tjepa::simulate_dataset(tjepa::layouts::allegro_xela().layout, opt, 9);
+    CHECK(std::equal(again.validation.recordings()[0].values().begin(), again.validation.recordings()[0].values().end(),
+                     data.validation.recordings()[0].values().begin()));
+  }
 }
