@@ -92,7 +92,7 @@ std::string dict(const std::string& descr, const std::string& shape, const std::
 }  // namespace
 
 TEST_SUITE("data") {
-  TEST_CASE("npy: float32 and float64, versions 1, 2 and 3, read back exactly") {
+  TEST_CASE("npy: float32 and float64 in versions 1 2 and 3 read back exactly") {
     TempDir dir;
     const auto v = ramp(24);
     std::vector<double> vd(v.begin(), v.end());
@@ -138,7 +138,7 @@ TEST_SUITE("data") {
                          tjepa::ShapeError);
   }
 
-  TEST_CASE("npy: write_npy round-trips, is atomic, and pads the header to 64 bytes") {
+  TEST_CASE("npy: write_npy round-trips atomically and pads the header to 64 bytes") {
     TempDir dir;
     const auto v = ramp(2 * 5 * 3);
     tjepa::Recording rec(2, 5, 3, tjepa::AlignedVector<float>(v.begin(), v.end()));
@@ -244,7 +244,7 @@ TEST_SUITE("data") {
                          tjepa::DataError);
   }
 
-  TEST_CASE("text: whitespace and CSV recordings, comments, header rows and a column map") {
+  TEST_CASE("text: whitespace and CSV recordings with comments and header rows and a column map") {
     TempDir dir;
     write_bytes(dir / "ws.txt", "# two taxels, two axes\n1 2 3 4\n\n  5\t6 7 8  \n");
     const auto a = tjepa::read_text_recording(dir / "ws.txt", text_format(2));

@@ -71,7 +71,7 @@ double corr(const std::vector<double>& a, const std::vector<double>& b) {
 }  // namespace
 
 TEST_SUITE("data") {
-  TEST_CASE("simulated skin: more normal force, more response; nothing off the touched pad") {
+  TEST_CASE("simulated skin: more normal force gives more response and nothing off the touched pad") {
     const tjepa::SimulatedSkin sim(test_geometry(), tjepa::SimConfig{}, 1);
     std::vector<float> out(static_cast<std::size_t>(sim.taxels()) * 3);
     for (int shape = 0; shape < tjepa::num_indenter_shapes; ++shape) {
@@ -100,7 +100,7 @@ TEST_SUITE("data") {
     }
   }
 
-  TEST_CASE("simulated skin: the response moves with the indenter, and shear follows the traction") {
+  TEST_CASE("simulated skin: the response moves with the indenter and shear follows the traction") {
     const tjepa::SimulatedSkin sim(test_geometry(), quiet_config(), 2);
     std::vector<float> out(static_cast<std::size_t>(sim.taxels()) * 3);
     std::vector<float> offsets_zero(out.size(), 0.0f);
@@ -148,7 +148,7 @@ TEST_SUITE("data") {
     CHECK(sx2 == doctest::Approx(-sx).epsilon(0.02));
   }
 
-  TEST_CASE("simulated skin: a flat punch keeps its contact area, a sphere's grows with force") {
+  TEST_CASE("simulated skin: a flat punch keeps its contact area while a sphere's grows with force") {
     const tjepa::SimulatedSkin sim(test_geometry(), quiet_config(), 3);
     std::vector<float> lo(static_cast<std::size_t>(sim.taxels()) * 3), hi(lo.size());
     // Forces low enough that the soft saturation is negligible.
@@ -172,7 +172,7 @@ TEST_SUITE("data") {
     CHECK(*std::max_element(s.begin(), s.end()) > 2.1);  // ... than the rim: the contact spreads
   }
 
-  TEST_CASE("simulated skin: recordings are deterministic, labelled, and quiet away from contact") {
+  TEST_CASE("simulated skin: recordings are deterministic and labelled and quiet away from contact") {
     const auto geo = test_geometry();
     tjepa::SimulatedSkin a(geo, quiet_config(), 7), b(geo, quiet_config(), 7), c(geo, quiet_config(), 8);
     const auto ra = a.record(3000), rb = b.record(3000), rc = c.record(3000);
@@ -261,7 +261,7 @@ TEST_SUITE("data") {
       CHECK(pre.baseline()[3 * i] == doctest::Approx(sim.offsets()[3 * i]).epsilon(0.01));
   }
 
-  TEST_CASE("simulated skin: runs on the built-in Allegro/Xela layout; bad input") {
+  TEST_CASE("simulated skin: runs on the built-in Allegro/Xela layout and rejects bad input") {
     const tjepa::Skin hand = tjepa::layouts::allegro_xela();
     tjepa::SimulatedSkin sim(hand.layout, tjepa::SimConfig{}, 5);
     CHECK(sim.taxels() == 368);
@@ -289,7 +289,7 @@ TEST_SUITE("data") {
     CHECK_THROWS_AS(sim.respond(tjepa::ContactState{}, small), tjepa::ShapeError);
   }
 
-  TEST_CASE("preprocessor: drop-out range, baseline where non-zero, per-axis stats ignoring zeros and NaN") {
+  TEST_CASE("preprocessor: drop-out range then baseline where non-zero then per-axis stats ignoring zeros and NaN") {
     const float nan = std::numeric_limits<float>::quiet_NaN();
     // 3 frames, 2 taxels, 2 axes (raw counts).
     tjepa::Recording base(2, 2, 2, tjepa::AlignedVector<float>{30000, 31000, 40000, 41000,  //
@@ -355,7 +355,7 @@ TEST_SUITE("data") {
     CHECK_THROWS_WITH_AS(fresh.fit(zeros), doctest::Contains("no non-zero finite value"), tjepa::DataError);
   }
 
-  TEST_CASE("windows: starts, taxel-major copies, batches equal per-window preprocessing") {
+  TEST_CASE("windows: starts and taxel-major copies and batches equal to preprocessing the recording") {
     CHECK(tjepa::window_starts(100, {10, 0}) == std::vector<std::int64_t>{0, 10, 20, 30, 40, 50, 60, 70, 80, 90});
     CHECK(tjepa::window_starts(25, {10, 5}) == std::vector<std::int64_t>{0, 5, 10, 15});
     CHECK(tjepa::window_starts(9, {10, 0}).empty());
@@ -401,7 +401,7 @@ TEST_SUITE("data") {
     CHECK_THROWS_AS(src.gather(std::span<const std::int64_t>(&bad_id, 1), batch), tjepa::ConfigError);
   }
 
-  TEST_CASE("windows: NaN entering training is a DataError naming frame, taxel and axis") {
+  TEST_CASE("windows: NaN entering training is a DataError naming frame and taxel and axis") {
     tjepa::Recording rec(40, 6, 3, 1.0f);
     rec.set_source("trial.npy");
     rec.at(23, 4, 2) = std::numeric_limits<float>::quiet_NaN();
@@ -423,7 +423,7 @@ TEST_SUITE("data") {
     CHECK_FALSE(batch.has_labels());
   }
 
-  TEST_CASE("grouped gather: groups with padding, and its adjoint") {
+  TEST_CASE("grouped gather: groups with padding and its adjoint") {
     // B = 2, N = 5, L = 3; groups {4, 0}, {2, -1}, {1, 3}.
     const int B = 2, N = 5, L = 3, G = 3, ng = 2;
     std::vector<double> x(B * N * L);
