@@ -227,6 +227,34 @@ TEST_SUITE("data") {
     CHECK_THROWS_AS(tjepa::read_npy(dir.path), tjepa::FileError);  // a directory
   }
 
+  TEST_CASE("npy: random corruptions and truncations either read or throw tjepa::Error") {
+    TempDir dir;
+    const auto v = ramp(24);
+    const std::string good = npy_bytes(dict("<f4", "(2, 4, 3)"), raw(v));
+    tjepa::Rng rng(17);
+    int read = 0, rejected = 0;
+    for (int trial = 0; trial < 600; ++trial) {
+      std::string bytes = good;
+      if (trial % 3 == 0) {
+        bytes.resize(rng.below(bytes.size() + 1));
+      } else {
+        const int flips = 1 + static_cast<int>(rng.below(4));
+        for (int k = 0; k < flips; ++k) bytes[rng.below(64)] = static_cast<char>(rng.below(256));
+      }
+      const fs::path p = dir / ("fuzz" + std::to_string(trial) + ".npy");
+      write_bytes(p, bytes);
+      try {
+        const tjepa::NpyArray a = tjepa::read_npy(p);
+        CHECK(a.numel() * sizeof(float) <= bytes.size());
+        ++read;
+      } catch (const tjepa::Error&) {
+        ++rejected;
+      }
+    }
+    CHECK(read + rejected == 600);
+    CHECK(rejected > 300);
+  }
+
   TEST_CASE("npy: NaN or Inf is a DataError naming its index when the caller asks for finite data") {
     TempDir dir;
     auto v = ramp(24);
