@@ -13,6 +13,8 @@
 #include "tjepa/layout/layout_builder.hpp"
 #include "tjepa/layout/allegro_xela.hpp"
 #include "tjepa/layout/generic.hpp"
+#include "tjepa/layout/inspire.hpp"
+#include "tjepa/layout/csv.hpp"
 
 #include "tjepa/data/grouped_gather.hpp"
 #include "tjepa/data/labels.hpp"
@@ -29,6 +31,11 @@
 #include "tjepa/graph/taxel_graph.hpp"
 #include "tjepa/graph/skin.hpp"
 #include "tjepa/graph/bridges.hpp"
+#include "tjepa/graph/coordinate_graphs.hpp"
+#include "tjepa/graph/join.hpp"
+#include "tjepa/graph/grouping.hpp"
+#include "tjepa/graph/block_grouping.hpp"
+#include "tjepa/graph/grow_grouping.hpp"
 #include "tjepa/graph/colors.hpp"
 #include "tjepa/graph/svg.hpp"
 
