@@ -22,6 +22,7 @@
 #include "tjepa/data/npy.hpp"
 #include "tjepa/data/preprocessor.hpp"
 #include "tjepa/data/recording.hpp"
+#include "tjepa/data/simulated_dataset.hpp"
 #include "tjepa/data/simulated_skin.hpp"
 #include "tjepa/data/text_reader.hpp"
 #include "tjepa/data/window.hpp"
