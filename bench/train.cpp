@@ -1,6 +1,6 @@
 // One JEPA training step at the reference scale (REFERENCE §4-5: ViT-Tiny encoder d = 192, 12
 // blocks, 3 heads; predictor 4 blocks; Allegro/Xela skin, N = 368 tokens, m·τ = 30), float,
-// batch 16, on 1 and 2 threads: forward + backward + clipping + AdamW + EMA.
+// batch 8 (the PyTorch reference point in bench/model.cpp), on 1 and 2 threads: forward + backward + clipping + AdamW + EMA.
 //
 // FLOP convention (GEMMs and attention products only): a block on L tokens costs per token
 // 24 d² (qkv 6d², proj 2d², fc1 8d², fc2 8d²) + 4 L d (QKᵀ and PV) forward; forward + backward
@@ -35,7 +35,7 @@ void BM_JepaTrainStep(benchmark::State& state) {
     return;
   }
 #endif
-  const int B = 16;
+  const int B = 8;
   const auto skin = tjepa::layouts::allegro_xela();
   const tjepa::MaskCollator collator(skin.graph);
   const int N = collator.num_tokens();
