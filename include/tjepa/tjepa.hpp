@@ -75,7 +75,6 @@
 #include "tjepa/optim/ema.hpp"
 #include "tjepa/optim/schedule.hpp"
 
-#include "tjepa/io/atomic_file.hpp"
 #include "tjepa/io/checkpoint.hpp"
 #include "tjepa/io/safetensors.hpp"
 

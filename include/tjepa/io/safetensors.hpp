@@ -14,7 +14,7 @@
 //
 // Writing orders the tensors by element size (largest first, then insertion order) so each one
 // starts aligned to its element size, and pads the header to a multiple of 8, as the reference
-// writer does. Files are written atomically.
+// writer does. Files are written atomically (core/atomic_write.hpp).
 #include <algorithm>
 #include <bit>
 #include <cstddef>
@@ -24,6 +24,7 @@
 #include <fstream>
 #include <map>
 #include <optional>
+#include <ostream>
 #include <span>
 #include <string>
 #include <string_view>
@@ -37,7 +38,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tjepa/core/error.hpp"
-#include "tjepa/io/atomic_file.hpp"
+#include "tjepa/core/atomic_write.hpp"
 
 namespace tjepa {
 
@@ -213,8 +214,9 @@ class SafetensorsFile {
   std::string source_ = "<memory>";
 };
 
-// The file's bytes.
-inline std::vector<std::byte> serialize_safetensors(const SafetensorsFile& file) {
+// Writes the file's bytes to `out`: the header length, the header, then the tensors in the
+// header's order (nothing is copied into one buffer first).
+inline void write_safetensors(std::ostream& out, const SafetensorsFile& file) {
   // Largest elements first so each tensor starts aligned to its element size.
   std::vector<std::size_t> order(file.size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
@@ -243,17 +245,15 @@ inline std::vector<std::byte> serialize_safetensors(const SafetensorsFile& file)
     fail<ConfigError>(file.source(), ": cannot encode the header (names and metadata must be UTF-8): ", e.what());
   }
   text.append((8 - text.size() % 8) % 8, ' ');
-  std::vector<std::byte> out(8 + text.size() + offset);
-  std::uint64_t n = text.size();
-  for (int b = 0; b < 8; ++b) out[static_cast<std::size_t>(b)] = static_cast<std::byte>((n >> (8 * b)) & 0xFF);
-  std::memcpy(out.data() + 8, text.data(), text.size());
-  std::byte* data = out.data() + 8 + text.size();
+  char length[8];
+  const std::uint64_t n = text.size();
+  for (int b = 0; b < 8; ++b) length[b] = static_cast<char>((n >> (8 * b)) & 0xFF);
+  out.write(length, 8);
+  out.write(text.data(), static_cast<std::streamsize>(text.size()));
   for (std::size_t i : order) {
     const Tensor& t = file.at(file.names()[i]);
-    if (!t.data.empty()) std::memcpy(data, t.data.data(), t.data.size());
-    data += t.data.size();
+    out.write(reinterpret_cast<const char*>(t.data.data()), static_cast<std::streamsize>(t.data.size()));
   }
-  return out;
 }
 
 // Parses and validates a whole file held in memory; `source` names it in error messages.
@@ -369,7 +369,7 @@ inline SafetensorsFile parse_safetensors(std::span<const std::byte> bytes, const
 }
 
 inline void save_safetensors(const std::filesystem::path& path, const SafetensorsFile& file) {
-  write_file_atomic(path, serialize_safetensors(file));
+  write_file_atomic_with(path, [&](std::ostream& out) { write_safetensors(out, file); });
 }
 
 inline SafetensorsFile load_safetensors(const std::filesystem::path& path,

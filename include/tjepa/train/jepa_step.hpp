@@ -52,7 +52,8 @@ struct JepaStepConfig {
   }
 };
 
-// Caller-owned buffers and caches of one step (nothing is allocated once a shape was seen).
+// Caller-owned buffers and caches of one step: the activation-sized buffers grow to the largest
+// shape seen and are reused, so steady-state steps allocate only a few small index vectors.
 template <class T>
 struct JepaWorkspace {
   Workspace<T> ws;
