@@ -382,6 +382,23 @@ TEST_SUITE("data") {
     CHECK_THROWS_WITH_AS(fresh.fit(zeros), doctest::Contains("no non-zero finite value"), tjepa::DataError);
   }
 
+  TEST_CASE("recording: frame ranges share values and copies are copy-on-write") {
+    tjepa::Recording r(10, 4, 3);
+    for (int t = 0; t < 10; ++t) r.at(t, 1, 2) = static_cast<float>(t);
+    const tjepa::Recording train = r.frames_range(0, 8), val = r.frames_range(8, 10);
+    CHECK(train.frames() == 8);
+    CHECK(val(1, 1, 2) == 9.0f);
+    CHECK(val.data() == r.frame(8));  // no copy
+    tjepa::Recording copy = r;
+    copy.at(0, 1, 2) = -1.0f;          // writes a private copy
+    CHECK(r(0, 1, 2) == 0.0f);
+    CHECK(train(0, 1, 2) == 0.0f);
+    CHECK(copy(0, 1, 2) == -1.0f);
+    CHECK_THROWS_AS(r.frames_range(5, 11), tjepa::ConfigError);
+    CHECK_THROWS_AS(tjepa::Recording(2, 0, 3), tjepa::ShapeError);
+    CHECK_THROWS_AS(tjepa::Recording(2, 2, 3, tjepa::AlignedVector<float>(5)), tjepa::ShapeError);
+  }
+
   TEST_CASE("windows: starts and taxel-major copies and batches equal to preprocessing the recording") {
     CHECK(tjepa::window_starts(100, {10, 0}) == std::vector<std::int64_t>{0, 10, 20, 30, 40, 50, 60, 70, 80, 90});
     CHECK(tjepa::window_starts(25, {10, 5}) == std::vector<std::int64_t>{0, 5, 10, 15});
