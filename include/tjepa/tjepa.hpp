@@ -16,6 +16,18 @@
 #include "tjepa/layout/inspire.hpp"
 #include "tjepa/layout/csv.hpp"
 
+#include "tjepa/data/grouped_gather.hpp"
+#include "tjepa/data/labels.hpp"
+#include "tjepa/data/named_tensor.hpp"
+#include "tjepa/data/npy.hpp"
+#include "tjepa/data/preprocessor.hpp"
+#include "tjepa/data/recording.hpp"
+#include "tjepa/data/simulated_dataset.hpp"
+#include "tjepa/data/simulated_skin.hpp"
+#include "tjepa/data/text_reader.hpp"
+#include "tjepa/data/window.hpp"
+#include "tjepa/data/window_source.hpp"
+
 #include "tjepa/graph/taxel_graph.hpp"
 #include "tjepa/graph/skin.hpp"
 #include "tjepa/graph/bridges.hpp"
