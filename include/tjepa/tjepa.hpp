@@ -48,4 +48,5 @@
 #include "tjepa/masks/local.hpp"
 #include "tjepa/masks/svg.hpp"
 
+#include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
