@@ -289,6 +289,33 @@ TEST_SUITE("data") {
     CHECK_THROWS_AS(sim.respond(tjepa::ContactState{}, small), tjepa::ShapeError);
   }
 
+  TEST_CASE("simulated skin: a pressure-only skin over two hands (one axis)") {
+    const tjepa::Skin hands = tjepa::layouts::inspire_hands();
+    tjepa::SimConfig cfg = quiet_config();
+    cfg.axes = 1;
+    tjepa::SimulatedSkin sim(hands.layout, cfg, 6);
+    CHECK(sim.axes() == 1);
+    const auto rec = sim.record(3000);
+    CHECK(rec.recording.axes() == 1);
+    CHECK(rec.recording.taxels() == hands.size());
+    std::set<int> parts;
+    int touched = 0;
+    for (int t = 0; t < rec.recording.frames(); ++t) {
+      const auto& l = rec.labels[t];
+      if (l.pad < 0 || l.force[2] < 1.0f) continue;
+      parts.insert(hands.layout.group_part[l.pad]);
+      double z = 0;
+      for (int i : sim.pad_taxels(l.pad)) z += rec.recording(t, i, 0) - sim.offsets()[i];
+      touched += z > 0;
+      CHECK(z > 0);
+    }
+    CHECK(touched > 100);
+    CHECK(parts.size() == 2);
+    tjepa::SimConfig bad;
+    bad.axes = 2;
+    CHECK_THROWS_WITH_AS(tjepa::SimulatedSkin(hands.layout, bad, 0), doctest::Contains("axes = 2"), tjepa::ConfigError);
+  }
+
   TEST_CASE("preprocessor: drop-out range then baseline where non-zero then per-axis stats ignoring zeros and NaN") {
     const float nan = std::numeric_limits<float>::quiet_NaN();
     // 3 frames, 2 taxels, 2 axes (raw counts).
@@ -353,6 +380,23 @@ TEST_SUITE("data") {
     tjepa::Recording zeros(4, 2, 1);
     tjepa::Preprocessor fresh(tjepa::PreprocessConfig::scalar_standardization());
     CHECK_THROWS_WITH_AS(fresh.fit(zeros), doctest::Contains("no non-zero finite value"), tjepa::DataError);
+  }
+
+  TEST_CASE("recording: frame ranges share values and copies are copy-on-write") {
+    tjepa::Recording r(10, 4, 3);
+    for (int t = 0; t < 10; ++t) r.at(t, 1, 2) = static_cast<float>(t);
+    const tjepa::Recording train = r.frames_range(0, 8), val = r.frames_range(8, 10);
+    CHECK(train.frames() == 8);
+    CHECK(val(1, 1, 2) == 9.0f);
+    CHECK(val.data() == r.frame(8));  // no copy
+    tjepa::Recording copy = r;
+    copy.at(0, 1, 2) = -1.0f;          // writes a private copy
+    CHECK(r(0, 1, 2) == 0.0f);
+    CHECK(train(0, 1, 2) == 0.0f);
+    CHECK(copy(0, 1, 2) == -1.0f);
+    CHECK_THROWS_AS(r.frames_range(5, 11), tjepa::ConfigError);
+    CHECK_THROWS_AS(tjepa::Recording(2, 0, 3), tjepa::ShapeError);
+    CHECK_THROWS_AS(tjepa::Recording(2, 2, 3, tjepa::AlignedVector<float>(5)), tjepa::ShapeError);
   }
 
   TEST_CASE("windows: starts and taxel-major copies and batches equal to preprocessing the recording") {
@@ -452,6 +496,27 @@ TEST_SUITE("data") {
     CHECK_THROWS_WITH_AS(tjepa::check_group_index(std::vector<int>{0, 0}, 1, 2, 5), doctest::Contains("taxel 0 appears"),
                          tjepa::DataError);
     CHECK_THROWS_AS(tjepa::check_group_index(std::vector<int>{0, 1, 2}, 2, 2, 5), tjepa::ShapeError);
+  }
+
+  TEST_CASE("grouped gather: the DECO-50 grouping's members gather what its gather_indices select") {
+    const tjepa::Skin hands = tjepa::layouts::inspire_hands();
+    const tjepa::Grouping grouping = tjepa::layouts::deco50_grouping(hands);
+    const int N = hands.size(), tau = 3, m = 1, B = 2, G = grouping.num_groups(), ng = grouping.max_size;
+    tjepa::check_group_index(grouping.members, G, ng, N);
+    std::vector<float> x(static_cast<std::size_t>(B) * N * tau * m);
+    tjepa::Rng rng(4);
+    for (auto& v : x) v = static_cast<float>(rng.normal());
+    std::vector<float> out(static_cast<std::size_t>(B) * G * ng * tau * m);
+    tjepa::gather_groups(x.data(), B, N, tau * m, grouping.members.data(), G, ng, out.data());
+    const std::vector<int> idx = grouping.gather_indices(tau, m);
+    REQUIRE(idx.size() * B == out.size());
+    for (int b = 0; b < B; ++b) {
+      const float* xb = x.data() + static_cast<std::size_t>(b) * N * tau * m;
+      for (std::size_t k = 0; k < idx.size(); ++k) {
+        const float want = idx[k] == N * tau * m ? 0.0f : xb[idx[k]];
+        if (out[b * idx.size() + k] != want) FAIL_CHECK("batch ", b, " slot ", k);
+      }
+    }
   }
 
   TEST_CASE("simulate_dataset: train and validation sources with statistics fitted on training data only") {

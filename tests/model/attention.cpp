@@ -361,6 +361,9 @@ TEST_SUITE("nn") {
       std::vector<float> out, lse;
       forward(Impl::fast, p, out, lse, ws);
       CHECK(max_abs_diff_out(p, out, naive_attention(p)) < 1e-5);
+      // Flash-style memory: forward and backward scratch is O(L * Dh), far below one [L, L] head.
+      backward(Impl::fast, p, out, lse, ws);
+      CHECK(ws.capacity() <= std::size_t{8} * 2 * static_cast<std::size_t>(L) * 64 + 65536);
     }
   }
 

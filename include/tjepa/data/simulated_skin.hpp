@@ -32,7 +32,8 @@
 //     frames, starting at dropout_rate per taxel per frame (0 lies outside the valid Xela range, so
 //     PreprocessConfig::magnetic() treats it as a drop-out).
 //
-// Axes: x, y along the pad's plane (e_u, e_v), z along its normal; the pad frame comes from a
+// Axes: x, y along the pad's plane (e_u, e_v), z along its normal (SimConfig::axes = 1 keeps only z,
+// like a piezoresistive skin); the pad frame comes from a
 // principal-component fit of the pad's taxel positions (e_u is the layout's x axis projected into
 // the plane). Labels (FrameLabel): force (shear u, shear v, normal) in N in that frame, the contact
 // centre in layout coordinates (mm), the indenter class and the pad.
@@ -100,6 +101,7 @@ struct ContactState {
 
 struct SimConfig {
   double rate_hz = 100.0;
+  int axes = 3;  // 3: magnetic (x, y shear, z normal); 1: pressure only (piezoresistive), the z reading
   // Contact events.
   double force_min = 0.3, force_max = 10.0;  // N, peak normal force (log-uniform)
   double friction_min = 0.4, friction_max = 1.0;
@@ -137,6 +139,7 @@ struct SimConfig {
       require<ConfigError>(lo <= hi, "SimConfig: ", name, " range [", lo, ", ", hi, "], expected min <= max");
     };
     pos(rate_hz, "rate_hz");
+    require<ConfigError>(axes == 1 || axes == 3, "SimConfig: axes = ", axes, ", expected 3 (x, y, z) or 1 (pressure)");
     pos(force_min, "force_min");
     range(force_min, force_max, "force");
     nonneg(friction_min, "friction_min");
@@ -196,7 +199,6 @@ inline double smoothstep(double x) {
 
 class SimulatedSkin {
  public:
-  static constexpr int axes = 3;
 
   SimulatedSkin(SkinGeometry geometry, SimConfig config = {}, std::uint64_t seed = 0)
       : geo_(std::move(geometry)), cfg_(std::move(config)), rng_(seed) {
@@ -213,7 +215,7 @@ class SimulatedSkin {
     }
     build_pads();
     // Per-sensor constants, drawn once.
-    gain_.resize(static_cast<std::size_t>(n) * axes);
+    gain_.resize(static_cast<std::size_t>(n) * cfg_.axes);
     offset_.resize(gain_.size());
     drift_.resize(gain_.size());
     for (auto& g : gain_) g = static_cast<float>(1.0 + cfg_.gain_spread * rng_.uniform(-1.0, 1.0));
@@ -230,8 +232,9 @@ class SimulatedSkin {
   const SkinGeometry& geometry() const { return geo_; }
   const SimConfig& config() const { return cfg_; }
   int taxels() const { return geo_.size(); }
+  int axes() const { return cfg_.axes; }
   int num_pads() const { return static_cast<int>(pads_.size()); }
-  // Per-taxel reading with no contact, no noise and no drift: [N, 3] counts.
+  // Per-taxel reading with no contact, no noise and no drift: [N, axes] counts.
   const std::vector<float>& offsets() const { return offset_; }
   // Taxel i's position in its pad's plane (mm).
   std::array<double, 2> taxel_uv(int i) const { return {uv_[2 * i], uv_[2 * i + 1]}; }
@@ -245,11 +248,11 @@ class SimulatedSkin {
     return x;
   }
 
-  // Noise-free signal of one contact: out [N, 3] counts, zero off the contacted pad (no offset,
+  // Noise-free signal of one contact: out [N, axes] counts, zero off the contacted pad (no offset,
   // drift, noise or drop-out). This is the physics the recordings are built on.
   void respond(const ContactState& c, std::span<float> out) const {
-    require<ShapeError>(out.size() == static_cast<std::size_t>(taxels()) * axes, "SimulatedSkin::respond: out has ",
-                        out.size(), " values, expected taxels*3 = ", static_cast<std::size_t>(taxels()) * axes);
+    require<ShapeError>(out.size() == static_cast<std::size_t>(taxels()) * axes(), "SimulatedSkin::respond: out has ",
+                        out.size(), " values, expected taxels*axes = ", static_cast<std::size_t>(taxels()) * axes());
     require<ConfigError>(c.pad >= 0 && c.pad < num_pads() && !pads_[c.pad].taxels.empty(),
                          "SimulatedSkin::respond: pad ", c.pad, " has no taxels");
     require<ConfigError>(c.size > 0 && c.normal >= 0, "SimulatedSkin::respond: size ", c.size, " and normal force ",
@@ -263,12 +266,12 @@ class SimulatedSkin {
   SimRecording record(int frames) {
     require<ConfigError>(frames >= 0, "SimulatedSkin::record: frames = ", frames, ", expected >= 0");
     SimRecording out;
-    out.recording = Recording(frames, taxels(), axes);
+    out.recording = Recording(frames, taxels(), axes());
     out.recording.set_source("simulated skin");
     out.labels.resize(frames);
     float* x = out.recording.mutable_data();
     for (int t = 0; t < frames; ++t) {
-      float* f = x + static_cast<std::size_t>(t) * taxels() * axes;
+      float* f = x + static_cast<std::size_t>(t) * taxels() * axes();
       sensor_frame(f);
       ContactState c;
       if (next_contact(c)) {
@@ -288,11 +291,11 @@ class SimulatedSkin {
   // A contact-free recording of the same sensor (for fitting the preprocessing baseline).
   Recording record_baseline(int frames) {
     require<ConfigError>(frames >= 0, "SimulatedSkin::record_baseline: frames = ", frames, ", expected >= 0");
-    Recording rec(frames, taxels(), axes);
+    Recording rec(frames, taxels(), axes());
     rec.set_source("simulated skin (no contact)");
     float* x = rec.mutable_data();
     for (int t = 0; t < frames; ++t) {
-      float* f = x + static_cast<std::size_t>(t) * taxels() * axes;
+      float* f = x + static_cast<std::size_t>(t) * taxels() * axes();
       sensor_frame(f);
       apply_dropouts(f);
     }
@@ -456,11 +459,14 @@ class SimulatedSkin {
       const double sx = cfg_.shear_sensitivity * kpa * (c.shear_u * p + bulge * c.normal * gu);
       const double sy = cfg_.shear_sensitivity * kpa * (c.shear_v * p + bulge * c.normal * gv);
       const double sz = cfg_.normal_sensitivity * kpa * c.normal * p;
-      float* fi = f + static_cast<std::size_t>(i) * axes;
-      const float* g = gain_.data() + static_cast<std::size_t>(i) * axes;
-      fi[0] += g[0] * static_cast<float>(Smax * std::tanh(sx / Smax));
-      fi[1] += g[1] * static_cast<float>(Smax * std::tanh(sy / Smax));
-      fi[2] += g[2] * static_cast<float>(Smax * std::tanh(sz / Smax));
+      const int m = cfg_.axes;
+      float* fi = f + static_cast<std::size_t>(i) * m;
+      const float* g = gain_.data() + static_cast<std::size_t>(i) * m;
+      fi[m - 1] += g[m - 1] * static_cast<float>(Smax * std::tanh(sz / Smax));
+      if (m == 3) {
+        fi[0] += g[0] * static_cast<float>(Smax * std::tanh(sx / Smax));
+        fi[1] += g[1] * static_cast<float>(Smax * std::tanh(sy / Smax));
+      }
     }
   }
 
@@ -501,7 +507,7 @@ class SimulatedSkin {
     for (int i = 0; i < n; ++i)
       if (dropout_left_[i] > 0) {
         --dropout_left_[i];
-        std::fill_n(f + static_cast<std::size_t>(i) * axes, axes, 0.0f);
+        std::fill_n(f + static_cast<std::size_t>(i) * cfg_.axes, cfg_.axes, 0.0f);
       }
   }
 

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Runs tjepa's benchmarks and PyTorch's (bench/compare_torch.py) side by side, at 1 and 2
+# threads, and writes bench/RESULTS.md. Run it on a quiet machine: `bench/compare.sh`.
+# PyTorch comes from Debian's python3-torch (installed here if missing, as root); it is never a
+# dependency of the library or its tests.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source tools/deps.sh
+tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" python3-torch
+cmake --preset release -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=OFF >/dev/null
+cmake --build --preset release --target tjepa_bench -j "$(nproc)"
+
+out=build/compare
+mkdir -p "$out"
+filter='BM_EncoderForward/|BM_EncoderForwardBackward/.*/0/|BM_AttentionForward/|BM_AttentionForwardBackward/'
+for t in 1 2; do
+  echo "tjepa, $t thread(s)" >&2
+  OMP_NUM_THREADS=$t OMP_PROC_BIND=false build/release/bench/tjepa_bench --benchmark_filter="$filter" \
+    --benchmark_repetitions=3 --benchmark_report_aggregates_only=true --benchmark_format=json \
+    > "$out/tjepa_t$t.json"
+  echo "PyTorch, $t thread(s)" >&2
+  OMP_NUM_THREADS=$t OPENBLAS_NUM_THREADS=$t MKL_NUM_THREADS=$t OMP_WAIT_POLICY=PASSIVE \
+    /usr/bin/python3 bench/compare_torch.py --threads "$t" > "$out/torch_t$t.jsonl"
+done
+/usr/bin/python3 bench/make_results.py "$out" > "$out/RESULTS.md"
+mv "$out/RESULTS.md" bench/RESULTS.md
+echo "wrote bench/RESULTS.md" >&2
