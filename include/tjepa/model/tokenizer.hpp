@@ -83,6 +83,7 @@ struct Tokenizer {
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, int B, T* out, std::type_identity_t<TokenizerCache<T>>* cache,
                Workspace<T>& ws) const {
+    check_params(ps, maps.back().norm.bias, "Tokenizer::forward");
     require<ShapeError>(B > 0, "Tokenizer::forward: B = ", B, ", expected > 0");
     if (cache) {
       cache->B = B;
@@ -120,6 +121,8 @@ struct Tokenizer {
   // columns get nothing).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dx, const TokenizerCache<T>& c, Workspace<T>& ws) const {
+    check_params(ps, maps.back().norm.bias, "Tokenizer::backward");
+    require<ConfigError>(c.B > 0, "Tokenizer::backward: the cache holds no forward pass");
     const int B = c.B;
     for (std::size_t i = 0; i < maps.size(); ++i) {
       const Map& m = maps[i];
