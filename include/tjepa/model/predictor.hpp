@@ -83,7 +83,7 @@ struct Predictor {
     input_projection.forward(ps, ctx, e, Bc * K);
     T* x = detail::grow(ws.x, M * pd);
     const T* u = ps.value(mask_token);
-    TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
+    TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(B) * L * pd > detail::parallel_grain))
     for (int b = 0; b < B; ++b) {
       T* xb = x + std::size_t(b) * L * pd;
       const T* eb = e + std::size_t(b % Bc) * K * pd;
