@@ -401,6 +401,26 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
+  TEST_CASE("bad input at the module boundary throws, naming the argument") {
+    ParamSet<float> ps, other;
+    Encoder enc(ps, EncoderConfig{10, 12, 1, 3, 4.0, true, 1e-6});
+    Predictor(other, PredictorConfig{12, 12, 1, 3, 4.0, false, 1e-6});
+    Workspace<float> ws;
+    std::vector<float> tokens(2 * 10 * 12), out(tokens.size());
+    std::vector<int> ctx{0, 1, 2, 10};
+    CHECK_THROWS_WITH_AS(enc.forward(ps, tokens.data(), 2, nullptr, 10, out.data(), nullptr, ws),
+                         "Encoder::forward: the ParamSet is not allocated", ConfigError);
+    ps.allocate();
+    other.allocate();
+    CHECK_THROWS_AS(enc.forward(other, tokens.data(), 2, nullptr, 10, out.data(), nullptr, ws), ConfigError);
+    CHECK_THROWS_WITH_AS(enc.forward(ps, tokens.data(), 2, ctx.data(), 2, out.data(), nullptr, ws),
+                         "Encoder::forward: context[3] = 10, expected [0, 10)", ShapeError);
+    CHECK_THROWS_AS(enc.forward(ps, tokens.data(), 2, nullptr, 4, out.data(), nullptr, ws), ShapeError);
+    EncoderCache<float> empty;
+    CHECK_THROWS_AS(enc.backward(ps, out.data(), nullptr, empty, ws), ConfigError);
+    CHECK_THROWS_AS(Encoder(ps, EncoderConfig{10, 10, 1, 3, 4.0, true, 1e-6}), ConfigError);
+  }
+
   TEST_CASE("init_params: REFERENCE §4 values, deterministic from the seed") {
     ParamSet<float> a, b;
     Encoder ea(a, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});

@@ -61,6 +61,7 @@ struct AttentiveProbe {
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* y,
                std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
+    check_params(ps, head.fc2.weight, "AttentiveProbe::forward");
     require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::forward: B = ", B, ", L = ", L, ", expected > 0");
     const int d = config.dim, H = config.heads, hid = mlp.hidden(), hh = head.hidden();
     const std::size_t M = std::size_t(B) * L;
@@ -101,6 +102,8 @@ struct AttentiveProbe {
   // dy [B, out] → parameter gradients and dx [B, L, d] += (may be nullptr).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, std::type_identity_t<T>* dx, const ProbeCache<T>& c, Workspace<T>& ws) const {
+    check_params(ps, head.fc2.weight, "AttentiveProbe::backward");
+    require<ConfigError>(c.B > 0, "AttentiveProbe::backward: the cache holds no forward pass");
     const int d = config.dim, B = c.B, L = c.L, hid = mlp.hidden(), hh = head.hidden();
     const std::size_t M = std::size_t(B) * L;
     const std::uint8_t* kv = c.key_valid.empty() ? nullptr : c.key_valid.data();

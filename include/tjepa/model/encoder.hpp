@@ -73,7 +73,7 @@ struct Encoder {
   void forward(const ParamSet<T>& ps, const T* tokens, int B, const int* context, int K, T* out,
                std::type_identity_t<EncoderCache<T>>* cache, Workspace<T>& ws, const EncoderOptions& opt = {}) const {
     const int N = config.num_tokens, d = config.dim;
-    require<ConfigError>(ps.allocated(), "Encoder::forward: the ParamSet is not allocated");
+    check_params(ps, norm.bias, "Encoder::forward");
     require<ShapeError>(B > 0, "Encoder::forward: B = ", B, ", expected > 0");
     require<ShapeError>(K > 0 && K <= N, "Encoder::forward: K = ", K, ", expected 1..", N);
     require<ShapeError>(context || K == N, "Encoder::forward: K = ", K, " without context indices, expected ", N);
@@ -102,6 +102,8 @@ struct Encoder {
   // dout [B, K, d] → parameter gradients (added to ps) and dtokens [B, N, d] += (may be nullptr).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dtokens, const EncoderCache<T>& cache, Workspace<T>& ws) const {
+    check_params(ps, norm.bias, "Encoder::backward");
+    require<ConfigError>(cache.B > 0, "Encoder::backward: the cache holds no forward pass");
     const int N = config.num_tokens, d = config.dim, B = cache.B, K = cache.K;
     const std::size_t M = std::size_t(B) * K;
     T* g = detail::grow(ws.dx, M * d);

@@ -11,6 +11,16 @@
 
 namespace tjepa {
 
+// Throws ConfigError unless ps is allocated and holds `id` where the module registered it: a cheap
+// guard against running a module on a ParamSet of another layout.
+template <class T>
+void check_params(const ParamSet<T>& ps, const ParamId& id, const char* where) {
+  require<ConfigError>(ps.allocated(), where, ": the ParamSet is not allocated");
+  require<ConfigError>(id.index < ps.count() && ps.infos()[id.index].offset == id.offset &&
+                           ps.infos()[id.index].size == id.size,
+                       where, ": the ParamSet does not have this module's layout (parameter #", id.index, ")");
+}
+
 struct LinearParams {
   ParamId weight, bias;
   int in = 0, out = 0;

@@ -71,7 +71,8 @@ struct Predictor {
   void forward(const ParamSet<T>& ps, const T* ctx, int Bc, int K, const T* pos, int N, const int* targets, int B,
                int t, T* out, std::type_identity_t<PredictorCache<T>>* cache, Workspace<T>& ws) const {
     const int pd = config.dim, din = config.in_dim;
-    require<ConfigError>(ps.allocated(), "Predictor::forward: the ParamSet is not allocated");
+    check_params(ps, output_projection.weight, "Predictor::forward");
+    require<ShapeError>(ctx && pos && targets && out, "Predictor::forward: a null ctx, pos, targets or out");
     require<ShapeError>(Bc > 0 && K > 0 && t > 0 && N > 0, "Predictor::forward: Bc = ", Bc, ", K = ", K,
                         ", t = ", t, ", N = ", N, ", expected all > 0");
     require<ShapeError>(B > 0 && B % Bc == 0, "Predictor::forward: B = ", B, ", expected a multiple of Bc = ", Bc);
@@ -82,7 +83,7 @@ struct Predictor {
     input_projection.forward(ps, ctx, e, Bc * K);
     T* x = detail::grow(ws.x, M * pd);
     const T* u = ps.value(mask_token);
-    TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
+    TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(B) * L * pd > detail::parallel_grain))
     for (int b = 0; b < B; ++b) {
       T* xb = x + std::size_t(b) * L * pd;
       const T* eb = e + std::size_t(b % Bc) * K * pd;
@@ -116,6 +117,8 @@ struct Predictor {
   template <class T>
   void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dctx, std::type_identity_t<T>* dpos, const PredictorCache<T>& c,
                 Workspace<T>& ws) const {
+    check_params(ps, output_projection.weight, "Predictor::backward");
+    require<ConfigError>(c.B > 0, "Predictor::backward: the cache holds no forward pass");
     const int pd = config.dim, Bc = c.Bc, K = c.K, B = c.B, t = c.t, L = K + t;
     const std::size_t M = std::size_t(B) * L, Mt = std::size_t(B) * t;
     T* dn = detail::grow(ws.drows, 2 * Mt * pd);

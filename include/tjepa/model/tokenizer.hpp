@@ -4,7 +4,8 @@
 //   per taxel: one map shared by all N taxels, W = m·τ.
 //     PyTorch: patch_embed.proj.{weight [d, m·τ], bias [d]}, patch_embed.norm.{weight, bias}.
 //     The reference's patch_embed.proj is a Conv1d with weight [d, m, τ]: flattened, its column
-//     index is axis·τ + frame, so rows must hold a taxel's window axis-major to load it 1:1.
+//     index is axis·τ + frame, so rows must hold a taxel's window axis-major to load it 1:1
+//     (assuming no temporal padding in that Conv1d; its PatchEmbed1d source was not available).
 //   grouped (DECO-50): one map and one LayerNorm per group size n (4 and 5), W = n_max·k with
 //     k = τ·m values per taxel; a group of size n uses the first n·k values of its row (the rest
 //     is padding). PyTorch (the reference's DecoHypertaxelTokenizer, mode "direct"):
@@ -82,6 +83,7 @@ struct Tokenizer {
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, int B, T* out, std::type_identity_t<TokenizerCache<T>>* cache,
                Workspace<T>& ws) const {
+    check_params(ps, maps.back().norm.bias, "Tokenizer::forward");
     require<ShapeError>(B > 0, "Tokenizer::forward: B = ", B, ", expected > 0");
     if (cache) {
       cache->B = B;
@@ -119,6 +121,8 @@ struct Tokenizer {
   // columns get nothing).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dx, const TokenizerCache<T>& c, Workspace<T>& ws) const {
+    check_params(ps, maps.back().norm.bias, "Tokenizer::backward");
+    require<ConfigError>(c.B > 0, "Tokenizer::backward: the cache holds no forward pass");
     const int B = c.B;
     for (std::size_t i = 0; i < maps.size(); ++i) {
       const Map& m = maps[i];

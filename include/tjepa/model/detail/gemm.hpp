@@ -42,7 +42,7 @@ void gemm_accumulate(Eigen::Index rows, Eigen::Index cols, Eigen::Index depth, c
   using Product = Eigen::internal::general_matrix_matrix_product<Eigen::Index, T, LhsOrder, false, T, RhsOrder, false,
                                                                   Eigen::RowMajor, 1>;
   const double flops = 2.0 * double(rows) * double(cols) * double(depth);
-  const int threads = flops > 4e5 ? std::min<int>(max_threads(), int((rows + 15) / 16)) : 1;
+  const int threads = flops > parallel_min_flops ? std::min<int>(max_threads(), int((rows + 15) / 16)) : 1;
   auto run = [&](Eigen::Index r0, Eigen::Index r1) {
     if (r1 <= r0) return;
     GemmBlocking<T> blocking(r1 - r0, cols, depth);

@@ -14,6 +14,11 @@
 
 namespace tjepa::detail {
 
+// Below these sizes a loop runs on one thread: a parallel region costs microseconds when the
+// cores are free and a scheduler time slice when they are not.
+inline constexpr std::size_t parallel_grain = std::size_t(1) << 17;  // elements of a row-wise kernel
+inline constexpr double parallel_min_flops = 8e6;                     // of a GEMM
+
 inline int max_threads() {
 #ifdef _OPENMP
   return omp_get_max_threads();

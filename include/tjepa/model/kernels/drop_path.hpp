@@ -41,7 +41,7 @@ void drop_path_backward(T* dbranch, const T* dx, const T* scale, int B, std::siz
 // x[B, per_sample] += scale[b] · branch[B, per_sample]
 template <class T>
 void drop_path_forward(T* x, const T* branch, const T* scale, int B, std::size_t per_sample) {
-  TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
+  TJEPA_OMP(omp parallel for schedule(static) if (B > 1 && B * per_sample > detail::parallel_grain))
   for (int b = 0; b < B; ++b) {
     if (scale[b] == T(0)) continue;
     T* xb = x + std::size_t(b) * per_sample;
@@ -54,7 +54,7 @@ void drop_path_forward(T* x, const T* branch, const T* scale, int B, std::size_t
 // Differentiates x += scale[b] · branch: dbranch[b] += scale[b] · dx[b].
 template <class T>
 void drop_path_backward(T* dbranch, const T* dx, const T* scale, int B, std::size_t per_sample) {
-  TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
+  TJEPA_OMP(omp parallel for schedule(static) if (B > 1 && B * per_sample > detail::parallel_grain))
   for (int b = 0; b < B; ++b) {
     if (scale[b] == T(0)) continue;
     T* gb = dbranch + std::size_t(b) * per_sample;

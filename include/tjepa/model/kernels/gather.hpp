@@ -12,7 +12,7 @@ namespace tjepa {
 
 template <class T>
 void gather_rows(T* out, const T* src, std::size_t src_batch, const int* idx, int B, int K, int C) {
-  TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
+  TJEPA_OMP(omp parallel for schedule(static) if (B > 1 && std::size_t(B) * K * C > detail::parallel_grain))
   for (int b = 0; b < B; ++b)
     for (int k = 0; k < K; ++k) {
       const T* s = src + b * src_batch + std::size_t(idx[std::size_t(b) * K + k]) * C;
@@ -22,7 +22,7 @@ void gather_rows(T* out, const T* src, std::size_t src_batch, const int* idx, in
 
 template <class T>
 void gather_add_rows(T* out, const T* src, std::size_t src_batch, const int* idx, int B, int K, int C) {
-  TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
+  TJEPA_OMP(omp parallel for schedule(static) if (B > 1 && std::size_t(B) * K * C > detail::parallel_grain))
   for (int b = 0; b < B; ++b)
     for (int k = 0; k < K; ++k) {
       const T* s = src + b * src_batch + std::size_t(idx[std::size_t(b) * K + k]) * C;
@@ -35,7 +35,7 @@ void gather_add_rows(T* out, const T* src, std::size_t src_batch, const int* idx
 // With a shared table (src_batch = 0) samples write the same rows, so the loop is serial.
 template <class T>
 void scatter_add_rows(T* dsrc, std::size_t src_batch, const T* dout, const int* idx, int B, int K, int C) {
-  TJEPA_OMP(omp parallel for schedule(static) if (B > 1 && src_batch > 0))
+  TJEPA_OMP(omp parallel for schedule(static) if (src_batch > 0 && std::size_t(B) * K * C > detail::parallel_grain))
   for (int b = 0; b < B; ++b)
     for (int k = 0; k < K; ++k) {
       T* d = dsrc + b * src_batch + std::size_t(idx[std::size_t(b) * K + k]) * C;

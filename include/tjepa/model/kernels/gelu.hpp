@@ -47,7 +47,7 @@ template <class T>
 void gelu_forward(T* out, const T* in, std::size_t n) {
   constexpr std::size_t W = detail::simd_width<T>;
   const std::size_t nv = n / W;
-  TJEPA_OMP(omp parallel for schedule(static) if (n > 65536))
+  TJEPA_OMP(omp parallel for schedule(static) if (n > detail::parallel_grain))
   for (std::size_t j = 0; j < nv; ++j)
     detail::gelu<T>(xsimd::load_unaligned(in + j * W)).store_unaligned(out + j * W);
   ref::gelu_forward(out + nv * W, in + nv * W, n - nv * W);
@@ -58,7 +58,7 @@ template <class T>
 void gelu_backward(T* din, const T* dout, const T* in, std::size_t n) {
   constexpr std::size_t W = detail::simd_width<T>;
   const std::size_t nv = n / W;
-  TJEPA_OMP(omp parallel for schedule(static) if (n > 65536))
+  TJEPA_OMP(omp parallel for schedule(static) if (n > detail::parallel_grain))
   for (std::size_t j = 0; j < nv; ++j) {
     const std::size_t i = j * W;
     const auto d = xsimd::load_unaligned(din + i) +
@@ -75,7 +75,7 @@ void bias_gelu_forward(T* out, T* pre, const T* b, int M, int N) {
   using V = detail::simd<T>;
   constexpr std::size_t W = detail::simd_width<T>;
   const std::size_t n = std::size_t(N);
-  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > 65536))
+  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > detail::parallel_grain))
   for (int m = 0; m < M; ++m) {
     T* p = pre + std::size_t(m) * n;
     T* o = out + std::size_t(m) * n;

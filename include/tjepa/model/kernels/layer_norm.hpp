@@ -61,7 +61,7 @@ void layer_norm_forward(T* out, T* mean, T* rstd, const T* in, const T* w, const
   using V = detail::simd<T>;
   constexpr std::size_t W = detail::simd_width<T>;
   const std::size_t n = std::size_t(C);
-  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > 65536))
+  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > detail::parallel_grain))
   for (int m = 0; m < M; ++m) {
     const T* x = in + std::size_t(m) * n;
     T* y = out + std::size_t(m) * n;
@@ -97,7 +97,7 @@ void layer_norm_backward(T* din, T* dw, T* db, const T* dout, const T* in, const
   constexpr std::size_t W = detail::simd_width<T>;
   const std::size_t n = std::size_t(C);
   if (din) {
-    TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > 65536))
+    TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > detail::parallel_grain))
     for (int m = 0; m < M; ++m) {
       const T* x = in + std::size_t(m) * n;
       const T* g = dout + std::size_t(m) * n;

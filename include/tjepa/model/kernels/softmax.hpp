@@ -43,7 +43,7 @@ void softmax_forward(T* out, const T* in, int M, int N) {
   using V = detail::simd<T>;
   constexpr std::size_t W = detail::simd_width<T>;
   const std::size_t n = std::size_t(N);
-  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > 65536))
+  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > detail::parallel_grain))
   for (int m = 0; m < M; ++m) {
     const T* x = in + std::size_t(m) * n;
     T* y = out + std::size_t(m) * n;
@@ -72,7 +72,7 @@ void softmax_backward(T* din, const T* dout, const T* out, int M, int N) {
   using V = detail::simd<T>;
   constexpr std::size_t W = detail::simd_width<T>;
   const std::size_t n = std::size_t(N);
-  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > 65536))
+  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > detail::parallel_grain))
   for (int m = 0; m < M; ++m) {
     const T* y = out + std::size_t(m) * n;
     const T* g = dout + std::size_t(m) * n;
