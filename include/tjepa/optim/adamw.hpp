@@ -68,7 +68,7 @@ class AdamW {
       T* m_all = exp_avg_[k].data();
       T* v_all = exp_avg_sq_[k].data();
       const auto& infos = ps.infos();
-      TJEPA_OMP(omp parallel)
+      TJEPA_OMP(omp parallel if (ps.flat_size() > detail::parallel_grain))
       for (const ParamInfo& info : infos) {
         T* p = p_all + info.offset;
         const T* g = g_all + info.offset;

@@ -41,7 +41,7 @@ template <class T>
 void scale_grads(ParamSet<T>& params, T factor) {
   T* g = params.grads().data();
   const auto n = static_cast<std::ptrdiff_t>(params.flat_size());
-  TJEPA_OMP(omp parallel for schedule(static))
+  TJEPA_OMP(omp parallel for schedule(static) if (params.flat_size() > detail::parallel_grain))
   for (std::ptrdiff_t i = 0; i < n; ++i) g[i] *= factor;
 }
 

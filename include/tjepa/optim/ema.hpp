@@ -21,7 +21,7 @@ void ema_update(ParamSet<T>& target, const ParamSet<T>& context, double momentum
   const T m = static_cast<T>(momentum);
   const T one_minus_m = static_cast<T>(1.0 - momentum);
   const auto n = static_cast<std::ptrdiff_t>(target.flat_size());
-  TJEPA_OMP(omp parallel for schedule(static))
+  TJEPA_OMP(omp parallel for schedule(static) if (target.flat_size() > detail::parallel_grain))
   for (std::ptrdiff_t i = 0; i < n; ++i) tv[i] = m * tv[i] + one_minus_m * cv[i];
 }
 

@@ -32,7 +32,7 @@ double embedding_std(const T* x, std::size_t M, int d) {
   std::vector<double> s1(chunks * D, 0.0), s2(chunks * D, 0.0);
   const auto count = static_cast<std::ptrdiff_t>(chunks);
   // Pass 1: column means; pass 2: squared deviations (stable for large offsets).
-  TJEPA_OMP(omp parallel for schedule(static) if (count > 1))
+  TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
   for (std::ptrdiff_t c = 0; c < count; ++c) {
     double* acc = s1.data() + static_cast<std::size_t>(c) * D;
     const std::size_t end = std::min(M, (static_cast<std::size_t>(c) + 1) * chunk);
@@ -43,7 +43,7 @@ double embedding_std(const T* x, std::size_t M, int d) {
   for (std::size_t c = 0; c < chunks; ++c)
     for (std::size_t j = 0; j < D; ++j) mean[j] += s1[c * D + j];
   for (auto& v : mean) v /= static_cast<double>(M);
-  TJEPA_OMP(omp parallel for schedule(static) if (count > 1))
+  TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
   for (std::ptrdiff_t c = 0; c < count; ++c) {
     double* acc = s2.data() + static_cast<std::size_t>(c) * D;
     const std::size_t end = std::min(M, (static_cast<std::size_t>(c) + 1) * chunk);

@@ -27,7 +27,7 @@ inline constexpr double target_norm_eps = 1e-5;
 template <class T>
 void normalize_rows(T* x, std::size_t M, int d, double eps = target_norm_eps) {
   const auto rows = static_cast<std::ptrdiff_t>(M);
-  TJEPA_OMP(omp parallel for schedule(static) if (rows > 64))
+  TJEPA_OMP(omp parallel for schedule(static) if (M * static_cast<std::size_t>(d) > detail::parallel_grain))
   for (std::ptrdiff_t m = 0; m < rows; ++m) {
     T* r = x + static_cast<std::size_t>(m) * d;
     double mu = 0;
@@ -56,7 +56,7 @@ double regression_loss(const T* pred, const T* target, T* dpred, std::size_t n, 
   if (dpred) {
     const double g = scale * inv_n;
     const auto count = static_cast<std::ptrdiff_t>(n);
-    TJEPA_OMP(omp parallel for schedule(static) if (count > 4096))
+    TJEPA_OMP(omp parallel for schedule(static) if (n > detail::parallel_grain))
     for (std::ptrdiff_t i = 0; i < count; ++i) {
       const double e = static_cast<double>(pred[i]) - static_cast<double>(target[i]);
       // ∂ℓ/∂e: 2e for mse; e inside the quadratic zone, sign(e) outside for smooth-L1.

@@ -15,7 +15,7 @@ double deterministic_sum(std::size_t n, Term term, std::size_t chunk = 4096) {
   const std::size_t chunks = (n + chunk - 1) / chunk;
   std::vector<double> partial(chunks, 0.0);
   const auto count = static_cast<std::ptrdiff_t>(chunks);
-  TJEPA_OMP(omp parallel for schedule(static) if (count > 1))
+  TJEPA_OMP(omp parallel for schedule(static) if (n > parallel_grain))
   for (std::ptrdiff_t c = 0; c < count; ++c) {
     const std::size_t begin = static_cast<std::size_t>(c) * chunk;
     const std::size_t end = std::min(n, begin + chunk);
