@@ -474,7 +474,8 @@ TEST_SUITE("nn") {
     Workspace<float> ws;
     auto run = [&] {
       tok.forward(ps, x.data(), B, tokens.data(), nullptr, ws);
-      enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, ws);            // target encoder
+      // The target encoder, with the reference's drop-path 0.3 (it runs in training mode there).
+      enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, ws, {DropPath{0.3, 5}, nullptr});
       enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), nullptr, ws);        // context
       pred.forward(ps, zc.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), 2 * B, t, out.data(), nullptr, ws);
       probe.forward(ps, z.data(), B, N, nullptr, y.data(), nullptr, ws);
