@@ -29,6 +29,13 @@ struct ParamId {
   std::size_t size = 0;                              // number of elements
 };
 
+// How init_params (model/init.hpp) fills a tensor; modules choose it when they register it.
+enum class ParamInit {
+  zeros,         // biases, the predictor's mask token (zero_init_mask_tokens)
+  ones,          // LayerNorm weights
+  trunc_normal,  // Linear weights, position table, query token: N(0, 0.02²) truncated at ±2
+};
+
 struct ParamInfo {
   std::string name;                // reference PyTorch name
   std::vector<std::int64_t> shape; // PyTorch shape, e.g. {576, 192} for a Linear(192 -> 576)
@@ -36,6 +43,7 @@ struct ParamInfo {
   std::size_t size = 0;
   // AdamW weight decay applies (I-JEPA's rule: not a bias and not 1-D).
   bool decay = false;
+  ParamInit init = ParamInit::zeros;
 };
 
 // I-JEPA's parameter-group rule: weight decay on everything except biases and 1-D tensors.
@@ -50,7 +58,7 @@ class ParamSet {
   using Scalar = T;
 
   // Registers a tensor. Offsets are padded to 64 bytes so every view is aligned.
-  ParamId add(std::string name, std::vector<std::int64_t> shape) {
+  ParamId add(std::string name, std::vector<std::int64_t> shape, ParamInit init = ParamInit::zeros) {
     require<ConfigError>(!allocated(), "ParamSet::add('", name, "'): the set is already allocated");
     require<ConfigError>(!name.empty(), "ParamSet::add: empty name");
     require<ConfigError>(!by_name_.contains(name), "ParamSet::add: duplicate name '", name, "'");
@@ -61,7 +69,7 @@ class ParamSet {
     }
     constexpr std::size_t pad = alignment / sizeof(T) > 0 ? alignment / sizeof(T) : 1;
     const std::size_t offset = (total_ + pad - 1) / pad * pad;
-    ParamInfo info{std::move(name), std::move(shape), offset, n, false};
+    ParamInfo info{std::move(name), std::move(shape), offset, n, false, init};
     info.decay = default_decay(info.name, info.shape);
     const ParamId id{infos_.size(), offset, n};
     by_name_.emplace(info.name, id.index);

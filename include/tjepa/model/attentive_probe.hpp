@@ -1,0 +1,137 @@
+#pragma once
+// AttentiveProbe (REFERENCE §6; V-JEPA's AttentivePooler with one CrossAttentionBlock, then a
+// 2-layer MLP head). For frozen token embeddings x [B, L, d]:
+//   q₀ = query_tokens                                  [1, 1, d], one learned query
+//   q₁ = q₀ + CrossAttn(q₀, norm1(x))                  3 heads, keys = the sample's L tokens
+//   q₂ = q₁ + Mlp(norm2(q₁))                           [B, d]
+//   y  = head.fc2(gelu(head.fc1(q₂)))                  [B, out]
+// PyTorch names (prefix "probe." by default): query_tokens; cross_attention_block.norm1.*,
+// cross_attention_block.xattn.{q,kv,proj}.*, cross_attention_block.norm2.*,
+// cross_attention_block.mlp.{fc1,fc2}.*; head.fc1.*, head.fc2.*.
+#include <algorithm>
+#include <string>
+#include <type_traits>
+
+#include "tjepa/model/attention.hpp"
+#include "tjepa/model/mlp.hpp"
+
+namespace tjepa {
+
+struct ProbeConfig {
+  int dim = 192;
+  int heads = 3;
+  double mlp_ratio = 4.0;
+  int head_hidden = 192;
+  int out_dim = 1;
+  double eps = layer_norm_eps;
+};
+
+template <class T>
+struct ProbeCache {
+  int B = 0, L = 0;
+  AlignedVector<T> x, xn, mean1, rstd1;       // [B·L, d], [B·L]
+  AlignedVector<T> q0, qbuf, kv, att, lse;    // [B, d], [B, d], [B·L, 2d], [B, d], [B, H]
+  AlignedVector<T> q1, qn, mean2, rstd2, h;   // [B, d], [B, d], [B], [B], [B, hidden]
+  AlignedVector<T> q2, z;                     // [B, d], [B, head_hidden]
+  std::vector<std::uint8_t> key_valid;
+};
+
+struct AttentiveProbe {
+  ProbeConfig config;
+  ParamId query;
+  NormParams norm1, norm2;
+  CrossAttention xattn;
+  Mlp mlp, head;
+
+  AttentiveProbe() = default;
+  template <class T>
+  AttentiveProbe(ParamSet<T>& ps, const ProbeConfig& c, const std::string& prefix = "probe.") : config(c) {
+    require<ConfigError>(c.out_dim > 0 && c.head_hidden > 0, "AttentiveProbe: out_dim ", c.out_dim,
+                         ", head_hidden ", c.head_hidden, ", expected > 0");
+    const std::string blk = prefix + "cross_attention_block.";
+    query = ps.add(prefix + "query_tokens", {1, 1, c.dim}, ParamInit::trunc_normal);
+    norm1 = NormParams::add(ps, blk + "norm1", c.dim, c.eps);
+    xattn = CrossAttention::add(ps, blk + "xattn", c.dim, c.heads, true);
+    norm2 = NormParams::add(ps, blk + "norm2", c.dim, c.eps);
+    mlp = Mlp::add(ps, blk + "mlp", c.dim, static_cast<int>(c.dim * c.mlp_ratio), true);
+    head = Mlp::add(ps, prefix + "head", c.dim, c.head_hidden, true, c.out_dim);
+  }
+
+  // x [B, L, d] → y [B, out]. key_valid [B, L] or nullptr. cache == nullptr: inference.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* y,
+               std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
+    check_params(ps, head.fc2.weight, "AttentiveProbe::forward");
+    require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::forward: B = ", B, ", L = ", L, ", expected > 0");
+    const int d = config.dim, H = config.heads, hid = mlp.hidden(), hh = head.hidden();
+    const std::size_t M = std::size_t(B) * L;
+    auto buf = [&](AlignedVector<T> ProbeCache<T>::*field, AlignedVector<T>& scratch, std::size_t n) {
+      return detail::grow(cache ? cache->*field : scratch, n);
+    };
+    if (cache) {
+      cache->B = B;
+      cache->L = L;
+      cache->x.assign(x, x + M * d);
+      if (key_valid)
+        cache->key_valid.assign(key_valid, key_valid + M);
+      else
+        cache->key_valid.clear();
+    }
+    T* xn = buf(&ProbeCache<T>::xn, ws.ln, M * d);
+    norm1.forward(ps, x, xn, cache ? detail::grow(cache->mean1, M) : nullptr,
+                  cache ? detail::grow(cache->rstd1, M) : nullptr, int(M));
+    T* q0 = buf(&ProbeCache<T>::q0, ws.rows, std::size_t(B) * d);
+    for (int b = 0; b < B; ++b) std::copy(ps.value(query), ps.value(query) + d, q0 + std::size_t(b) * d);
+    T* q1 = buf(&ProbeCache<T>::q1, ws.x, std::size_t(B) * d);
+    std::copy(q0, q0 + std::size_t(B) * d, q1);
+    xattn.forward(ps, q0, xn, B, L, key_valid, buf(&ProbeCache<T>::qbuf, ws.att, std::size_t(B) * d),
+                  buf(&ProbeCache<T>::kv, ws.qkv, M * 2 * d), buf(&ProbeCache<T>::att, ws.branch, std::size_t(B) * d),
+                  cache ? detail::grow(cache->lse, std::size_t(B) * H) : nullptr, q1, true, ws);
+    T* qn = buf(&ProbeCache<T>::qn, ws.rows2, std::size_t(B) * d);
+    norm2.forward(ps, q1, qn, cache ? detail::grow(cache->mean2, std::size_t(B)) : nullptr,
+                  cache ? detail::grow(cache->rstd2, std::size_t(B)) : nullptr, B);
+    T* q2 = buf(&ProbeCache<T>::q2, ws.dx, std::size_t(B) * d);
+    std::copy(q1, q1 + std::size_t(B) * d, q2);
+    T* h = buf(&ProbeCache<T>::h, ws.hidden, std::size_t(B) * hid);
+    mlp.forward(ps, qn, h, detail::grow(ws.hidden2, std::size_t(B) * hid), q2, B, true);
+    T* z = buf(&ProbeCache<T>::z, ws.dhidden, std::size_t(B) * hh);
+    T* zact = detail::grow(ws.hidden2, std::size_t(B) * hh);
+    head.forward(ps, q2, z, zact, y, B, false);
+  }
+
+  // dy [B, out] → parameter gradients and dx [B, L, d] += (may be nullptr).
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dy, std::type_identity_t<T>* dx, const ProbeCache<T>& c, Workspace<T>& ws) const {
+    check_params(ps, head.fc2.weight, "AttentiveProbe::backward");
+    require<ConfigError>(c.B > 0, "AttentiveProbe::backward: the cache holds no forward pass");
+    const int d = config.dim, B = c.B, L = c.L, hid = mlp.hidden(), hh = head.hidden();
+    const std::size_t M = std::size_t(B) * L;
+    const std::uint8_t* kv = c.key_valid.empty() ? nullptr : c.key_valid.data();
+    T* dq = detail::grow(ws.dx, std::size_t(B) * d);  // running ∂L/∂q
+    std::fill(dq, dq + std::size_t(B) * d, T(0));
+    const std::size_t hmax = std::size_t(B) * std::max(hid, hh);
+    T* s1 = detail::grow(ws.hidden2, hmax);
+    T* s2 = detail::grow(ws.dhidden, hmax);
+    // y = head(q₂)
+    head.backward(ps, dy, c.q2.data(), c.z.data(), s1, s2, dq, B);
+    // q₂ = q₁ + mlp(qn), qn = norm2(q₁): dq already holds the identity path
+    T* dqn = detail::grow(ws.dln, std::size_t(B) * d);
+    std::fill(dqn, dqn + std::size_t(B) * d, T(0));
+    mlp.backward(ps, dq, c.qn.data(), c.h.data(), s1, s2, dqn, B);
+    norm2.backward(ps, dqn, c.q1.data(), c.mean2.data(), c.rstd2.data(), dq, B);
+    // q₁ = q₀ + xattn(q₀, xn), xn = norm1(x)
+    T* dxn = detail::grow(ws.dbranch, M * d);
+    std::fill(dxn, dxn + M * d, T(0));
+    T* dqs = detail::grow(ws.drows, std::size_t(B) * d);
+    T* dkv = detail::grow(ws.dqkv, M * 2 * d);
+    T* datt = detail::grow(ws.att, std::size_t(B) * d);
+    xattn.backward(ps, dq, c.q0.data(), c.xn.data(), B, L, kv, c.qbuf.data(), c.kv.data(), c.att.data(), c.lse.data(),
+                   dqs, dkv, datt, dq, dxn, ws);
+    T* du = ps.grad(query);
+    for (int b = 0; b < B; ++b)
+      for (int i = 0; i < d; ++i) du[i] += dq[std::size_t(b) * d + i];
+    norm1.backward(ps, dxn, c.x.data(), c.mean1.data(), c.rstd1.data(), dx, int(M));
+  }
+};
+
+}  // namespace tjepa

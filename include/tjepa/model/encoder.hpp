@@ -1,0 +1,124 @@
+#pragma once
+// Encoder (ViT-Tiny of REFERENCE §4): position table, pre-norm blocks, final LayerNorm.
+//
+//   x[b, k] = tokens[b, c[b, k]] + pos_embed[c[b, k]]      c = context indices [B, K] (or all N)
+//   x ← blocks(x);  out = norm(x)                           out [B, K, d]
+//
+// The same Encoder object runs the context encoder (on a subset of tokens, with gradients) and
+// the EMA target encoder (all tokens, no cache) on two ParamSets of the same layout.
+//
+// PyTorch names (the reference's SignalTransformer, prefix "" by default):
+//   pos_embed [1, N, d]; blocks.{i}.norm1.{weight,bias} [d]; blocks.{i}.attn.qkv.{weight [3d, d],
+//   bias [3d]}; blocks.{i}.attn.proj.{weight [d, d], bias}; blocks.{i}.norm2.*;
+//   blocks.{i}.mlp.fc1.{weight [4d, d], bias}; blocks.{i}.mlp.fc2.{weight [d, 4d], bias}; norm.*
+// The tokenizer (tokenizer.hpp) registers its own names (patch_embed.* / tokenizer.*).
+#include <cstdint>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "tjepa/model/block.hpp"
+#include "tjepa/model/position_table.hpp"
+
+namespace tjepa {
+
+struct EncoderConfig {
+  int num_tokens = 368;  // N: rows of the position table
+  int dim = 192;
+  int depth = 12;
+  int heads = 3;
+  double mlp_ratio = 4.0;
+  bool bias = true;  // qkv / proj / fc1 / fc2 biases
+  double eps = layer_norm_eps;
+};
+
+struct EncoderOptions {
+  DropPath drop_path;                         // the reference trains with rate 0.3
+  const std::uint8_t* key_valid = nullptr;    // [B, K] padding mask (nonzero = real token) or nullptr
+};
+
+template <class T>
+struct EncoderCache {
+  int B = 0, K = 0;
+  std::vector<int> context;  // [B, K] copy; empty = all tokens
+  BlockStackCache<T> stack;
+  AlignedVector<T> mean, rstd;  // [B·K] final norm statistics
+};
+
+struct Encoder {
+  EncoderConfig config;
+  PositionTable pos;
+  BlockStack stack;
+  NormParams norm;
+
+  Encoder() = default;
+  template <class T>
+  Encoder(ParamSet<T>& ps, const EncoderConfig& c, const std::string& prefix = "") : config(c) {
+    require<ConfigError>(c.num_tokens > 0, "Encoder: num_tokens ", c.num_tokens, ", expected > 0");
+    require<ConfigError>(c.dim > 0 && c.heads > 0 && c.dim % c.heads == 0, "Encoder: dim ", c.dim,
+                         " and heads ", c.heads, ", expected dim a positive multiple of heads");
+    pos = PositionTable::add(ps, prefix + "pos_embed", c.num_tokens, c.dim);
+    BlockConfig bc{c.dim, c.heads, c.mlp_ratio, c.bias, c.bias, c.bias, c.eps};
+    stack = BlockStack::add(ps, prefix + "blocks.", c.depth, bc);
+    norm = NormParams::add(ps, prefix + "norm", c.dim, c.eps);
+  }
+  int dim() const { return config.dim; }
+  int num_tokens() const { return config.num_tokens; }
+  // The position table (the predictor reads the target encoder's rows by default).
+  ParamId pos_embed() const { return pos.table; }
+
+  // tokens [B, N, d] → out [B, K, d]. context [B, K] token indices, or nullptr for all N tokens
+  // (then K must be N). cache == nullptr: inference (no allocation once the shape was seen).
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* tokens, int B, const int* context, int K, T* out,
+               std::type_identity_t<EncoderCache<T>>* cache, Workspace<T>& ws, const EncoderOptions& opt = {}) const {
+    const int N = config.num_tokens, d = config.dim;
+    check_params(ps, norm.bias, "Encoder::forward");
+    require<ShapeError>(B > 0, "Encoder::forward: B = ", B, ", expected > 0");
+    require<ShapeError>(K > 0 && K <= N, "Encoder::forward: K = ", K, ", expected 1..", N);
+    require<ShapeError>(context || K == N, "Encoder::forward: K = ", K, " without context indices, expected ", N);
+    if (context) check_indices(context, std::size_t(B) * K, N, "Encoder::forward", "context");
+    const std::size_t M = std::size_t(B) * K;
+    T* x = detail::grow(ws.x, M * d);
+    if (context)
+      gather_rows(x, tokens, std::size_t(N) * d, context, B, K, d);
+    else
+      std::copy(tokens, tokens + M * d, x);
+    pos.forward(ps, x, context, B, K);
+    if (cache) {
+      cache->B = B;
+      cache->K = K;
+      if (context)
+        cache->context.assign(context, context + M);
+      else
+        cache->context.clear();
+    }
+    stack.forward(ps, x, x, B, K, opt.key_valid, opt.drop_path, cache ? &cache->stack : nullptr, ws);
+    T* mean = cache ? detail::grow(cache->mean, M) : nullptr;
+    T* rstd = cache ? detail::grow(cache->rstd, M) : nullptr;
+    norm.forward(ps, x, out, mean, rstd, int(M));
+  }
+
+  // dout [B, K, d] → parameter gradients (added to ps) and dtokens [B, N, d] += (may be nullptr).
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dtokens, const EncoderCache<T>& cache, Workspace<T>& ws) const {
+    check_params(ps, norm.bias, "Encoder::backward");
+    require<ConfigError>(cache.B > 0, "Encoder::backward: the cache holds no forward pass");
+    const int N = config.num_tokens, d = config.dim, B = cache.B, K = cache.K;
+    const std::size_t M = std::size_t(B) * K;
+    T* g = detail::grow(ws.dx, M * d);
+    std::fill(g, g + M * d, T(0));
+    norm.backward(ps, dout, cache.stack.xs.data() + std::size_t(stack.depth()) * M * d, cache.mean.data(),
+                  cache.rstd.data(), g, int(M));
+    stack.backward(ps, g, cache.stack, ws);
+    const int* idx = cache.context.empty() ? nullptr : cache.context.data();
+    pos.backward(ps, g, idx, B, K);
+    if (!dtokens) return;
+    if (idx)
+      scatter_add_rows(dtokens, std::size_t(N) * d, g, idx, B, K, d);
+    else
+      for (std::size_t i = 0; i < M * d; ++i) dtokens[i] += g[i];
+  }
+};
+
+}  // namespace tjepa

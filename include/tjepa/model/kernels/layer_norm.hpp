@@ -1,0 +1,161 @@
+#pragma once
+// LayerNorm over the last dimension of [M, C] rows (PyTorch semantics, biased variance):
+//   out = (x - mean) · rstd · w + b,   rstd = 1 / sqrt(var + eps).
+// mean[M] and rstd[M] are what backward needs; pass nullptr for inference.
+#include <cmath>
+#include <cstddef>
+
+#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/model/detail/simd.hpp"
+
+namespace tjepa {
+
+// The reference's LayerNorm eps (ViT-Tiny, partial(nn.LayerNorm, eps=1e-6)).
+inline constexpr double layer_norm_eps = 1e-6;
+
+namespace ref {
+template <class T>
+void layer_norm_forward(T* out, T* mean, T* rstd, const T* in, const T* w, const T* b, int M, int C,
+                        T eps) {
+  for (int m = 0; m < M; ++m) {
+    const T* x = in + std::size_t(m) * C;
+    T mu = 0;
+    for (int c = 0; c < C; ++c) mu += x[c];
+    mu /= T(C);
+    T var = 0;
+    for (int c = 0; c < C; ++c) var += (x[c] - mu) * (x[c] - mu);
+    var /= T(C);
+    const T rs = T(1) / std::sqrt(var + eps);
+    for (int c = 0; c < C; ++c) out[std::size_t(m) * C + c] = (x[c] - mu) * rs * w[c] + b[c];
+    if (mean) mean[m] = mu;
+    if (rstd) rstd[m] = rs;
+  }
+}
+template <class T>
+void layer_norm_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* w,
+                         const T* mean, const T* rstd, int M, int C) {
+  for (int m = 0; m < M; ++m) {
+    const T* x = in + std::size_t(m) * C;
+    const T* g = dout + std::size_t(m) * C;
+    T m1 = 0, m2 = 0;
+    for (int c = 0; c < C; ++c) {
+      const T xhat = (x[c] - mean[m]) * rstd[m];
+      m1 += g[c] * w[c];
+      m2 += g[c] * w[c] * xhat;
+    }
+    m1 /= T(C);
+    m2 /= T(C);
+    for (int c = 0; c < C; ++c) {
+      const T xhat = (x[c] - mean[m]) * rstd[m];
+      if (din) din[std::size_t(m) * C + c] += rstd[m] * (g[c] * w[c] - m1 - xhat * m2);
+      dw[c] += g[c] * xhat;
+      db[c] += g[c];
+    }
+  }
+}
+}  // namespace ref
+
+template <class T>
+void layer_norm_forward(T* out, T* mean, T* rstd, const T* in, const T* w, const T* b, int M, int C,
+                        T eps = T(layer_norm_eps)) {
+  using V = detail::simd<T>;
+  constexpr std::size_t W = detail::simd_width<T>;
+  const std::size_t n = std::size_t(C);
+  TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > detail::parallel_grain))
+  for (int m = 0; m < M; ++m) {
+    const T* x = in + std::size_t(m) * n;
+    T* y = out + std::size_t(m) * n;
+    const T mu = detail::simd_sum(x, n) / T(C);
+    const V vmu(mu);
+    V acc(T(0));
+    std::size_t i = 0;
+    for (; i + W <= n; i += W) {
+      const V d = xsimd::load_unaligned(x + i) - vmu;
+      acc = xsimd::fma(d, d, acc);
+    }
+    T var = detail::hsum(acc);
+    for (; i < n; ++i) var += (x[i] - mu) * (x[i] - mu);
+    const T rs = T(1) / std::sqrt(var / T(C) + eps);
+    const V vrs(rs);
+    for (i = 0; i + W <= n; i += W) {
+      const V xh = (xsimd::load_unaligned(x + i) - vmu) * vrs;
+      xsimd::fma(xh, xsimd::load_unaligned(w + i), xsimd::load_unaligned(b + i)).store_unaligned(y + i);
+    }
+    for (; i < n; ++i) y[i] = (x[i] - mu) * rs * w[i] + b[i];
+    if (mean) mean[m] = mu;
+    if (rstd) rstd[m] = rs;
+  }
+}
+
+// Differentiates out = xhat · w + b with xhat = (x - mean) · rstd:
+//   din += rstd · (dxhat - mean(dxhat) - xhat · mean(dxhat ⊙ xhat)),  dxhat = dout ⊙ w
+//   dw += Σ_m dout ⊙ xhat,  db += Σ_m dout.   din may be nullptr.
+template <class T>
+void layer_norm_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* w,
+                         const T* mean, const T* rstd, int M, int C) {
+  using V = detail::simd<T>;
+  constexpr std::size_t W = detail::simd_width<T>;
+  const std::size_t n = std::size_t(C);
+  if (din) {
+    TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(M) * n > detail::parallel_grain))
+    for (int m = 0; m < M; ++m) {
+      const T* x = in + std::size_t(m) * n;
+      const T* g = dout + std::size_t(m) * n;
+      T* dx = din + std::size_t(m) * n;
+      const V vmu(mean[m]), vrs(rstd[m]);
+      V a1(T(0)), a2(T(0));
+      std::size_t i = 0;
+      for (; i + W <= n; i += W) {
+        const V gw = xsimd::load_unaligned(g + i) * xsimd::load_unaligned(w + i);
+        const V xh = (xsimd::load_unaligned(x + i) - vmu) * vrs;
+        a1 += gw;
+        a2 = xsimd::fma(gw, xh, a2);
+      }
+      T m1 = detail::hsum(a1), m2 = detail::hsum(a2);
+      for (std::size_t j = i; j < n; ++j) {
+        const T xh = (x[j] - mean[m]) * rstd[m];
+        m1 += g[j] * w[j];
+        m2 += g[j] * w[j] * xh;
+      }
+      m1 /= T(C);
+      m2 /= T(C);
+      const V vm1(m1), vm2(m2);
+      for (i = 0; i + W <= n; i += W) {
+        const V gw = xsimd::load_unaligned(g + i) * xsimd::load_unaligned(w + i);
+        const V xh = (xsimd::load_unaligned(x + i) - vmu) * vrs;
+        const V d = xsimd::load_unaligned(dx + i) + vrs * (gw - vm1 - xh * vm2);
+        d.store_unaligned(dx + i);
+      }
+      for (; i < n; ++i) {
+        const T xh = (x[i] - mean[m]) * rstd[m];
+        dx[i] += rstd[m] * (g[i] * w[i] - m1 - xh * m2);
+      }
+    }
+  }
+  // Parameter gradients: a reduction over rows, summed per column block in registers and added
+  // once, so that a second backward adds exactly the same amount (and the order is fixed).
+  std::size_t i = 0;
+  for (; i + W <= n; i += W) {
+    V aw(T(0)), ab(T(0));
+    for (int m = 0; m < M; ++m) {
+      const V gv = xsimd::load_unaligned(dout + std::size_t(m) * n + i);
+      const V xh = (xsimd::load_unaligned(in + std::size_t(m) * n + i) - V(mean[m])) * V(rstd[m]);
+      aw = xsimd::fma(gv, xh, aw);
+      ab += gv;
+    }
+    (xsimd::load_unaligned(dw + i) + aw).store_unaligned(dw + i);
+    (xsimd::load_unaligned(db + i) + ab).store_unaligned(db + i);
+  }
+  for (; i < n; ++i) {
+    T aw = 0, ab = 0;
+    for (int m = 0; m < M; ++m) {
+      const T g = dout[std::size_t(m) * n + i];
+      aw += g * (in[std::size_t(m) * n + i] - mean[m]) * rstd[m];
+      ab += g;
+    }
+    dw[i] += aw;
+    db[i] += ab;
+  }
+}
+
+}  // namespace tjepa

@@ -1,0 +1,71 @@
+#pragma once
+// Linear layer on a batch of rows: out[M, N] = in[M, K] · w[N, K]ᵀ + b[N].
+//
+// w is stored PyTorch-style [out, in]. A [B, L, C] activation is a [B·L, C] matrix, so every
+// token-wise layer is one large GEMM (Eigen's packed kernels through detail/gemm.hpp: no
+// allocation after warm-up, rows split over the OpenMP threads). Backward ADDS into its gradients
+// (llm.c style): one zero_grad serves a whole step.
+#include <cstddef>
+
+#include "tjepa/core/eigen.hpp"
+#include "tjepa/model/detail/gemm.hpp"
+
+namespace tjepa {
+
+namespace ref {
+// Scalar reference, the spec for the fast path.
+template <class T>
+void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
+  for (int m = 0; m < M; ++m)
+    for (int n = 0; n < N; ++n) {
+      T s = b ? b[n] : T(0);
+      for (int k = 0; k < K; ++k) s += in[std::size_t(m) * K + k] * w[std::size_t(n) * K + k];
+      out[std::size_t(m) * N + n] = s;
+    }
+}
+template <class T>
+void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* w, int M, int K,
+                     int N) {
+  for (int m = 0; m < M; ++m)
+    for (int n = 0; n < N; ++n) {
+      const T g = dout[std::size_t(m) * N + n];
+      if (db) db[n] += g;
+      for (int k = 0; k < K; ++k) {
+        if (din) din[std::size_t(m) * K + k] += g * w[std::size_t(n) * K + k];
+        if (dw) dw[std::size_t(n) * K + k] += g * in[std::size_t(m) * K + k];
+      }
+    }
+}
+}  // namespace ref
+
+// out[M, N] = in[M, K] · wᵀ (+ b); b may be nullptr.
+template <class T>
+void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
+  // The bias is the GEMM's starting value, so bias and product are one pass over out.
+  MatrixMap<T> o(out, M, N);
+  if (b)
+    o.rowwise() = ConstRowVectorMap<T>(b, N);
+  else
+    o.setZero();
+  detail::gemm_accumulate<Eigen::RowMajor, Eigen::ColMajor>(M, N, K, in, K, w, K, out, N);
+}
+
+// out[M, N] += in[M, K] · wᵀ (+ b): the residual add fused into the GEMM's accumulation.
+template <class T>
+void linear_forward_accumulate(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
+  if (b) MatrixMap<T>(out, M, N).rowwise() += ConstRowVectorMap<T>(b, N);
+  detail::gemm_accumulate<Eigen::RowMajor, Eigen::ColMajor>(M, N, K, in, K, w, K, out, N);
+}
+
+// Differentiates out = in · wᵀ + b:
+//   din[M, K] += dout · w,   dw[N, K] += doutᵀ · in,   db[N] += Σ_m dout[m, :].
+// Any of din, dw, db may be nullptr (not wanted).
+template <class T>
+void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* w, int M, int K,
+                     int N) {
+  if (din) detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, din, K);
+  if (dw) detail::gemm_accumulate<Eigen::ColMajor, Eigen::RowMajor>(N, K, M, dout, N, in, K, dw, K);
+  if (db) RowVectorMap<T>(db, N) += ConstMatrixMap<T>(dout, M, N).colwise().sum();
+}
+
+}  // namespace tjepa

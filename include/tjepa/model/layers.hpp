@@ -1,0 +1,85 @@
+#pragma once
+// The two parameterized pieces every module is built from: a Linear (weight [out, in], optional
+// bias [out]) and a LayerNorm (weight [C], bias [C]), as ParamIds registered under a PyTorch name.
+// They hold no values: forward and backward read values and add gradients in a ParamSet of the
+// same layout (the context encoder's, or the EMA target encoder's).
+#include <string>
+
+#include "tjepa/model/kernels/layer_norm.hpp"
+#include "tjepa/model/kernels/linear.hpp"
+#include "tjepa/model/param_set.hpp"
+
+namespace tjepa {
+
+// Throws ConfigError unless ps is allocated and holds `id` where the module registered it: a cheap
+// guard against running a module on a ParamSet of another layout.
+template <class T>
+void check_params(const ParamSet<T>& ps, const ParamId& id, const char* where) {
+  require<ConfigError>(ps.allocated(), where, ": the ParamSet is not allocated");
+  require<ConfigError>(id.index < ps.count() && ps.infos()[id.index].offset == id.offset &&
+                           ps.infos()[id.index].size == id.size,
+                       where, ": the ParamSet does not have this module's layout (parameter #", id.index, ")");
+}
+
+struct LinearParams {
+  ParamId weight, bias;
+  int in = 0, out = 0;
+  bool has_bias = false;
+
+  template <class T>
+  static LinearParams add(ParamSet<T>& ps, const std::string& name, int in, int out, bool bias) {
+    LinearParams p;
+    p.in = in;
+    p.out = out;
+    p.has_bias = bias;
+    p.weight = ps.add(name + ".weight", {out, in}, ParamInit::trunc_normal);
+    if (bias) p.bias = ps.add(name + ".bias", {out}, ParamInit::zeros);
+    return p;
+  }
+  template <class T>
+  const T* b(const ParamSet<T>& ps) const { return has_bias ? ps.value(bias) : nullptr; }
+
+  // out[M, out] = in[M, in] · Wᵀ + b
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, T* y, int M) const {
+    linear_forward(y, x, ps.value(weight), b(ps), M, in, out);
+  }
+  // y[M, out] += x · Wᵀ + b (residual add fused into the GEMM)
+  template <class T>
+  void forward_accumulate(const ParamSet<T>& ps, const T* x, T* y, int M) const {
+    linear_forward_accumulate(y, x, ps.value(weight), b(ps), M, in, out);
+  }
+  // dx (may be nullptr) += dy · W; dW += dyᵀ · x; db += Σ dy
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, T* dx, int M) const {
+    linear_backward(dx, ps.grad(weight), has_bias ? ps.grad(bias) : nullptr, dy, x, ps.value(weight), M, in,
+                    out);
+  }
+};
+
+struct NormParams {
+  ParamId weight, bias;
+  int dim = 0;
+  double eps = layer_norm_eps;
+
+  template <class T>
+  static NormParams add(ParamSet<T>& ps, const std::string& name, int dim, double eps) {
+    NormParams p;
+    p.dim = dim;
+    p.eps = eps;
+    p.weight = ps.add(name + ".weight", {dim}, ParamInit::ones);
+    p.bias = ps.add(name + ".bias", {dim}, ParamInit::zeros);
+    return p;
+  }
+  // mean, rstd [M] may be nullptr (inference).
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, T* y, T* mean, T* rstd, int M) const {
+    layer_norm_forward(y, mean, rstd, x, ps.value(weight), ps.value(bias), M, dim, T(eps));
+  }
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* mean, const T* rstd, T* dx, int M) const {
+    layer_norm_backward(dx, ps.grad(weight), ps.grad(bias), dy, x, ps.value(weight), mean, rstd, M, dim);
+  }
+};
+
+}  // namespace tjepa

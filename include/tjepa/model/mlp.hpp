@@ -1,0 +1,53 @@
+#pragma once
+// Mlp (timm's): fc1 [hidden, d] → exact GELU → fc2 [out, hidden] (out = d inside a block; the
+// probe's output head has its own out). PyTorch names: <name>.fc1.*, <name>.fc2.*.
+// The fc1 bias is fused into the GELU pass, fc2's output into the residual add.
+#include <algorithm>
+#include <string>
+
+#include "tjepa/model/kernels/gelu.hpp"
+#include "tjepa/model/layers.hpp"
+
+namespace tjepa {
+
+struct Mlp {
+  LinearParams fc1, fc2;
+
+  template <class T>
+  static Mlp add(ParamSet<T>& ps, const std::string& name, int dim, int hidden, bool bias, int out = 0) {
+    Mlp m;
+    m.fc1 = LinearParams::add(ps, name + ".fc1", dim, hidden, bias);
+    m.fc2 = LinearParams::add(ps, name + ".fc2", hidden, out > 0 ? out : dim, bias);
+    return m;
+  }
+  int dim() const { return fc1.in; }
+  int hidden() const { return fc1.out; }
+  int out() const { return fc2.out; }
+
+  // x [M, d] → y [M, out] (y += when accumulate: the residual add). h_pre [M, hidden] receives
+  // fc1's output + bias (kept for backward), h [M, hidden] the activation; h may equal h_pre.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, bool accumulate) const {
+    linear_forward(h_pre, x, ps.value(fc1.weight), static_cast<const T*>(nullptr), M, fc1.in, fc1.out);
+    bias_gelu_forward(h, h_pre, fc1.b(ps), M, fc1.out);
+    if (accumulate)
+      fc2.forward_accumulate(ps, h, y, M);
+    else
+      fc2.forward(ps, h, y, M);
+  }
+
+  // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]. h, dh [M, hidden] are scratch (h is recomputed from
+  // h_pre rather than kept: the largest activation of a block).
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M) const {
+    const std::size_t n = std::size_t(M) * std::size_t(fc1.out);
+    gelu_forward(h, h_pre, n);
+    std::fill(dh, dh + n, T(0));
+    fc2.backward(ps, dy, h, dh, M);  // y = h · W2ᵀ + b2
+    std::fill(h, h + n, T(0));       // h now holds ∂L/∂h_pre
+    gelu_backward(h, dh, h_pre, n);  // h = gelu(h_pre)
+    fc1.backward(ps, h, x, dx, M);   // h_pre = x · W1ᵀ + b1
+  }
+};
+
+}  // namespace tjepa

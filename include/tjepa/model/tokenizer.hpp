@@ -1,0 +1,176 @@
+#pragma once
+// Tokenizer (paper eq. 1, REFERENCE §4): a token's window of values → R^d by an affine map, then
+// LayerNorm. Tokens are rows of x [B, G, W]:
+//   per taxel: one map shared by all N taxels, W = m·τ.
+//     PyTorch: patch_embed.proj.{weight [d, m·τ], bias [d]}, patch_embed.norm.{weight, bias}.
+//     The reference's patch_embed.proj is a Conv1d with weight [d, m, τ]: flattened, its column
+//     index is axis·τ + frame, so rows must hold a taxel's window axis-major to load it 1:1
+//     (assuming no temporal padding in that Conv1d; its PatchEmbed1d source was not available).
+//   grouped (DECO-50): one map and one LayerNorm per group size n (4 and 5), W = n_max·k with
+//     k = τ·m values per taxel; a group of size n uses the first n·k values of its row (the rest
+//     is padding). PyTorch (the reference's DecoHypertaxelTokenizer, mode "direct"):
+//     tokenizer.direct{n}.0.{weight [d, n·k], bias} (Linear), tokenizer.direct{n}.1.* (LayerNorm);
+//     its column index is frame·n + member (m = 1).
+#include <algorithm>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "tjepa/model/layers.hpp"
+#include "tjepa/model/workspace.hpp"
+
+namespace tjepa {
+
+template <class T>
+struct TokenizerCache {
+  int B = 0;
+  // Per map: inputs [B·G_n, n·k], pre-norm outputs [B·G_n, d], norm statistics [B·G_n].
+  std::vector<AlignedVector<T>> x, pre, mean, rstd;
+};
+
+struct Tokenizer {
+  struct Map {
+    LinearParams proj;
+    NormParams norm;
+    std::vector<int> tokens;  // token indices this map embeds; empty = all tokens (per taxel)
+  };
+  std::vector<Map> maps;
+  int num_tokens = 0, width = 0, dim = 0;
+
+  // Per-taxel tokenizer for N taxels with in_dim = m·τ values each.
+  template <class T>
+  static Tokenizer per_taxel(ParamSet<T>& ps, int N, int in_dim, int dim, double eps = layer_norm_eps,
+                             const std::string& prefix = "patch_embed.") {
+    require<ConfigError>(N > 0 && in_dim > 0 && dim > 0, "Tokenizer::per_taxel: N = ", N, ", in_dim = ", in_dim,
+                         ", dim = ", dim, ", expected all > 0");
+    Tokenizer t;
+    t.num_tokens = N;
+    t.width = in_dim;
+    t.dim = dim;
+    t.maps.push_back({LinearParams::add(ps, prefix + "proj", in_dim, dim, true),
+                      NormParams::add(ps, prefix + "norm", dim, eps), {}});
+    return t;
+  }
+
+  // Grouped tokenizer: group_size[g] taxels in token g, k values per taxel.
+  template <class T>
+  static Tokenizer grouped(ParamSet<T>& ps, const std::vector<int>& group_size, int k, int dim,
+                           double eps = layer_norm_eps, const std::string& prefix = "tokenizer.") {
+    require<ConfigError>(!group_size.empty() && k > 0 && dim > 0, "Tokenizer::grouped: ", group_size.size(),
+                         " groups, k = ", k, ", dim = ", dim, ", expected all > 0");
+    Tokenizer t;
+    t.num_tokens = static_cast<int>(group_size.size());
+    t.dim = dim;
+    std::vector<int> sizes;
+    for (std::size_t g = 0; g < group_size.size(); ++g) {
+      require<ConfigError>(group_size[g] > 0, "Tokenizer::grouped: group_size[", g, "] = ", group_size[g],
+                           ", expected > 0");
+      if (std::find(sizes.begin(), sizes.end(), group_size[g]) == sizes.end()) sizes.push_back(group_size[g]);
+    }
+    std::sort(sizes.begin(), sizes.end());
+    t.width = sizes.back() * k;
+    for (int n : sizes) {
+      Map m{LinearParams::add(ps, prefix + "direct" + std::to_string(n) + ".0", n * k, dim, true),
+            NormParams::add(ps, prefix + "direct" + std::to_string(n) + ".1", dim, eps), {}};
+      for (std::size_t g = 0; g < group_size.size(); ++g)
+        if (group_size[g] == n) m.tokens.push_back(static_cast<int>(g));
+      t.maps.push_back(std::move(m));
+    }
+    return t;
+  }
+
+  // x [B, G, width] → out [B, G, dim]. cache == nullptr: inference.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, int B, T* out, std::type_identity_t<TokenizerCache<T>>* cache,
+               Workspace<T>& ws) const {
+    check_params(ps, maps.back().norm.bias, "Tokenizer::forward");
+    require<ShapeError>(B > 0, "Tokenizer::forward: B = ", B, ", expected > 0");
+    if (cache) {
+      cache->B = B;
+      for (auto* v : {&cache->x, &cache->pre, &cache->mean, &cache->rstd}) v->resize(maps.size());
+    }
+    for (std::size_t i = 0; i < maps.size(); ++i) {
+      const Map& m = maps[i];
+      const int G = m.tokens.empty() ? num_tokens : static_cast<int>(m.tokens.size());
+      const int M = B * G, in = m.proj.in;
+      const T* xm = x;
+      if (!m.tokens.empty() || cache) {
+        T* buf = detail::grow(cache ? cache->x[i] : ws.rows, std::size_t(M) * in);
+        gather_columns(buf, x, B, m.tokens, in);
+        xm = buf;
+      }
+      T* pre = detail::grow(cache ? cache->pre[i] : ws.rows2, std::size_t(M) * dim);
+      m.proj.forward(ps, xm, pre, M);
+      T* mean = cache ? detail::grow(cache->mean[i], std::size_t(M)) : nullptr;
+      T* rstd = cache ? detail::grow(cache->rstd[i], std::size_t(M)) : nullptr;
+      if (m.tokens.empty()) {
+        m.norm.forward(ps, pre, out, mean, rstd, M);
+        continue;
+      }
+      T* y = detail::grow(ws.branch, std::size_t(M) * dim);
+      m.norm.forward(ps, pre, y, mean, rstd, M);
+      for (int b = 0; b < B; ++b)
+        for (int j = 0; j < G; ++j) {
+          const T* src = y + (std::size_t(b) * G + j) * dim;
+          std::copy(src, src + dim, out + (std::size_t(b) * num_tokens + m.tokens[std::size_t(j)]) * dim);
+        }
+    }
+  }
+
+  // dout [B, G, dim] → parameter gradients and dx [B, G, width] += (may be nullptr; padding
+  // columns get nothing).
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dx, const TokenizerCache<T>& c, Workspace<T>& ws) const {
+    check_params(ps, maps.back().norm.bias, "Tokenizer::backward");
+    require<ConfigError>(c.B > 0, "Tokenizer::backward: the cache holds no forward pass");
+    const int B = c.B;
+    for (std::size_t i = 0; i < maps.size(); ++i) {
+      const Map& m = maps[i];
+      const int G = m.tokens.empty() ? num_tokens : static_cast<int>(m.tokens.size());
+      const int M = B * G, in = m.proj.in;
+      const T* dy = dout;
+      if (!m.tokens.empty()) {
+        T* buf = detail::grow(ws.drows, std::size_t(M) * dim);
+        for (int b = 0; b < B; ++b)
+          for (int j = 0; j < G; ++j) {
+            const T* src = dout + (std::size_t(b) * num_tokens + m.tokens[std::size_t(j)]) * dim;
+            std::copy(src, src + dim, buf + (std::size_t(b) * G + j) * dim);
+          }
+        dy = buf;
+      }
+      T* dpre = detail::grow(ws.dln, std::size_t(M) * dim);
+      std::fill(dpre, dpre + std::size_t(M) * dim, T(0));
+      // pre = x · Wᵀ + b, out = norm(pre): the norm's input is pre (kept in the cache).
+      m.norm.backward(ps, dy, c.pre[i].data(), c.mean[i].data(), c.rstd[i].data(), dpre, M);
+      T* dxm = nullptr;
+      if (dx) {
+        dxm = detail::grow(ws.dbranch, std::size_t(M) * in);
+        std::fill(dxm, dxm + std::size_t(M) * in, T(0));
+      }
+      m.proj.backward(ps, dpre, c.x[i].data(), dxm, M);
+      if (!dx) continue;
+      for (int b = 0; b < B; ++b)
+        for (int j = 0; j < G; ++j) {
+          const int g = m.tokens.empty() ? j : m.tokens[std::size_t(j)];
+          const T* src = dxm + (std::size_t(b) * G + j) * in;
+          T* dst = dx + (std::size_t(b) * num_tokens + g) * width;
+          for (int q = 0; q < in; ++q) dst[q] += src[q];
+        }
+    }
+  }
+
+ private:
+  // buf[b·G + j, :in] = x[b, tokens[j], :in] (tokens empty: all tokens).
+  template <class T>
+  void gather_columns(T* buf, const T* x, int B, const std::vector<int>& tokens, int in) const {
+    const int G = tokens.empty() ? num_tokens : static_cast<int>(tokens.size());
+    for (int b = 0; b < B; ++b)
+      for (int j = 0; j < G; ++j) {
+        const int g = tokens.empty() ? j : tokens[std::size_t(j)];
+        const T* src = x + (std::size_t(b) * num_tokens + g) * width;
+        std::copy(src, src + in, buf + (std::size_t(b) * G + j) * in);
+      }
+  }
+};
+
+}  // namespace tjepa

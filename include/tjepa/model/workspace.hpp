@@ -1,0 +1,47 @@
+#pragma once
+// Workspace: the caller-owned scratch of every module's forward and backward. Buffers grow on
+// demand and never shrink, so once a shape has been seen, running it again allocates nothing.
+// Activations kept for backward are not here but in each module's cache (EncoderCache, ...).
+// One Workspace serves one call at a time; modules called one after the other may share it.
+#include <cstddef>
+#include <vector>
+
+#include "tjepa/core/aligned.hpp"
+#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/model/kernels/attention.hpp"
+
+namespace tjepa {
+
+template <class T>
+struct Workspace {
+  // Forward scratch (M = rows = B·L).
+  AlignedVector<T> x;       // [M, d] running activation of the inference path
+  AlignedVector<T> stream;  // [M, d] residual stream of a stack that keeps only some rows
+  AlignedVector<T> ln;      // [M, d] LayerNorm output
+  AlignedVector<T> qkv;     // [M, 3d]
+  AlignedVector<T> att;     // [M, d] attention output before proj
+  AlignedVector<T> hidden;  // [M, hidden] MLP activation
+  AlignedVector<T> branch;  // [M, d] a residual branch under drop-path
+  AlignedVector<T> scales;  // [depth, 2, B] drop-path scales of the inference path
+  AlignedVector<T> rows;    // [rows, ·] gathered rows (predictor targets, tokenizer groups)
+  AlignedVector<T> rows2;   // [rows, ·] second gathered buffer
+  // Backward scratch.
+  AlignedVector<T> dx;       // [M, d] gradient flowing down the residual stream
+  AlignedVector<T> dbranch;  // [M, d]
+  AlignedVector<T> dln;      // [M, d]
+  AlignedVector<T> dqkv;     // [M, 3d]
+  AlignedVector<T> dhidden;  // [M, hidden]
+  AlignedVector<T> hidden2;  // [M, hidden] recomputed activation
+  AlignedVector<T> drows;    // [rows, ·]
+  AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
+  // One attention workspace per OpenMP thread.
+  std::vector<AttentionWorkspace<T>> attention;
+
+  AttentionWorkspace<T>* attention_per_thread() {
+    const auto n = static_cast<std::size_t>(detail::max_threads());
+    if (attention.size() < n) attention.resize(n);
+    return attention.data();
+  }
+};
+
+}  // namespace tjepa

@@ -1,0 +1,79 @@
+#pragma once
+// Test helpers of the nn suite: the one central-difference gradient check every kernel and module
+// test uses, and random fills. Not a translation unit (tests/CMakeLists globs *.cpp only).
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <tjepa/core/random.hpp>
+#include <tjepa/model/param_set.hpp>
+
+namespace tjepa::test {
+
+inline constexpr double grad_tolerance = 1e-6;
+
+template <class Vec>
+void fill_normal(Vec& v, Rng& rng, double std = 1.0) {
+  for (auto& x : v) x = static_cast<typename Vec::value_type>(rng.normal(0.0, std));
+}
+inline std::vector<double> normal_vector(std::size_t n, Rng& rng, double std = 1.0) {
+  std::vector<double> v(n);
+  fill_normal(v, rng, std);
+  return v;
+}
+inline double dot(const double* a, const double* b, std::size_t n) {
+  double s = 0;
+  for (std::size_t i = 0; i < n; ++i) s += a[i] * b[i];
+  return s;
+}
+
+// Relative error ‖a − n‖₂ / max(‖a‖₂, ‖n‖₂) between the analytic gradient `grad` of
+// loss() = Σ w ⊙ out with respect to the `count` values at x, and central differences
+// (loss(x + h) − loss(x − h)) / 2h. At most max_checks entries, spread over the tensor, are
+// perturbed (each costs two forward passes). Returns 0 when both gradients vanish.
+inline double gradient_error(double* x, const double* grad, std::size_t count, const std::function<double()>& loss,
+                             std::size_t max_checks = 48, double h = 1e-5) {
+  const std::size_t step = std::max<std::size_t>(1, count / max_checks);
+  double diff = 0, na = 0, nn = 0;
+  for (std::size_t i = (count / 2) % step; i < count; i += step) {
+    const double x0 = x[i];
+    x[i] = x0 + h;
+    const double lp = loss();
+    x[i] = x0 - h;
+    const double lm = loss();
+    x[i] = x0;
+    const double num = (lp - lm) / (2 * h);
+    diff += (num - grad[i]) * (num - grad[i]);
+    na += grad[i] * grad[i];
+    nn += num * num;
+  }
+  const double den = std::sqrt(std::max(na, nn));
+  return den == 0 ? 0.0 : std::sqrt(diff) / den;
+}
+
+// gradient_error for every tensor of a ParamSet (its grads must hold the analytic gradient).
+inline void check_param_gradients(ParamSet<double>& ps, const std::function<double()>& loss) {
+  for (std::size_t i = 0; i < ps.count(); ++i) {
+    const ParamId id = ps.id(i);
+    const double err = gradient_error(ps.value(id), ps.grad(id), id.size, loss);
+    INFO("parameter ", ps.infos()[i].name);
+    CHECK(err < grad_tolerance);
+  }
+}
+
+// Values of every tensor ~ N(0, std²): away from the degenerate init (LayerNorm 1/0, zero biases)
+// so that every path of the gradient is exercised.
+inline void randomize(ParamSet<double>& ps, std::uint64_t seed, double std = 0.3) {
+  Rng rng(seed);
+  for (std::size_t i = 0; i < ps.count(); ++i) {
+    const double shift = ps.infos()[i].init == ParamInit::ones ? 1.0 : 0.0;
+    for (auto& v : ps.value_span(ps.id(i))) v = shift + rng.normal(0.0, std);
+  }
+}
+
+}  // namespace tjepa::test
