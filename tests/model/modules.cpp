@@ -113,7 +113,7 @@ using test::gradient_error;
 using test::grad_tolerance;
 
 TEST_SUITE("nn") {
-  TEST_CASE("Encoder on a context subset: gradients of tokens and parameters (2 blocks, drop-path)") {
+  TEST_CASE("Encoder on a context subset: gradients of tokens and parameters (2 blocks - drop-path)") {
     ParamSet<double> ps;
     EncoderConfig cfg{7, 12, 2, 3, 4.0, true, 1e-6};
     Encoder enc(ps, cfg);
@@ -147,7 +147,7 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
-  TEST_CASE("Predictor, tiled targets: gradients of context, position rows and parameters (2 blocks)") {
+  TEST_CASE("Predictor - tiled targets: gradients of context - position rows and parameters (2 blocks)") {
     ParamSet<double> ps;
     PredictorConfig cfg{10, 12, 2, 3, 4.0, false, 1e-6};
     Predictor pred(ps, cfg);
@@ -178,7 +178,7 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
-  TEST_CASE("BlockStack keeping only the last rows: same outputs as the full stack, gradients") {
+  TEST_CASE("BlockStack keeping only the last rows: same outputs as the full stack - gradients") {
     ParamSet<double> ps;
     const BlockConfig bc{12, 3, 2.0, true, false, true, 1e-6};
     auto stack = BlockStack::add(ps, "blocks.", 2, bc);
@@ -256,7 +256,7 @@ TEST_SUITE("nn") {
     CHECK(worst <= 1e-13 * scale);
   }
 
-  TEST_CASE("SelfAttention with a key padding mask, Mlp: gradients of inputs and parameters") {
+  TEST_CASE("SelfAttention with a key padding mask - Mlp: gradients of inputs and parameters") {
     ParamSet<double> ps;
     const int B = 2, L = 5, d = 12;
     auto attn = SelfAttention::add(ps, "attn", d, 3, true, true);
@@ -325,7 +325,7 @@ TEST_SUITE("nn") {
     }
   }
 
-  TEST_CASE("Tokenizer, per taxel and grouped with padding: gradients of inputs and parameters") {
+  TEST_CASE("Tokenizer - per taxel and grouped with padding: gradients of inputs and parameters") {
     ParamSet<double> ps;
     const int B = 2, d = 12;
     Tokenizer tok;
@@ -401,7 +401,7 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
-  TEST_CASE("bad input at the module boundary throws, naming the argument") {
+  TEST_CASE("bad input at the module boundary throws - naming the argument") {
     ParamSet<float> ps, other;
     Encoder enc(ps, EncoderConfig{10, 12, 1, 3, 4.0, true, 1e-6});
     Predictor(other, PredictorConfig{12, 12, 1, 3, 4.0, false, 1e-6});
@@ -421,7 +421,7 @@ TEST_SUITE("nn") {
     CHECK_THROWS_AS(Encoder(ps, EncoderConfig{10, 10, 1, 3, 4.0, true, 1e-6}), ConfigError);
   }
 
-  TEST_CASE("init_params: REFERENCE §4 values, deterministic from the seed") {
+  TEST_CASE("init_params: REFERENCE §4 values - deterministic from the seed") {
     ParamSet<float> a, b;
     Encoder ea(a, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});
     Encoder eb(b, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});
@@ -474,7 +474,8 @@ TEST_SUITE("nn") {
     Workspace<float> ws;
     auto run = [&] {
       tok.forward(ps, x.data(), B, tokens.data(), nullptr, ws);
-      enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, ws);            // target encoder
+      // The target encoder, with the reference's drop-path 0.3 (it runs in training mode there).
+      enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, ws, {DropPath{0.3, 5}, nullptr});
       enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), nullptr, ws);        // context
       pred.forward(ps, zc.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), 2 * B, t, out.data(), nullptr, ws);
       probe.forward(ps, z.data(), B, N, nullptr, y.data(), nullptr, ws);
