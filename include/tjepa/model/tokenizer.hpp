@@ -10,7 +10,8 @@
 //     k = τ·m values per taxel; a group of size n uses the first n·k values of its row (the rest
 //     is padding). PyTorch (the reference's DecoHypertaxelTokenizer, mode "direct"):
 //     tokenizer.direct{n}.0.{weight [d, n·k], bias} (Linear), tokenizer.direct{n}.1.* (LayerNorm);
-//     its column index is frame·n + member (m = 1).
+//     its column index is frame·n + member (m = 1), and (frame·n + member)·m + axis for m > 1:
+//     the rows gather_groups (data/grouped_gather.hpp) builds from a window batch [B, N, τ, m].
 #include <algorithm>
 #include <string>
 #include <type_traits>
