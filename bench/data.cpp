@@ -2,11 +2,13 @@
 // 3 axes), preprocessing throughput on batches, window gathering, and .npy reading.
 #include <benchmark/benchmark.h>
 
+#include <tjepa/data/grouped_gather.hpp>
 #include <tjepa/data/npy.hpp>
 #include <tjepa/data/preprocessor.hpp>
 #include <tjepa/data/simulated_skin.hpp>
 #include <tjepa/data/window_source.hpp>
 #include <tjepa/layout/allegro_xela.hpp>
+#include <tjepa/layout/inspire.hpp>
 
 #include <filesystem>
 #include <unistd.h>
@@ -83,6 +85,22 @@ void BM_GatherBatch(benchmark::State& state) {
   state.SetBytesProcessed(state.iterations() * static_cast<std::int64_t>(batch.x.size() * sizeof(float)));
 }
 BENCHMARK(BM_GatherBatch)->Arg(256);
+
+// DECO-50 grouped tokens: a batch [B, 2124, τ = 3, 1] of the two Inspire hands into the grouped
+// tokenizer's rows [B, 528, 5·3].
+void BM_GatherGroupsDeco50(benchmark::State& state) {
+  static const tjepa::Grouping grouping = tjepa::layouts::deco50_grouping(tjepa::layouts::inspire_hands());
+  const int B = static_cast<int>(state.range(0)), N = grouping.num_taxels, G = grouping.num_groups(), tau = 3;
+  std::vector<float> x(static_cast<std::size_t>(B) * N * tau, 1.0f);
+  std::vector<float> out(static_cast<std::size_t>(B) * G * grouping.max_size * tau);
+  for (auto _ : state) {
+    tjepa::gather_groups(x.data(), B, N, tau, 1, grouping.members.data(), G, grouping.max_size, out.data());
+    benchmark::DoNotOptimize(out.data());
+  }
+  state.SetItemsProcessed(state.iterations() * B);
+  state.SetBytesProcessed(state.iterations() * static_cast<std::int64_t>(out.size() * sizeof(float)));
+}
+BENCHMARK(BM_GatherGroupsDeco50)->Arg(256);
 
 // Reading a float32 .npy recording (mapped: no copy) and checking it for NaN.
 void BM_ReadNpy(benchmark::State& state) {

@@ -40,12 +40,6 @@ void BM_InspireHandsOnly(benchmark::State& state) {
 }
 BENCHMARK(BM_InspireHandsOnly)->Unit(benchmark::kMillisecond);
 
-void BM_InspireGatherIndices(benchmark::State& state) {
-  const auto grouping = tjepa::layouts::deco50_grouping(tjepa::layouts::inspire_hands());
-  for (auto _ : state) benchmark::DoNotOptimize(grouping.gather_indices(3, 1).data());
-}
-BENCHMARK(BM_InspireGatherIndices)->Unit(benchmark::kMicrosecond);
-
 void BM_GrowGroupingInspireHands(benchmark::State& state) {
   const auto skin = tjepa::layouts::inspire_hands();
   for (auto _ : state) {

@@ -124,9 +124,9 @@ BENCHMARK(BM_PredictorForwardBackward)->Unit(benchmark::kMillisecond)->UseRealTi
 void BM_JepaStepModel(benchmark::State& state) {
   const int N = 368, B = 8, K = 258, t = 51, R = 4, in = 30;
   ParamSet<float> ps, target, pps;
-  Tokenizer tok = Tokenizer::per_taxel(ps, N, in, dim);
+  Tokenizer tok = Tokenizer::per_taxel(ps, N, 3, in / 3, dim);
   Encoder enc(ps, EncoderConfig{N, dim, depth, heads, 4.0, true, 1e-6});
-  Tokenizer::per_taxel(target, N, in, dim);
+  Tokenizer::per_taxel(target, N, 3, in / 3, dim);
   Encoder(target, EncoderConfig{N, dim, depth, heads, 4.0, true, 1e-6});
   Predictor pred(pps, PredictorConfig{dim, dim, 4, heads, 4.0, false, 1e-6});
   for (auto* p : {&ps, &target, &pps}) {

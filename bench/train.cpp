@@ -39,7 +39,7 @@ void BM_JepaTrainStep(benchmark::State& state) {
   const auto skin = tjepa::layouts::allegro_xela();
   const tjepa::MaskCollator collator(skin.graph);
   const int N = collator.num_tokens();
-  tjepa::JepaModel<float> model(tjepa::JepaConfig::reference(N, 30), 1);
+  tjepa::JepaModel<float> model(tjepa::JepaConfig::reference(N, 30, 3), 1);
   tjepa::AdamW<float> opt(model.trainable());
   const auto schedule = tjepa::TrainingSchedule::reference(500, 100, 30);
   tjepa::JepaWorkspace<float> ws;

@@ -221,35 +221,6 @@ TEST_SUITE("graph") {
     CHECK(one.graph.num_components() == 1);
   }
 
-  TEST_CASE("Grouping::gather_indices turns N x tau x m windows into token rows with a zero sentinel") {
-    const auto s = tjepa::layouts::inspire_hands();
-    const auto gr = tjepa::layouts::deco50_grouping(s);
-    for (int m : {1, 3}) {
-      const int tau = 3, n = 2124, stride = tau * m, row = gr.max_size * stride;
-      const auto idx = gr.gather_indices(tau, m);
-      REQUIRE(idx.size() == static_cast<std::size_t>(gr.num_groups()) * row);
-      std::vector<double> x(static_cast<std::size_t>(n) * stride + 1);
-      for (int i = 0; i < n; ++i)
-        for (int t = 0; t < tau; ++t)
-          for (int a = 0; a < m; ++a) x[static_cast<std::size_t>(i) * stride + t * m + a] = 1000.0 * i + 10.0 * t + a;
-      x.back() = 0.0;  // the sentinel slot
-      for (int g = 0; g < gr.num_groups(); ++g) {
-        for (int j = 0; j < gr.max_size; ++j)
-          for (int t = 0; t < tau; ++t)
-            for (int a = 0; a < m; ++a) {
-              const int k = g * row + j * stride + t * m + a;
-              const double got = x[idx[k]];
-              if (j < gr.sizes[g]) CHECK(got == 1000.0 * gr.members[g * gr.max_size + j] + 10.0 * t + a);
-              else {
-                CHECK(idx[k] == n * stride);
-                CHECK(got == 0.0);
-              }
-            }
-      }
-    }
-    CHECK_THROWS_AS(gr.gather_indices(0, 1), tjepa::ConfigError);
-  }
-
   TEST_CASE("grow_grouping: connected groups of 4-5 covering every part of any layout") {
     const std::vector<std::pair<std::string, tjepa::Skin>> skins = {
         {"allegro", tjepa::layouts::allegro_xela()},

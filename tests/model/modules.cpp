@@ -331,8 +331,10 @@ TEST_SUITE("nn") {
     Tokenizer tok;
     int in_used = 0;
     SUBCASE("per taxel") {
-      tok = Tokenizer::per_taxel(ps, 5, 6, d);
-      CHECK(ps.contains("patch_embed.proj.weight"));
+      tok = Tokenizer::per_taxel(ps, 5, 2, 3, d);
+      CHECK(tok.width == 6);
+      // The reference's Conv1d weight [d, m, τ], so a strict PyTorch load_state_dict accepts it.
+      CHECK(ps.infos()[ps.id("patch_embed.proj.weight").index].shape == std::vector<std::int64_t>{12, 2, 3});
       CHECK(ps.contains("patch_embed.norm.bias"));
     }
     SUBCASE("grouped") {
@@ -458,7 +460,7 @@ TEST_SUITE("nn") {
   TEST_CASE("Inference after warm-up makes no heap allocation (counting allocator)") {
     ParamSet<float> ps;
     const int N = 40, d = 48, B = 2, K = 23, t = 7;
-    Tokenizer tok = Tokenizer::per_taxel(ps, N, 30, d);
+    Tokenizer tok = Tokenizer::per_taxel(ps, N, 3, 10, d);
     Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
     Predictor pred(ps, PredictorConfig{d, d, 2, 3, 4.0, false, 1e-6});
     AttentiveProbe probe(ps, ProbeConfig{d, 3, 4.0, 32, 3, 1e-6});

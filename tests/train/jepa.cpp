@@ -28,6 +28,7 @@ namespace {
 JepaConfig tiny_config(int depth = 2) {
   JepaConfig c;
   c.in_dim = 4;
+  c.axes = 2;
   c.encoder = EncoderConfig{9, 8, depth, 2, 2.0, true, 1e-6};
   c.predictor = PredictorConfig{8, 8, 1, 2, 2.0, false, 1e-6};
   return c;
@@ -115,6 +116,7 @@ MaskCollator blob_collator() {
 JepaConfig blob_config() {
   JepaConfig c;
   c.in_dim = 4;  // m·τ
+  c.axes = 2;
   c.encoder = EncoderConfig{36, 16, 2, 2, 2.0, true, 1e-6};
   c.predictor = PredictorConfig{16, 16, 1, 2, 2.0, false, 1e-6};
   return c;
@@ -328,6 +330,9 @@ TEST_SUITE("train") {
     Trainer<float> resumed(resumed_model, source, collator, tc);
     resumed.resume(ckpt.path);
     CHECK(resumed.step() == 8);
+    // The per-taxel tokenizer weight is stored as the reference's Conv1d weight [d, m, τ].
+    CHECK(load_safetensors(ckpt.path).at("context_encoder.patch_embed.proj.weight").shape ==
+          std::vector<std::int64_t>{16, 2, 2});
     const auto tail = resumed.run();
     REQUIRE(tail.size() == 10);
     for (int s = 0; s < 10; ++s) {

@@ -14,9 +14,9 @@
 //                        taxel edge joins them (bridges included); graph.part(g) = part[g],
 //                        graph.group(g) = region[g], so stratified global masks over the tokens
 //                        draw one token per region. Weights 1 by default.
-// gather_indices(τ, m) turns a window [N, τ, m] into tokens [G, n_max·τ·m].
+// members is the index gather_groups (data/grouped_gather.hpp) takes to turn a window batch
+// [B, N, τ, m] into the grouped tokenizer's rows [B, G, n_max·τ·m].
 #include <algorithm>
-#include <climits>
 #include <cmath>
 #include <cstdint>
 #include <map>
@@ -60,27 +60,6 @@ struct Grouping {
     out.reserve(token_of.size());
     for (int t : token_of) out.push_back(per_token[t]);
     return out;
-  }
-
-  // [G, n_max·τ·m] indices into a window x flattened from [N, τ, m] (x[i, t, a] at i·τ·m + t·m + a):
-  // token g's row lists its members' τ·m values one member after the other, in members order.
-  // Padded slots (size < n_max) hold the sentinel N·τ·m: append one zero to the flattened window
-  // (N·τ·m + 1 values) and gather, so padding reads 0.
-  std::vector<int> gather_indices(int tau, int m) const {
-    require<ConfigError>(tau > 0 && m > 0, "Grouping::gather_indices: tau = ", tau, ", m = ", m,
-                         ", expected both > 0");
-    const long long tm = static_cast<long long>(tau) * m;
-    require<ConfigError>(static_cast<long long>(num_taxels) * tm < INT_MAX, "Grouping::gather_indices: N·τ·m = ",
-                         static_cast<long long>(num_taxels) * tm, " does not fit an int index");
-    const int stride = static_cast<int>(tm), sentinel = num_taxels * stride;
-    std::vector<int> idx(static_cast<std::size_t>(num_groups()) * max_size * stride);
-    std::size_t o = 0;
-    for (int g = 0; g < num_groups(); ++g)
-      for (int j = 0; j < max_size; ++j) {
-        const int i = members[static_cast<std::size_t>(g) * max_size + j];
-        for (int k = 0; k < stride; ++k) idx[o++] = i >= 0 ? i * stride + k : sentinel;
-      }
-    return idx;
   }
 };
 

@@ -3,7 +3,10 @@
 // bias [out]) and a LayerNorm (weight [C], bias [C]), as ParamIds registered under a PyTorch name.
 // They hold no values: forward and backward read values and add gradients in a ParamSet of the
 // same layout (the context encoder's, or the EMA target encoder's).
+#include <cstdint>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "tjepa/model/kernels/layer_norm.hpp"
 #include "tjepa/model/kernels/linear.hpp"
@@ -26,13 +29,22 @@ struct LinearParams {
   int in = 0, out = 0;
   bool has_bias = false;
 
+  // weight_shape: the weight's PyTorch shape when it is not [out, in] but flattens to it (a
+  // Conv1d's [out, C, k] with in = C·k); empty: [out, in].
   template <class T>
-  static LinearParams add(ParamSet<T>& ps, const std::string& name, int in, int out, bool bias) {
+  static LinearParams add(ParamSet<T>& ps, const std::string& name, int in, int out, bool bias,
+                          std::vector<std::int64_t> weight_shape = {}) {
     LinearParams p;
     p.in = in;
     p.out = out;
     p.has_bias = bias;
-    p.weight = ps.add(name + ".weight", {out, in}, ParamInit::trunc_normal);
+    if (weight_shape.empty()) weight_shape = {out, in};
+    std::int64_t numel = 1;
+    for (auto s : weight_shape) numel *= s;
+    require<ConfigError>(!weight_shape.empty() && weight_shape[0] == out && numel == std::int64_t(out) * in,
+                         "LinearParams::add: ", name, ".weight shape of ", weight_shape.size(),
+                         " dims and ", numel, " values, expected [", out, ", ...] flattening to ", out, "x", in);
+    p.weight = ps.add(name + ".weight", std::move(weight_shape), ParamInit::trunc_normal);
     if (bias) p.bias = ps.add(name + ".bias", {out}, ParamInit::zeros);
     return p;
   }

@@ -2,15 +2,17 @@
 // Tokenizer (paper eq. 1, REFERENCE §4): a token's window of values → R^d by an affine map, then
 // LayerNorm. Tokens are rows of x [B, G, W]:
 //   per taxel: one map shared by all N taxels, W = m·τ.
-//     PyTorch: patch_embed.proj.{weight [d, m·τ], bias [d]}, patch_embed.norm.{weight, bias}.
-//     The reference's patch_embed.proj is a Conv1d with weight [d, m, τ]: flattened, its column
-//     index is axis·τ + frame, so rows must hold a taxel's window axis-major to load it 1:1
-//     (assuming no temporal padding in that Conv1d; its PatchEmbed1d source was not available).
+//     PyTorch: patch_embed.proj.{weight [d, m, τ], bias [d]}, patch_embed.norm.{weight, bias}.
+//     The reference's patch_embed.proj is a Conv1d with weight [d, m, τ], registered with that
+//     shape so a strict load_state_dict accepts it: flattened, its column index is axis·τ + frame,
+//     so rows must hold a taxel's window axis-major (train/trainer.hpp's windows_to_tokens) to load
+//     it 1:1 (assuming no temporal padding in that Conv1d; its PatchEmbed1d source was not available).
 //   grouped (DECO-50): one map and one LayerNorm per group size n (4 and 5), W = n_max·k with
 //     k = τ·m values per taxel; a group of size n uses the first n·k values of its row (the rest
 //     is padding). PyTorch (the reference's DecoHypertaxelTokenizer, mode "direct"):
 //     tokenizer.direct{n}.0.{weight [d, n·k], bias} (Linear), tokenizer.direct{n}.1.* (LayerNorm);
-//     its column index is frame·n + member (m = 1).
+//     its column index is frame·n + member (m = 1), and (frame·n + member)·m + axis for m > 1:
+//     the rows gather_groups (data/grouped_gather.hpp) builds from a window batch [B, N, τ, m].
 #include <algorithm>
 #include <string>
 #include <type_traits>
@@ -37,17 +39,17 @@ struct Tokenizer {
   std::vector<Map> maps;
   int num_tokens = 0, width = 0, dim = 0;
 
-  // Per-taxel tokenizer for N taxels with in_dim = m·τ values each.
+  // Per-taxel tokenizer for N taxels with m axes × τ frames each (rows axis-major, m·τ values).
   template <class T>
-  static Tokenizer per_taxel(ParamSet<T>& ps, int N, int in_dim, int dim, double eps = layer_norm_eps,
+  static Tokenizer per_taxel(ParamSet<T>& ps, int N, int axes, int frames, int dim, double eps = layer_norm_eps,
                              const std::string& prefix = "patch_embed.") {
-    require<ConfigError>(N > 0 && in_dim > 0 && dim > 0, "Tokenizer::per_taxel: N = ", N, ", in_dim = ", in_dim,
-                         ", dim = ", dim, ", expected all > 0");
+    require<ConfigError>(N > 0 && axes > 0 && frames > 0 && dim > 0, "Tokenizer::per_taxel: N = ", N,
+                         ", axes = ", axes, ", frames = ", frames, ", dim = ", dim, ", expected all > 0");
     Tokenizer t;
     t.num_tokens = N;
-    t.width = in_dim;
+    t.width = axes * frames;
     t.dim = dim;
-    t.maps.push_back({LinearParams::add(ps, prefix + "proj", in_dim, dim, true),
+    t.maps.push_back({LinearParams::add(ps, prefix + "proj", t.width, dim, true, {dim, axes, frames}),
                       NormParams::add(ps, prefix + "norm", dim, eps), {}});
     return t;
   }

@@ -25,20 +25,25 @@ struct JepaConfig {
   // Tokenizer input per token: m·τ values (one token per taxel), or with group_size set, the
   // m·τ values of each taxel of a group (DECO-50: groups of 4 and 5 taxels).
   int in_dim = 30;
+  // m: values per taxel and frame; in_dim = m·τ. The per-taxel tokenizer's weight is [d, m, τ].
+  int axes = 1;
   std::vector<int> group_size;  // [N tokens] taxels per token; empty: one token per taxel
   EncoderConfig encoder;        // encoder.num_tokens = N
   PredictorConfig predictor;    // in_dim = encoder.dim; dim = encoder.dim (position rows are shared)
 
   // The reference (REFERENCE §4): ViT-Tiny encoder, 4-block predictor of width 192.
-  static JepaConfig reference(int num_tokens, int in_dim) {
+  static JepaConfig reference(int num_tokens, int in_dim, int axes = 1) {
     JepaConfig c;
     c.in_dim = in_dim;
+    c.axes = axes;
     c.encoder.num_tokens = num_tokens;
     return c;
   }
 
   void validate() const {
     require<ConfigError>(in_dim > 0, "JepaConfig: in_dim = ", in_dim, ", expected > 0");
+    require<ConfigError>(axes > 0 && in_dim % axes == 0, "JepaConfig: axes = ", axes,
+                         ", expected > 0 and dividing in_dim = ", in_dim, " (in_dim = m·τ)");
     require<ConfigError>(group_size.empty() || static_cast<int>(group_size.size()) == encoder.num_tokens,
                          "JepaConfig: group_size has ", group_size.size(), " entries, expected encoder.num_tokens = ",
                          encoder.num_tokens, " (or none)");
@@ -53,6 +58,7 @@ struct JepaConfig {
     const auto& e = encoder;
     const auto& p = predictor;
     return {{"in_dim", in_dim},
+            {"axes", axes},
             {"group_size", group_size},
             {"encoder",
              {{"num_tokens", e.num_tokens}, {"dim", e.dim}, {"depth", e.depth}, {"heads", e.heads},
@@ -77,8 +83,9 @@ class JepaModel {
   JepaModel(const JepaConfig& c, std::uint64_t seed) : config(c) {
     c.validate();
     const int N = c.encoder.num_tokens, d = c.encoder.dim;
-    tokenizer = c.group_size.empty() ? Tokenizer::per_taxel(context, N, c.in_dim, d, c.encoder.eps)
-                                     : Tokenizer::grouped(context, c.group_size, c.in_dim, d, c.encoder.eps);
+    tokenizer = c.group_size.empty()
+                    ? Tokenizer::per_taxel(context, N, c.axes, c.in_dim / c.axes, d, c.encoder.eps)
+                    : Tokenizer::grouped(context, c.group_size, c.in_dim, d, c.encoder.eps);
     encoder = Encoder(context, c.encoder);
     predictor = Predictor(predictor_params, c.predictor, "");
     context.allocate();

@@ -6,7 +6,7 @@
 #include <numbers>
 
 #include "tjepa/model/detail/parallel.hpp"
-#include "tjepa/model/detail/simd.hpp"
+#include "tjepa/core/detail/simd.hpp"
 
 namespace tjepa {
 

@@ -6,7 +6,7 @@
 #include <cstddef>
 
 #include "tjepa/model/detail/parallel.hpp"
-#include "tjepa/model/detail/simd.hpp"
+#include "tjepa/core/detail/simd.hpp"
 
 namespace tjepa {
 

@@ -8,7 +8,7 @@
 #include <limits>
 
 #include "tjepa/model/detail/parallel.hpp"
-#include "tjepa/model/detail/simd.hpp"
+#include "tjepa/core/detail/simd.hpp"
 
 namespace tjepa {
 

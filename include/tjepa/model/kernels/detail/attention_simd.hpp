@@ -11,13 +11,15 @@
 
 #include <xsimd/xsimd.hpp>
 
+#include "tjepa/core/detail/simd.hpp"
+
 namespace tjepa::detail::attn {
 
 template <class T>
-using Vec = xsimd::batch<T>;
+using Vec = detail::simd<T>;
 
 template <class T>
-inline constexpr int W = static_cast<int>(Vec<T>::size);
+inline constexpr int W = static_cast<int>(detail::simd_width<T>);
 
 // Register blocking of the micro-kernels: an MR x (NV*W) block of C lives in MR*NV registers.
 // AVX-512 has 32 vector registers (24 accumulators + 4 B vectors + broadcasts); AVX2 and SSE have 16.

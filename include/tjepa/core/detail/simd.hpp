@@ -1,6 +1,8 @@
 #pragma once
-// Small xsimd helpers shared by the row-wise kernels (LayerNorm, GELU, softmax). Every loop runs
-// whole vectors, then a scalar tail, so any length works.
+// Small xsimd helpers: the native vector type and width, horizontal sum and max, and the row
+// reductions of the row-wise kernels (LayerNorm, GELU, softmax); the attention kernels
+// (model/kernels/detail/attention_simd.hpp) use the same vector type. Every loop runs whole
+// vectors, then a scalar tail, so any length works.
 #include <cstddef>
 
 #include <xsimd/xsimd.hpp>
