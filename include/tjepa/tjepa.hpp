@@ -6,6 +6,7 @@
 #include "tjepa/core/eigen.hpp"
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
+#include "tjepa/core/atomic_write.hpp"
 
 #include "tjepa/layout/taxel_layout.hpp"
 #include "tjepa/layout/grid_pad.hpp"
@@ -27,6 +28,8 @@
 #include "tjepa/graph/taxel_graph.hpp"
 #include "tjepa/graph/skin.hpp"
 #include "tjepa/graph/bridges.hpp"
+#include "tjepa/graph/colors.hpp"
+#include "tjepa/graph/svg.hpp"
 
 #include "tjepa/masks/collator.hpp"
 #include "tjepa/masks/config.hpp"

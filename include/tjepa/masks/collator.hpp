@@ -259,19 +259,9 @@ class MaskCollator {
     return {tgt_buf_.data() + (static_cast<std::size_t>(j) * B + i) * n, n};
   }
 
-  // The first m entries of row, ascending, into dst. Token ids are < N: a scan over marks costs
-  // O(N) and beats a comparison sort for long rows.
+  // The first m entries of row, ascending, into dst.
   void sorted_prefix(std::span<const int> row, int m, MaskWorkspace& ws, int* dst) const {
-    if (m <= 64) {
-      std::copy(row.begin(), row.begin() + m, dst);
-      std::sort(dst, dst + m);
-      return;
-    }
-    ws.picked.clear();
-    for (int k = 0; k < m; ++k) ws.picked.set(row[k]);
-    int w = 0;
-    for (int v = 0, n = num_tokens(); w < m && v < n; ++v)
-      if (ws.picked.test(v)) dst[w++] = v;
+    detail::sort_tokens(row.data(), m, ws.bits.data(), (num_tokens() + 63) / 64, dst);
   }
 
   [[noreturn]] void fail_context(int i, int best, int union_size, const std::string& drawn) const {
@@ -314,7 +304,8 @@ class MaskCollator {
           for (std::size_t j = 0; j < specs_.size(); ++j) {
             TargetSet& ts = out.targets[j];
             int* r = ts.indices.data() + static_cast<std::size_t>(i) * ts.size;
-            std::sort(r, r + ts.size);
+            std::copy(r, r + ts.size, ws.perm.data());
+            detail::sort_tokens(ws.perm.data(), ts.size, ws.bits.data(), (num_tokens() + 63) / 64, r);
           }
           return;
         }

@@ -19,41 +19,42 @@ namespace detail {
 // Dijkstra from `seed`, never leaving the seed's part; writes the first out.size() settled tokens
 // to out in settle order and returns how many it found (fewer only if the piece is smaller).
 inline int grow_region(const TaxelGraph& g, int seed, Rng& rng, MaskWorkspace& ws, std::span<int> out) {
-  const auto& offsets = g.offsets();
-  const auto& adj = g.adjacency();
-  const auto& w = g.edge_weights();
-  const auto& parts = g.parts();
+  const int* offsets = g.offsets().data();
+  const int* adj = g.adjacency().data();
+  const double* w = g.edge_weights().data();
+  const int* parts = g.parts().data();
   const int part = parts[seed];
   const int want = static_cast<int>(out.size());
-  ws.reached.clear();
-  ws.settled.clear();
+  const std::uint32_t reached = ws.next_dijkstra_epoch(), settled = reached + 1;
+  std::uint32_t* state = ws.state.data();
+  double* dist = ws.dist.data();
+  std::uint64_t* tie = ws.tie.data();
+  auto draw_tie = [&](int v) { return (rng() & 0xFFFFFFFF00000000ull) | static_cast<std::uint32_t>(v); };
   ws.frontier.clear();
-  ws.reached.set(seed);
-  ws.dist[seed] = 0.0;
-  ws.key[seed] = rng();
-  ws.frontier.push_back({0.0, ws.key[seed], seed});
+  state[seed] = reached;
+  dist[seed] = 0.0;
+  tie[seed] = draw_tie(seed);
+  ws.frontier.push(FrontierItem::make(0.0, tie[seed]));
   int found = 0;
   while (found < want && !ws.frontier.empty()) {
-    std::pop_heap(ws.frontier.begin(), ws.frontier.end(), FrontierFarther{});
-    const FrontierItem top = ws.frontier.back();
-    ws.frontier.pop_back();
-    const int u = top.node;
-    if (ws.settled.test(u) || top.dist != ws.dist[u]) continue;  // stale entry
-    ws.settled.set(u);
+    const FrontierItem top = ws.frontier.pop();
+    const int u = top.node();
+    const double du = top.dist();
+    if (state[u] == settled || du != dist[u]) continue;  // stale entry
+    state[u] = settled;
     out[found++] = u;
     for (int k = offsets[u]; k < offsets[u + 1]; ++k) {
       const int v = adj[k];
-      if (parts[v] != part || ws.settled.test(v)) continue;
-      const double d = top.dist + w[k];
-      if (!ws.reached.test(v)) {
-        ws.reached.set(v);
-        ws.key[v] = rng();
-      } else if (d >= ws.dist[v]) {
+      if (parts[v] != part || state[v] == settled) continue;
+      const double d = du + w[k];
+      if (state[v] != reached) {
+        state[v] = reached;
+        tie[v] = draw_tie(v);
+      } else if (d >= dist[v]) {
         continue;
       }
-      ws.dist[v] = d;
-      ws.frontier.push_back({d, ws.key[v], v});
-      std::push_heap(ws.frontier.begin(), ws.frontier.end(), FrontierFarther{});
+      dist[v] = d;
+      ws.frontier.push(FrontierItem::make(d, tie[v]));
     }
   }
   return found;

@@ -2,6 +2,7 @@
 // Scratch buffers of the mask samplers, owned by the caller and reused from sample to sample so
 // that the per-sample path allocates nothing once the buffers have grown to the graph's size.
 #include <algorithm>
+#include <bit>
 #include <cstdint>
 #include <vector>
 
@@ -34,18 +35,74 @@ class EpochMarks {
   std::uint32_t epoch_ = 1;
 };
 
-// One Dijkstra frontier entry: ordered by distance, then by a random key (the tie-break).
+// One Dijkstra frontier entry: a 128-bit key, compared as one integer (branch-free, which is what
+// makes the heap fast): high 64 bits = the distance's bits (a non-negative double's bit pattern
+// orders like its value), low 64 bits = the tie-break word (random 32-bit key of the node << 32) |
+// node, so equal distances pop in random order and the node rides along.
 struct FrontierItem {
-  double dist;
-  std::uint64_t key;
-  int node;
-};
-// std::push_heap builds a max-heap: "less" means farther (or, at equal distance, larger key).
-struct FrontierFarther {
-  bool operator()(const FrontierItem& a, const FrontierItem& b) const {
-    return a.dist > b.dist || (a.dist == b.dist && a.key > b.key);
+  __uint128_t key;
+  static FrontierItem make(double dist, std::uint64_t tie) {
+    return {(static_cast<__uint128_t>(std::bit_cast<std::uint64_t>(dist)) << 64) | tie};
   }
+  double dist() const { return std::bit_cast<double>(static_cast<std::uint64_t>(key >> 64)); }
+  int node() const { return static_cast<int>(static_cast<std::uint32_t>(key)); }
 };
+inline bool nearer(const FrontierItem& a, const FrontierItem& b) { return a.key < b.key; }
+
+// A binary min-heap over a caller-owned vector (no allocation once it has grown).
+class Frontier {
+ public:
+  void clear() { h_.clear(); }
+  bool empty() const { return h_.empty(); }
+  void reserve(std::size_t n) { h_.reserve(n); }
+  void push(FrontierItem x) {
+    std::size_t i = h_.size();
+    h_.push_back(x);
+    while (i > 0) {
+      const std::size_t parent = (i - 1) / 2;
+      if (!nearer(x, h_[parent])) break;
+      h_[i] = h_[parent];
+      i = parent;
+    }
+    h_[i] = x;
+  }
+  FrontierItem pop() {
+    const FrontierItem top = h_[0];
+    const FrontierItem last = h_.back();
+    h_.pop_back();
+    const std::size_t n = h_.size();
+    if (n > 0) {
+      std::size_t i = 0;
+      for (;;) {
+        std::size_t c = 2 * i + 1;
+        if (c >= n) break;
+        if (c + 1 < n) c += static_cast<std::size_t>(nearer(h_[c + 1], h_[c]));
+        if (!nearer(h_[c], last)) break;
+        h_[i] = h_[c];
+        i = c;
+      }
+      h_[i] = last;
+    }
+    return top;
+  }
+
+ private:
+  std::vector<FrontierItem> h_;
+};
+
+// Writes the m distinct token ids src[0..m) to dst in ascending order through a bitset of the
+// N tokens ((N + 63) / 64 words, all zero on entry and on return): O(m + N/64), no comparisons.
+inline void sort_tokens(const int* src, int m, std::uint64_t* bits, int words, int* dst) {
+  for (int k = 0; k < m; ++k) bits[src[k] >> 6] |= std::uint64_t{1} << (src[k] & 63);
+  for (int wi = 0; wi < words; ++wi) {
+    std::uint64_t word = bits[wi];
+    bits[wi] = 0;
+    while (word != 0) {
+      *dst++ = (wi << 6) + std::countr_zero(word);
+      word &= word - 1;
+    }
+  }
+}
 
 }  // namespace tjepa::detail
 
@@ -54,24 +111,37 @@ namespace tjepa {
 // Per-thread scratch of the mask samplers: pass the same one to every call on a thread.
 struct MaskWorkspace {
   detail::EpochMarks picked;    // tokens already in the mask being built
-  detail::EpochMarks reached;   // Dijkstra: tokens with a tentative distance
-  detail::EpochMarks settled;   // Dijkstra: tokens settled
+  // Dijkstra state of token v: state[v] == epoch: reached (dist[v] and tie[v] valid);
+  // epoch + 1: settled; anything else: not seen in this run. The epoch advances by 2 per run.
+  std::vector<std::uint32_t> state;
+  std::uint32_t epoch = 0;
   detail::EpochMarks excluded;  // the union of a sample's targets
   std::vector<double> dist;     // [N] Dijkstra tentative distances
-  std::vector<std::uint64_t> key;  // [N] Dijkstra random tie-break key, drawn when first reached
-  std::vector<detail::FrontierItem> frontier;
+  std::vector<std::uint64_t> tie;  // [N] Dijkstra tie-break word (random key, node), drawn when first reached
+  detail::Frontier frontier;
   std::vector<int> perm;        // [N] partial Fisher–Yates scratch
   std::vector<int> order;       // [G] group order scratch
+  std::vector<std::uint64_t> bits;  // [(N + 63) / 64] zero between uses (detail::sort_tokens)
 
   void resize(int n) {
     picked.resize(n);
-    reached.resize(n);
-    settled.resize(n);
+    if (static_cast<int>(state.size()) < n) state.resize(n, 0);
     excluded.resize(n);
     if (static_cast<int>(dist.size()) < n) dist.resize(n);
-    if (static_cast<int>(key.size()) < n) key.resize(n);
+    if (static_cast<int>(tie.size()) < n) tie.resize(n);
     if (static_cast<int>(perm.size()) < n) perm.resize(n);
+    if (static_cast<int>(bits.size()) < (n + 63) / 64) bits.resize((n + 63) / 64, 0);
     frontier.reserve(static_cast<std::size_t>(n) * 4);
+  }
+
+  // Starts a Dijkstra run: returns the run's "reached" stamp (settled is that + 1).
+  std::uint32_t next_dijkstra_epoch() {
+    epoch += 2;
+    if (epoch < 2) {  // wrapped
+      std::fill(state.begin(), state.end(), 0u);
+      epoch = 2;
+    }
+    return epoch;
   }
 };
 
