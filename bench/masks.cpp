@@ -27,6 +27,12 @@ void BM_MasksAllegro(benchmark::State& state) {
 }
 BENCHMARK(BM_MasksAllegro)->Arg(256)->Unit(benchmark::kMillisecond);
 
+void BM_MasksDeco50Grouped(benchmark::State& state) {
+  static const tjepa::Grouping grouping = tjepa::layouts::deco50_grouping(tjepa::layouts::inspire_hands());
+  run_collator(state, grouping.graph, {});
+}
+BENCHMARK(BM_MasksDeco50Grouped)->Arg(256)->Unit(benchmark::kMillisecond);
+
 void BM_MasksAllegroLocalContext(benchmark::State& state) {
   static const tjepa::Skin skin = tjepa::layouts::allegro_xela();
   tjepa::MaskConfig cfg;
@@ -48,27 +54,30 @@ struct AllegroFixture {
   AllegroFixture() { ws.resize(skin.graph.num_nodes()); }
 };
 
-void BM_MasksLocalAllegro(benchmark::State& state) {
+// One mask of state.range(0) tokens per iteration, drawn by sample(domain, rng, ws, out).
+template <class Sample>
+void run_sampler(benchmark::State& state, Sample sample) {
   static AllegroFixture f;
   tjepa::Rng rng(1);
   std::vector<int> out(static_cast<std::size_t>(state.range(0)));
   for (auto _ : state) {
-    tjepa::sample_local_mask(f.skin.graph, f.domain, rng, f.ws, out);
+    sample(f, rng, out);
     benchmark::DoNotOptimize(out.data());
   }
   state.SetItemsProcessed(state.iterations());
 }
+
+void BM_MasksLocalAllegro(benchmark::State& state) {
+  run_sampler(state, [](AllegroFixture& f, tjepa::Rng& rng, std::vector<int>& out) {
+    tjepa::sample_local_mask(f.skin.graph, f.domain, rng, f.ws, out);
+  });
+}
 BENCHMARK(BM_MasksLocalAllegro)->Arg(51);
 
 void BM_MasksGlobalAllegro(benchmark::State& state) {
-  static AllegroFixture f;
-  tjepa::Rng rng(1);
-  std::vector<int> out(static_cast<std::size_t>(state.range(0)));
-  for (auto _ : state) {
+  run_sampler(state, [](AllegroFixture& f, tjepa::Rng& rng, std::vector<int>& out) {
     tjepa::sample_global_mask(f.domain, tjepa::GlobalSampling::stratified, rng, f.ws, out);
-    benchmark::DoNotOptimize(out.data());
-  }
-  state.SetItemsProcessed(state.iterations());
+  });
 }
 BENCHMARK(BM_MasksGlobalAllegro)->Arg(51);
 

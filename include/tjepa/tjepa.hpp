@@ -13,6 +13,8 @@
 #include "tjepa/layout/layout_builder.hpp"
 #include "tjepa/layout/allegro_xela.hpp"
 #include "tjepa/layout/generic.hpp"
+#include "tjepa/layout/inspire.hpp"
+#include "tjepa/layout/csv.hpp"
 
 #include "tjepa/data/grouped_gather.hpp"
 #include "tjepa/data/labels.hpp"
@@ -20,6 +22,7 @@
 #include "tjepa/data/npy.hpp"
 #include "tjepa/data/preprocessor.hpp"
 #include "tjepa/data/recording.hpp"
+#include "tjepa/data/simulated_dataset.hpp"
 #include "tjepa/data/simulated_skin.hpp"
 #include "tjepa/data/text_reader.hpp"
 #include "tjepa/data/window.hpp"
@@ -28,6 +31,11 @@
 #include "tjepa/graph/taxel_graph.hpp"
 #include "tjepa/graph/skin.hpp"
 #include "tjepa/graph/bridges.hpp"
+#include "tjepa/graph/coordinate_graphs.hpp"
+#include "tjepa/graph/join.hpp"
+#include "tjepa/graph/grouping.hpp"
+#include "tjepa/graph/block_grouping.hpp"
+#include "tjepa/graph/grow_grouping.hpp"
 #include "tjepa/graph/colors.hpp"
 #include "tjepa/graph/svg.hpp"
 
@@ -38,6 +46,7 @@
 #include "tjepa/masks/global.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/masks/local.hpp"
+#include "tjepa/masks/svg.hpp"
 
 #include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
@@ -69,3 +78,9 @@
 #include "tjepa/io/atomic_file.hpp"
 #include "tjepa/io/checkpoint.hpp"
 #include "tjepa/io/safetensors.hpp"
+
+#include "tjepa/train/health.hpp"
+#include "tjepa/train/jepa_model.hpp"
+#include "tjepa/train/jepa_step.hpp"
+#include "tjepa/train/loss.hpp"
+#include "tjepa/train/trainer.hpp"

@@ -54,7 +54,7 @@ TEST_SUITE("core") {
     CHECK_THROWS_AS(restored.set_state({0, 0, 0, 0}), tjepa::ConfigError);
   }
 
-  TEST_CASE("uniform, below, normal and truncated_normal have the right moments") {
+  TEST_CASE("uniform below normal and truncated_normal have the right moments") {
     tjepa::Rng r(123);
     const int n = 200000;
     double s = 0, s2 = 0;

@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include <unistd.h>
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -23,7 +25,7 @@ struct TempDir {
   TempDir() {
     static int counter = 0;
     path = fs::temp_directory_path() /
-           ("tjepa_data_io_" + std::to_string(tjepa::detail::process_id()) + "_" + std::to_string(counter++));
+           ("tjepa_data_io_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
     fs::remove_all(path);
     fs::create_directories(path);
   }
@@ -90,7 +92,7 @@ std::string dict(const std::string& descr, const std::string& shape, const std::
 }  // namespace
 
 TEST_SUITE("data") {
-  TEST_CASE("npy: float32 and float64, versions 1, 2 and 3, read back exactly") {
+  TEST_CASE("npy: float32 and float64 in versions 1 2 and 3 read back exactly") {
     TempDir dir;
     const auto v = ramp(24);
     std::vector<double> vd(v.begin(), v.end());
@@ -136,7 +138,7 @@ TEST_SUITE("data") {
                          tjepa::ShapeError);
   }
 
-  TEST_CASE("npy: write_npy round-trips, is atomic, and pads the header to 64 bytes") {
+  TEST_CASE("npy: write_npy round-trips atomically and pads the header to 64 bytes") {
     TempDir dir;
     const auto v = ramp(2 * 5 * 3);
     tjepa::Recording rec(2, 5, 3, tjepa::AlignedVector<float>(v.begin(), v.end()));
@@ -225,6 +227,34 @@ TEST_SUITE("data") {
     CHECK_THROWS_AS(tjepa::read_npy(dir.path), tjepa::FileError);  // a directory
   }
 
+  TEST_CASE("npy: random corruptions and truncations either read or throw tjepa::Error") {
+    TempDir dir;
+    const auto v = ramp(24);
+    const std::string good = npy_bytes(dict("<f4", "(2, 4, 3)"), raw(v));
+    tjepa::Rng rng(17);
+    int read = 0, rejected = 0;
+    for (int trial = 0; trial < 600; ++trial) {
+      std::string bytes = good;
+      if (trial % 3 == 0) {
+        bytes.resize(rng.below(bytes.size() + 1));
+      } else {
+        const int flips = 1 + static_cast<int>(rng.below(4));
+        for (int k = 0; k < flips; ++k) bytes[rng.below(64)] = static_cast<char>(rng.below(256));
+      }
+      const fs::path p = dir / ("fuzz" + std::to_string(trial) + ".npy");
+      write_bytes(p, bytes);
+      try {
+        const tjepa::NpyArray a = tjepa::read_npy(p);
+        CHECK(a.numel() * sizeof(float) <= bytes.size());
+        ++read;
+      } catch (const tjepa::Error&) {
+        ++rejected;
+      }
+    }
+    CHECK(read + rejected == 600);
+    CHECK(rejected > 300);
+  }
+
   TEST_CASE("npy: NaN or Inf is a DataError naming its index when the caller asks for finite data") {
     TempDir dir;
     auto v = ramp(24);
@@ -242,7 +272,7 @@ TEST_SUITE("data") {
                          tjepa::DataError);
   }
 
-  TEST_CASE("text: whitespace and CSV recordings, comments, header rows and a column map") {
+  TEST_CASE("text: whitespace and CSV recordings with comments and header rows and a column map") {
     TempDir dir;
     write_bytes(dir / "ws.txt", "# two taxels, two axes\n1 2 3 4\n\n  5\t6 7 8  \n");
     const auto a = tjepa::read_text_recording(dir / "ws.txt", text_format(2));

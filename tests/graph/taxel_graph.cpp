@@ -3,11 +3,14 @@
 #include <tjepa/tjepa.hpp>
 
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -17,6 +20,7 @@ std::size_t count(const std::string& s, const std::string& what) {
   for (auto p = s.find(what); p != std::string::npos; p = s.find(what, p + 1)) ++n;
   return n;
 }
+
 
 std::string slurp(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);
@@ -28,7 +32,7 @@ std::string slurp(const std::filesystem::path& p) {
 }  // namespace
 
 TEST_SUITE("graph") {
-  TEST_CASE("TaxelGraph stores a CSR with sorted neighbours, parts and components") {
+  TEST_CASE("TaxelGraph stores a CSR with sorted neighbours - parts and components") {
     // Two parts: a path 0-1-2 and an edge 3-4.
     std::vector<tjepa::Edge> e = {{1, 0, 1.0}, {1, 2, 2.0}, {4, 3, 0.5}};
     tjepa::TaxelGraph g(5, e, {0, 0, 0, 1, 1});
@@ -47,6 +51,17 @@ TEST_SUITE("graph") {
     CHECK(back[0] == tjepa::Edge{0, 1, 1.0});
   }
 
+  TEST_CASE("induces_connected") {
+    // A path 0-1-2-3 and an isolated 4.
+    std::vector<tjepa::Edge> e = {{0, 1, 1.0}, {1, 2, 1.0}, {2, 3, 1.0}};
+    tjepa::TaxelGraph g(5, e);
+    CHECK(tjepa::induces_connected(g, std::vector<int>{2, 0, 1}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{0, 2}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{3, 4}));
+    CHECK(tjepa::induces_connected(g, std::vector<int>{4}));
+    CHECK(!tjepa::induces_connected(g, std::vector<int>{}));
+  }
+
   TEST_CASE("TaxelGraph rejects bad input with a message that names it") {
     std::vector<tjepa::Edge> none;
     CHECK_THROWS_WITH_AS(tjepa::TaxelGraph(0, none), doctest::Contains("empty layout"), tjepa::DataError);
@@ -63,7 +78,7 @@ TEST_SUITE("graph") {
     CHECK_THROWS_AS(tjepa::TaxelGraph(3, none, {0, 1}), tjepa::ShapeError);
   }
 
-  TEST_CASE("SVG: one disc per taxel, one line per edge, bridges dashed, fills and highlights") {
+  TEST_CASE("SVG: one disc per taxel - one line per edge - bridges dashed - fills and highlights") {
     const auto skin = tjepa::layouts::allegro_xela();
     const int n = skin.size();
     const std::string svg = tjepa::svg_string(skin);
@@ -136,5 +151,226 @@ TEST_SUITE("graph") {
       tjepa::write_svg(doc, tjepa::layouts::allegro_xela(), o);
     }
     CHECK(slurp(doc) == svg);
+  }
+
+  TEST_CASE("DECO-50 grouping: 264 tokens per hand - 528 for two - sizes 4 and 5 - lifted group graph") {
+    const auto s = tjepa::layouts::inspire_hands();
+    const auto gr = tjepa::layouts::deco50_grouping(s);
+    CHECK(gr.num_groups() == 528);
+    CHECK(gr.max_size == 5);
+    CHECK(gr.num_taxels == 2124);
+    int per_hand[2] = {0, 0}, five = 0;
+    std::vector<int> times(2124, 0);
+    for (int g = 0; g < gr.num_groups(); ++g) {
+      ++per_hand[gr.part[g]];
+      CHECK((gr.sizes[g] == 4 || gr.sizes[g] == 5));
+      five += gr.sizes[g] == 5;
+      const auto mem = gr.members_of(g);
+      for (int j = 0; j < gr.max_size; ++j) {
+        CHECK(gr.valid[g * gr.max_size + j] == (j < gr.sizes[g]));
+        if (j >= gr.sizes[g]) CHECK(gr.members[g * gr.max_size + j] == -1);
+      }
+      std::vector<int> m(mem.begin(), mem.end());
+      CHECK(tjepa::induces_connected(s.graph, m));
+      for (int i : m) {
+        ++times[i];
+        CHECK(s.layout.group[i] == gr.region[g]);  // blocks never straddle regions
+        CHECK(gr.token_of[i] == g);
+      }
+    }
+    CHECK(per_hand[0] == 264);
+    CHECK(per_hand[1] == 264);
+    CHECK(five == 2 * 6);  // one 5-group per 3 x 3 region: 5 tips + thumb middle, per hand
+    for (int i = 0; i < 2124; ++i) CHECK(times[i] == 1);
+
+    // The group graph: hands apart, part = hand, group = region (34), unit weights, and token
+    // adjacency exactly the lifted taxel adjacency.
+    const auto& gg = gr.graph;
+    CHECK(gg.num_nodes() == 528);
+    CHECK(gg.num_components() == 2);
+    CHECK(gg.num_parts() == 2);
+    CHECK(gg.num_groups() == 34);
+    std::set<std::pair<int, int>> lifted;
+    for (const auto& e : s.graph.edges()) {
+      const int a = gr.token_of[e.src], b = gr.token_of[e.dst];
+      if (a != b) lifted.insert({std::min(a, b), std::max(a, b)});
+    }
+    std::set<std::pair<int, int>> have;
+    for (const auto& e : gg.edges()) {
+      CHECK(e.weight == 1.0);
+      have.insert({e.src, e.dst});
+    }
+    CHECK(have == lifted);
+    std::set<int> regions_seen;
+    for (int g = 0; g < 528; ++g) {
+      CHECK(gg.part(g) == gr.part[g]);
+      CHECK(gg.group(g) == gr.region[g]);
+      regions_seen.insert(gg.group(g));
+    }
+    CHECK(regions_seen.size() == 34u);
+    // Per-token values spread back to taxels (to draw token masks on the layout).
+    std::vector<int> token_value(528);
+    for (int g = 0; g < 528; ++g) token_value[g] = 7 * g;
+    const auto taxel_value = gr.per_taxel<int>(token_value);
+    for (int i = 0; i < 2124; ++i) CHECK(taxel_value[i] == 7 * gr.token_of[i]);
+    CHECK_THROWS_AS(gr.per_taxel<int>(std::vector<int>(3)), tjepa::ShapeError);
+    // Each 2 x 2 block of a 12 x 8 nail is a 6 x 4 grid of tokens: inner tokens have 4 neighbours
+    // inside the region.
+    const auto one = tjepa::layouts::deco50_grouping(tjepa::layouts::inspire_hand(tjepa::layouts::inspire::Side::left));
+    CHECK(one.num_groups() == 264);
+    CHECK(one.graph.num_components() == 1);
+  }
+
+  TEST_CASE("Grouping::gather_indices turns N x tau x m windows into token rows with a zero sentinel") {
+    const auto s = tjepa::layouts::inspire_hands();
+    const auto gr = tjepa::layouts::deco50_grouping(s);
+    for (int m : {1, 3}) {
+      const int tau = 3, n = 2124, stride = tau * m, row = gr.max_size * stride;
+      const auto idx = gr.gather_indices(tau, m);
+      REQUIRE(idx.size() == static_cast<std::size_t>(gr.num_groups()) * row);
+      std::vector<double> x(static_cast<std::size_t>(n) * stride + 1);
+      for (int i = 0; i < n; ++i)
+        for (int t = 0; t < tau; ++t)
+          for (int a = 0; a < m; ++a) x[static_cast<std::size_t>(i) * stride + t * m + a] = 1000.0 * i + 10.0 * t + a;
+      x.back() = 0.0;  // the sentinel slot
+      for (int g = 0; g < gr.num_groups(); ++g) {
+        for (int j = 0; j < gr.max_size; ++j)
+          for (int t = 0; t < tau; ++t)
+            for (int a = 0; a < m; ++a) {
+              const int k = g * row + j * stride + t * m + a;
+              const double got = x[idx[k]];
+              if (j < gr.sizes[g]) CHECK(got == 1000.0 * gr.members[g * gr.max_size + j] + 10.0 * t + a);
+              else {
+                CHECK(idx[k] == n * stride);
+                CHECK(got == 0.0);
+              }
+            }
+      }
+    }
+    CHECK_THROWS_AS(gr.gather_indices(0, 1), tjepa::ConfigError);
+  }
+
+  TEST_CASE("grow_grouping: connected groups of 4-5 covering every part of any layout") {
+    const std::vector<std::pair<std::string, tjepa::Skin>> skins = {
+        {"allegro", tjepa::layouts::allegro_xela()},
+        {"two_part", tjepa::layouts::two_part_skin()},
+        {"grid", tjepa::layouts::grid_skin()},
+        {"inspire", tjepa::layouts::inspire_hands()},
+        // Edges across the two parts must not pull groups across them.
+        {"two_part_knn_across", [] {
+           auto l = tjepa::layouts::two_part_skin().layout;
+           const int n0 = static_cast<int>(l.taxels_of_part(0).size());
+           auto e = tjepa::knn_edges(l, 4);
+           for (const auto& x : tjepa::knn_edges(l, n0, true))
+             if (l.part[x.src] != l.part[x.dst]) e.push_back(x);
+           return tjepa::make_skin(l, e);
+         }()}};
+    for (const auto& [name, s] : skins) {
+      for (auto [lo, hi] : {std::pair{4, 5}, std::pair{3, 4}, std::pair{6, 8}, std::pair{5, 6}, std::pair{8, 10}}) {
+        INFO(name, " n_g in [", lo, ", ", hi, "]");
+        const auto gr = tjepa::grow_grouping(s, lo, hi);
+        std::vector<int> times(s.size(), 0);
+        long long total = 0;
+        for (int g = 0; g < gr.num_groups(); ++g) {
+          CHECK(gr.sizes[g] >= lo);
+          CHECK(gr.sizes[g] <= hi);
+          const auto mem = gr.members_of(g);
+          std::vector<int> m(mem.begin(), mem.end());
+          CHECK(tjepa::induces_connected(s.graph, m));
+          for (int i : m) {
+            ++times[i];
+            CHECK(s.layout.part[i] == gr.part[g]);
+          }
+          total += gr.sizes[g];
+        }
+        CHECK(total == s.size());
+        CHECK(std::all_of(times.begin(), times.end(), [](int t) { return t == 1; }));
+        CHECK(gr.graph.num_components() == s.graph.num_components());
+        CHECK(gr.graph.num_parts() == s.layout.num_parts());
+        // Deterministic.
+        CHECK(tjepa::grow_grouping(s, lo, hi).members == gr.members);
+      }
+    }
+  }
+
+  TEST_CASE("grow_grouping on random blob-shaped parts - irregular - with holes and thin arms") {
+    int attempted = 0, grouped = 0;
+    for (std::uint64_t seed = 0; seed < 40; ++seed) {
+      // A blob grown cell by cell from the centre of a 14 x 14 grid: connected, ragged.
+      tjepa::Rng rng(seed);
+      const int side = 14, want = 40 + static_cast<int>(rng.below(80));
+      std::vector<std::uint8_t> live(side * side, 0);
+      live[7 * side + 7] = 1;
+      for (int have = 1; have < want;) {
+        const int c = static_cast<int>(rng.below(side * side));
+        if (live[c]) continue;
+        const int r = c / side, q = c % side;
+        const bool touches = (r > 0 && live[c - side]) || (r + 1 < side && live[c + side]) ||
+                             (q > 0 && live[c - 1]) || (q + 1 < side && live[c + 1]);
+        if (touches) live[c] = 1, ++have;
+      }
+      tjepa::LayoutBuilder b;
+      b.add_grid_pad("blob", b.add_part("blob"), tjepa::GridPad(side, side).with_live(live));
+      const auto s = b.build();
+      REQUIRE(s.graph.num_components() == 1);
+      for (auto [lo, hi] : {std::pair{4, 5}, std::pair{3, 5}}) {
+        INFO("seed ", seed, " size ", s.size(), " n_g in [", lo, ", ", hi, "]");
+        ++attempted;
+        const auto gr = tjepa::grow_grouping(s, lo, hi);
+        ++grouped;
+        int total = 0;
+        for (int g = 0; g < gr.num_groups(); ++g) {
+          CHECK(gr.sizes[g] >= lo);
+          CHECK(gr.sizes[g] <= hi);
+          const auto mem = gr.members_of(g);
+          CHECK(tjepa::induces_connected(s.graph, std::vector<int>(mem.begin(), mem.end())));
+          total += gr.sizes[g];
+        }
+        CHECK(total == s.size());
+      }
+    }
+    CHECK(grouped == attempted);
+  }
+
+  TEST_CASE("groupings reject what they cannot cover") {
+    tjepa::LayoutBuilder b;
+    const int p = b.add_part("p"), q = b.add_part("tiny");
+    b.add_grid_pad("seven", p, tjepa::GridPad(1, 7), {0, 0});
+    b.add_grid_pad("three", q, tjepa::GridPad(1, 3), {0, 10});
+    const auto s = b.build();
+    CHECK_THROWS_WITH_AS(tjepa::grow_grouping(s, 4, 5), doctest::Contains("cannot cover part 'p' of 7 taxels"),
+                         tjepa::ConfigError);
+    CHECK_THROWS_WITH_AS(tjepa::grow_grouping(s, 2, 2), doctest::Contains("cannot cover"), tjepa::ConfigError);
+    CHECK_NOTHROW(tjepa::grow_grouping(s, 3, 4));
+    CHECK_THROWS_AS(tjepa::grow_grouping(s, 5, 4), tjepa::ConfigError);
+    // A star of three 2-taxel arms: 7 = 3 + 4 taxels, but no cut into connected groups of 3-4.
+    {
+      const std::vector<tjepa::Edge> e = {{0, 1, 1.0}, {1, 2, 1.0}, {0, 3, 1.0}, {3, 4, 1.0}, {0, 5, 1.0}, {5, 6, 1.0}};
+      tjepa::TaxelLayout star;
+      star.ids = {0, 1, 2, 3, 4, 5, 6};
+      star.part.assign(7, 0);
+      star.group.assign(7, 0);
+      star.part_names = {"star"};
+      star.group_names = {"all"};
+      star.group_part = {0};
+      const auto sk = tjepa::make_skin(star, e);
+      CHECK_THROWS_WITH_AS(tjepa::grow_grouping(sk, 3, 4), doctest::Contains("could not cut part 'star'"),
+                           tjepa::DataError);
+      CHECK(tjepa::grow_grouping(sk, 2, 3).num_groups() == 3);  // two arms, and the centre with the third
+    }
+    CHECK_THROWS_WITH_AS(tjepa::block_grouping(s), doctest::Contains("expected even sides"), tjepa::DataError);
+
+    // make_grouping: every taxel exactly once, connected, inside one part.
+    CHECK_THROWS_WITH_AS(tjepa::make_grouping(s, {{0, 1, 2, 3, 4, 5, 6}, {7, 8}}), doctest::Contains("taxel 9 is in no group"),
+                         tjepa::DataError);
+    CHECK_THROWS_WITH_AS(tjepa::make_grouping(s, {{0, 1, 2, 3, 4, 5, 6}, {7, 8, 9, 6}}),
+                         doctest::Contains("is in groups 0 and 1"), tjepa::DataError);
+    CHECK_THROWS_WITH_AS(tjepa::make_grouping(s, {{0, 2}, {1, 3, 4, 5, 6}, {7, 8, 9}}),
+                         doctest::Contains("not connected"), tjepa::DataError);
+    CHECK_THROWS_WITH_AS(tjepa::make_grouping(s, {{0, 1, 2, 3, 4, 5}, {6, 7, 8, 9}}), doctest::Contains("spans parts"),
+                         tjepa::DataError);
+    const auto ok = tjepa::make_grouping(s, {{0, 1, 2, 3}, {4, 5, 6}, {7, 8, 9}}, tjepa::GroupWeights::centroid_distance);
+    CHECK(ok.graph.num_edges() == 1u);
+    CHECK(ok.graph.weights(0)[0] == doctest::Approx(3.5));  // centroid x 1.5 vs 5 at 1 mm pitch
   }
 }

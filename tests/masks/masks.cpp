@@ -99,7 +99,7 @@ TEST_SUITE("masks") {
     CHECK(shapes.size() == 6);  // C(4, 2)
   }
 
-  TEST_CASE("global masks: stratified covers every group, then uniform; t < G picks t groups") {
+  TEST_CASE("global masks: stratified covers every group then fills uniformly and t < G picks t groups") {
     GridSpec s{12, 12, 3, 4, 1.0};  // 4 x 3 = 12 groups of 12 tokens
     auto g = grid_graph(s);
     const auto pieces = tjepa::part_pieces(g);
@@ -147,7 +147,7 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("contexts: uniform drops the excluded tokens; local grows one region per part") {
+  TEST_CASE("contexts: uniform drops the excluded tokens and local grows one region per part") {
     auto g = two_part_graph({6, 6, 3, 3, 1.0}, {4, 6, 2, 3, 1.0});  // 36 + 24 tokens
     const auto pieces = tjepa::part_pieces(g);
     std::vector<tjepa::MaskDomain> parts{{g, pieces, 0}, {g, pieces, 1}};
@@ -176,9 +176,9 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("collator on a one-part grid: shapes, sizes, disjointness, minimum, coverage") {
+  TEST_CASE("collator on a one-part grid: shapes and sizes and disjointness and minimum and coverage") {
     GridSpec s{20, 20, 5, 5, 1.0};  // 400 tokens, 16 groups
-    tjepa::MaskConfig cfg;
+    auto cfg = one_thread();
     tjepa::MaskCollator col(grid_graph(s), cfg);
     CHECK(col.num_targets() == 4);
     CHECK(col.min_context() == 60);  // max(32, ceil(0.15 * 400))
@@ -209,7 +209,7 @@ TEST_SUITE("masks") {
 
   TEST_CASE("collator on a two-part graph: per-part targets of floor(n_part * s) tokens") {
     auto g = two_part_graph({16, 16, 4, 4, 1.0}, {12, 10, 4, 5, 1.0});  // 256 + 120
-    tjepa::MaskCollator col(g);
+    tjepa::MaskCollator col(g, one_thread());
     REQUIRE(col.per_part());
     REQUIRE(col.num_targets() == 4);
     std::vector<int> hits(g.num_nodes(), 0);
@@ -239,7 +239,7 @@ TEST_SUITE("masks") {
     for (int v = 0; v < g.num_nodes(); ++v) CHECK(hits[v] > 0);
   }
 
-  TEST_CASE("ablations: 4 local, 4 global, uniform global, local context, whole-sensor targets") {
+  TEST_CASE("ablations on a two-part graph: 4 local or 4 global or local context or whole-sensor targets") {
     auto g = two_part_graph({16, 16, 4, 4, 1.0}, {14, 14, 7, 7, 1.0});  // 256 + 196
     struct Case {
       int nl, ng;
@@ -255,7 +255,7 @@ TEST_SUITE("masks") {
         {2, 2, tjepa::PartTargets::automatic, tjepa::ContextSampling::local, tjepa::GlobalSampling::stratified},
     };
     for (const Case& k : cases) {
-      tjepa::MaskConfig cfg;
+      auto cfg = one_thread();
       cfg.num_local = k.nl;
       cfg.num_global = k.ng;
       cfg.part_targets = k.pt;
@@ -274,7 +274,7 @@ TEST_SUITE("masks") {
     }
   }
 
-  TEST_CASE("determinism: same seed same masks, independent of the thread count") {
+  TEST_CASE("determinism: same seed gives the same masks whatever the thread count") {
     auto g = two_part_graph({16, 16, 4, 4, 1.0}, {12, 10, 4, 5, 1.0});
     tjepa::MaskConfig one, four;
     one.num_threads = 1;
@@ -300,9 +300,9 @@ TEST_SUITE("masks") {
     CHECK(full.targets[0].indices == again.targets[0].indices);
   }
 
-  TEST_CASE("I-JEPA blocks on a full grid: exact h x w, reach the last row and column") {
+  TEST_CASE("I-JEPA blocks on a full grid are exact h x w rectangles that reach the last row and column") {
     GridSpec s{14, 14, 7, 7, 1.0};
-    tjepa::MaskConfig cfg;
+    auto cfg = one_thread();
     cfg.scheme = tjepa::TargetScheme::ijepa_blocks;
     cfg.min_context_tokens = 10;
     cfg.min_context_ratio = 0.0;
@@ -363,7 +363,7 @@ TEST_SUITE("masks") {
     CHECK(gp.cols == 11);
     CHECK(gp.row[30 + 7] == 1);
     CHECK(gp.col[30 + 7] == 8);
-    tjepa::MaskConfig cfg;
+    auto cfg = one_thread();
     cfg.scheme = tjepa::TargetScheme::ijepa_blocks;
     cfg.min_context_tokens = 5;
     cfg.min_context_ratio = 0;
@@ -374,7 +374,7 @@ TEST_SUITE("masks") {
   TEST_CASE("bad configurations throw with a message that names the problem") {
     auto g = grid_graph({20, 20, 5, 5, 1.0});
     auto make = [&](auto edit) {
-      tjepa::MaskConfig c;
+      auto c = one_thread();
       edit(c);
       return tjepa::MaskCollator(g, c);
     };
@@ -394,6 +394,10 @@ TEST_SUITE("masks") {
     CHECK_THROWS_WITH_AS(make([](auto& c) { c.min_context_tokens = 250; }),
                          doctest::Contains("fewer than its minimum 250"), CE);
     CHECK_THROWS_WITH_AS(make([](auto& c) { c.max_tries = 0; }), doctest::Contains("max_tries"), CE);
+    CHECK_THROWS_WITH_AS(make([](auto& c) { c.min_context_ratio = std::nan(""); }),
+                         doctest::Contains("min_context_ratio = nan"), CE);
+    CHECK_THROWS_WITH_AS(make([](auto& c) { c.target_ratio = {0.1, std::nan("")}; }),
+                         doctest::Contains("target_ratio"), CE);
     CHECK_THROWS_WITH_AS(make([](auto& c) { c.scheme = tjepa::TargetScheme::ijepa_blocks; }),
                          doctest::Contains("needs a grid placement"), CE);
     // Local targets larger than any connected piece.
@@ -404,7 +408,7 @@ TEST_SUITE("masks") {
     CHECK_THROWS_WITH_AS(tjepa::MaskCollator(split, c), doctest::Contains("largest connected piece"), CE);
     // A context that cannot keep its minimum once the targets are removed: fails after the
     // tries, saying why.
-    tjepa::MaskConfig tight;
+    auto tight = one_thread();
     tight.context_ratio = {0.5, 0.5};
     tight.target_ratio = {0.17, 0.18};
     tight.min_context_tokens = 190;

@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <limits>
+#include <type_traits>
 #include <vector>
 
 #include <tjepa/core/random.hpp>
@@ -259,7 +262,7 @@ void check_fast_vs_ref(const Problem<T>& p, double tol) {
 }  // namespace
 
 TEST_SUITE("nn") {
-  TEST_CASE("ref attention equals a naive softmax(QK^T/sqrt(Dh))V, self and cross, masked") {
+  TEST_CASE("ref attention equals a naive softmax(QK^T/sqrt(Dh))V for self and cross attention with masks") {
     for (bool masked : {false, true}) {
       auto self = make_problem<double>(13, 13, 3, 8, true, masked, 1);
       tjepa::AttentionWorkspace<double> ws;
@@ -272,7 +275,7 @@ TEST_SUITE("nn") {
     }
   }
 
-  TEST_CASE_TEMPLATE("attention with every key masked gives 0 output, +inf lse and 0 gradient", T, float, double) {
+  TEST_CASE_TEMPLATE("attention with every key masked gives 0 output and +inf lse and 0 gradient", T, float, double) {
     for (Impl impl : {Impl::ref, Impl::fast}) {
       auto p = make_problem<T>(7, 9, 2, 5, false, true, 3);
       std::fill(p.valid.begin(), p.valid.end(), std::uint8_t{0});
@@ -314,7 +317,7 @@ TEST_SUITE("nn") {
     }
   }
 
-  TEST_CASE("attention rejects bad shapes and null buffers, naming the argument") {
+  TEST_CASE("attention rejects bad shapes and null buffers and names the argument") {
     std::vector<float> b(64, 0.0f), lse(8, 0.0f);
     tjepa::AttentionWorkspace<float> ws;
     AttentionShape s{2, 2, 2, 4, 8, 8, 8, 8};
@@ -332,11 +335,11 @@ TEST_SUITE("nn") {
                          doctest::Contains("lse is null"), tjepa::ShapeError);
   }
 
-  TEST_CASE_TEMPLATE("fast attention matches the reference on awkward sizes, strides, masks, cross", T, float, double) {
+  TEST_CASE_TEMPLATE("fast attention matches the reference on awkward sizes and strides with masks and cross attention", T, float, double) {
     const double tol = std::is_same_v<T, float> ? 2e-5 : 1e-12;
     std::uint64_t seed = 100;
     for (int L : {1, 7, 17, 131}) {
-      for (int Dh : {64, 13}) {
+      for (int Dh : {64, 13, 80}) {
         for (bool masked : {false, true}) {
           CAPTURE(L);
           CAPTURE(Dh);
@@ -361,6 +364,37 @@ TEST_SUITE("nn") {
     }
   }
 
+  TEST_CASE_TEMPLATE("vectorized exp2 is within 2 ulp of std::exp2 and flushes -inf to 0", T, float, double) {
+    using V = tjepa::detail::attn::Vec<T>;
+    constexpr int w = tjepa::detail::attn::W<T>;
+    using Bits = std::conditional_t<std::is_same_v<T, float>, std::int32_t, std::int64_t>;
+    const double lo = std::is_same_v<T, float> ? -125.0 : -1020.0;
+    tjepa::Rng rng(500);
+    std::int64_t worst = 0;
+    alignas(64) T x[w], y[w];
+    for (int it = 0; it < 20000; ++it) {
+      for (int i = 0; i < w; ++i) {
+        // Half the arguments in the softmax's busy range [-30, 0], half anywhere down to lo.
+        x[i] = static_cast<T>(it % 2 == 0 ? rng.uniform(-30.0, 0.0) : rng.uniform(lo, 0.0));
+      }
+      tjepa::detail::attn::exp2(V::load_aligned(x)).store_aligned(y);
+      for (int i = 0; i < w; ++i) {
+        const T want = static_cast<T>(std::exp2(static_cast<long double>(x[i])));
+        Bits a, b;
+        std::memcpy(&a, &y[i], sizeof(T));
+        std::memcpy(&b, &want, sizeof(T));
+        worst = std::max<std::int64_t>(worst, a > b ? a - b : b - a);
+      }
+    }
+    CHECK(worst <= 2);
+    for (int i = 0; i < w; ++i) x[i] = i % 2 == 0 ? -std::numeric_limits<T>::infinity() : T(-5000);
+    tjepa::detail::attn::exp2(V::load_aligned(x)).store_aligned(y);
+    for (int i = 0; i < w; ++i) CHECK(y[i] == T(0));
+    for (int i = 0; i < w; ++i) x[i] = T(0);
+    tjepa::detail::attn::exp2(V::load_aligned(x)).store_aligned(y);
+    for (int i = 0; i < w; ++i) CHECK(y[i] == T(1));
+  }
+
   TEST_CASE("attention workspace never reallocates for the same or a smaller shape") {
     auto big = make_problem<float>(131, 131, 3, 64, true, true, 400);
     auto small = make_problem<float>(70, 70, 3, 64, true, false, 401);
@@ -368,12 +402,14 @@ TEST_SUITE("nn") {
     tjepa::AttentionWorkspace<float> ws;
     ws.reserve(big.s);
     const float* data = ws.buffer.data();
+    const int* keys = ws.keys.data();
     const std::size_t cap = ws.capacity();
     for (const auto* p : {&big, &small, &cross}) {
       std::vector<float> out, lse;
       forward(Impl::fast, *p, out, lse, ws);
       backward(Impl::fast, *p, out, lse, ws);
       CHECK(ws.buffer.data() == data);
+      CHECK(ws.keys.data() == keys);
       CHECK(ws.capacity() == cap);
     }
   }

@@ -6,12 +6,107 @@
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
+// The replaced operator delete calls free on what the replaced operator new got from malloc.
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 #endif
 #include <doctest/doctest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
 
 #include <tjepa/tjepa.hpp>
 
 #include "gradcheck.hpp"
+
+// Counting allocator for the allocation-free inference test. Global operator new is replaced for
+// the whole test binary (it only forwards to malloc). Eigen and xsimd allocate with malloc, not
+// operator new, so without a sanitizer (which owns malloc) malloc itself is interposed too.
+namespace {
+std::atomic<long> g_allocations{0};
+std::atomic<bool> g_counting{false};
+void note_allocation() {
+  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
+}
+void* checked(void* p) {
+  if (!p) throw std::bad_alloc();
+  return p;
+}
+}  // namespace
+
+void* operator new(std::size_t n) {
+  note_allocation();
+  return checked(std::malloc(n ? n : 1));
+}
+void* operator new[](std::size_t n) {
+  note_allocation();
+  return checked(std::malloc(n ? n : 1));
+}
+void* operator new(std::size_t n, std::align_val_t a) {
+  note_allocation();
+  const auto al = static_cast<std::size_t>(a);
+  return checked(std::aligned_alloc(al, (n + al - 1) / al * al));
+}
+void* operator new[](std::size_t n, std::align_val_t a) { return operator new(n, a); }
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define TJEPA_TEST_ASAN 1
+#endif
+#endif
+#if defined(__SANITIZE_ADDRESS__)
+#define TJEPA_TEST_ASAN 1
+#endif
+#if defined(__GLIBC__) && !defined(TJEPA_TEST_ASAN)
+#define TJEPA_TEST_COUNTS_MALLOC 1
+extern "C" {
+void* __libc_malloc(std::size_t);
+void* __libc_calloc(std::size_t, std::size_t);
+void* __libc_realloc(void*, std::size_t);
+void* __libc_memalign(std::size_t, std::size_t);
+void* malloc(std::size_t n) noexcept {
+  note_allocation();
+  return __libc_malloc(n);
+}
+void* calloc(std::size_t n, std::size_t size) noexcept {
+  note_allocation();
+  return __libc_calloc(n, size);
+}
+void* realloc(void* p, std::size_t n) noexcept {
+  note_allocation();
+  return __libc_realloc(p, n);
+}
+void* aligned_alloc(std::size_t al, std::size_t n) noexcept {
+  note_allocation();
+  return __libc_memalign(al, n);
+}
+int posix_memalign(void** p, std::size_t al, std::size_t n) noexcept {
+  note_allocation();
+  *p = __libc_memalign(al, n);
+  return *p ? 0 : ENOMEM;
+}
+}
+#endif
+
+namespace {
+// Heap allocations made while f runs (all threads).
+template <class F>
+long count_allocations(F&& f) {
+  g_allocations = 0;
+  g_counting = true;
+  f();
+  g_counting = false;
+  return g_allocations.load();
+}
+}  // namespace
 
 using namespace tjepa;
 using test::gradient_error;
@@ -82,4 +177,301 @@ TEST_SUITE("nn") {
     CHECK(gradient_error(pos.data(), dpos.data(), pos.size(), loss) < grad_tolerance);
     test::check_param_gradients(ps, loss);
   }
+
+  TEST_CASE("BlockStack keeping only the last rows: same outputs as the full stack, gradients") {
+    ParamSet<double> ps;
+    const BlockConfig bc{12, 3, 2.0, true, false, true, 1e-6};
+    auto stack = BlockStack::add(ps, "blocks.", 2, bc);
+    ps.allocate();
+    test::randomize(ps, 15);
+    const int B = 3, L = 6, kf = 2, d = 12, Lk = L - kf;
+    Rng rng(16);
+    auto x = test::normal_vector(std::size_t(B) * L * d, rng);
+    std::vector<std::uint8_t> valid(std::size_t(B) * L, 1);
+    valid[1] = valid[L + 4] = 0;
+    DropPath dp;
+    SUBCASE("no drop-path") {}
+    SUBCASE("drop-path 0.5") { dp = {0.5, 17}; }
+    Workspace<double> ws;
+    std::vector<double> full(x.size()), kept(std::size_t(B) * Lk * d);
+    stack.forward(ps, x.data(), full.data(), B, L, valid.data(), dp, nullptr, ws);
+    stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, nullptr, ws, kf);
+    double diff = 0;
+    for (int b = 0; b < B; ++b)
+      for (std::size_t i = 0; i < std::size_t(Lk) * d; ++i)
+        diff = std::max(diff, std::abs(kept[std::size_t(b) * Lk * d + i] - full[(std::size_t(b) * L + kf) * d + i]));
+    CHECK(diff < 1e-12);
+    auto w = test::normal_vector(kept.size(), rng);
+    auto loss = [&] {
+      stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, nullptr, ws, kf);
+      return test::dot(w.data(), kept.data(), kept.size());
+    };
+    BlockStackCache<double> cache;
+    ps.zero_grad();
+    stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, &cache, ws, kf);
+    CHECK(test::dot(w.data(), kept.data(), kept.size()) == doctest::Approx(loss()).epsilon(1e-13));
+    std::vector<double> dx(x.size(), 0.0);
+    std::copy(w.begin(), w.end(), dx.begin());
+    stack.backward(ps, dx.data(), cache, ws);
+    CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
+    test::check_param_gradients(ps, loss);
+  }
+
+  TEST_CASE("Encoder and Predictor backward accumulate: two passes give twice the gradient") {
+    ParamSet<double> ps;
+    Encoder enc(ps, EncoderConfig{6, 12, 2, 3, 4.0, true, 1e-6});
+    Predictor pred(ps, PredictorConfig{12, 12, 1, 3, 4.0, false, 1e-6});
+    ps.allocate();
+    test::randomize(ps, 5);
+    const int B = 2, N = 6, K = 4, t = 2, d = 12;
+    Rng rng(6);
+    auto tokens = test::normal_vector(std::size_t(B) * N * d, rng);
+    auto w = test::normal_vector(std::size_t(B) * t * d, rng);
+    const std::vector<int> ctx{0, 1, 3, 5, 2, 3, 4, 5}, tg{2, 4, 0, 1};
+    std::vector<double> z(std::size_t(B) * K * d), out(w.size());
+    Workspace<double> ws;
+    EncoderCache<double> ec;
+    PredictorCache<double> pc;
+    auto step = [&](std::vector<double>& dtokens) {
+      std::vector<double> dz(z.size(), 0.0);
+      enc.forward(ps, tokens.data(), B, ctx.data(), K, z.data(), &ec, ws, {DropPath{0.3, 7}, nullptr});
+      pred.forward(ps, z.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), B, t, out.data(), &pc, ws);
+      pred.backward(ps, w.data(), dz.data(), ps.grad(enc.pos_embed()), pc, ws);
+      enc.backward(ps, dz.data(), dtokens.data(), ec, ws);
+    };
+    std::vector<double> d1(tokens.size(), 0.0), d2(tokens.size(), 0.0);
+    ps.zero_grad();
+    step(d1);
+    const std::vector<double> g1(ps.grads().begin(), ps.grads().end());
+    ps.zero_grad();
+    step(d2);
+    step(d2);
+    double worst = 0, scale = 0;
+    for (std::size_t i = 0; i < g1.size(); ++i) {
+      worst = std::max(worst, std::abs(ps.grads()[i] - 2 * g1[i]));
+      scale = std::max(scale, std::abs(g1[i]));
+    }
+    for (std::size_t i = 0; i < d1.size(); ++i) worst = std::max(worst, std::abs(d2[i] - 2 * d1[i]));
+    CHECK(scale > 0);
+    CHECK(worst <= 1e-13 * scale);
+  }
+
+  TEST_CASE("SelfAttention with a key padding mask, Mlp: gradients of inputs and parameters") {
+    ParamSet<double> ps;
+    const int B = 2, L = 5, d = 12;
+    auto attn = SelfAttention::add(ps, "attn", d, 3, true, true);
+    auto mlp = Mlp::add(ps, "mlp", d, 20, true, 7);
+    ps.allocate();
+    test::randomize(ps, 8);
+    Rng rng(9);
+    auto x = test::normal_vector(std::size_t(B) * L * d, rng);
+    const std::vector<std::uint8_t> valid{1, 0, 1, 1, 0, 1, 1, 1, 1, 0};
+    Workspace<double> ws;
+    std::vector<double> qkv(std::size_t(B) * L * 3 * d), att(std::size_t(B) * L * d), lse(std::size_t(B) * 3 * L);
+    SUBCASE("attention") {
+      auto w = test::normal_vector(std::size_t(B) * L * d, rng);
+      std::vector<double> y(w.size());
+      auto loss = [&] {
+        attn.forward(ps, x.data(), B, L, valid.data(), qkv.data(), att.data(), static_cast<double*>(nullptr),
+                     y.data(), false, ws);
+        return test::dot(w.data(), y.data(), y.size());
+      };
+      ps.zero_grad();
+      attn.forward(ps, x.data(), B, L, valid.data(), qkv.data(), att.data(), lse.data(), y.data(), false, ws);
+      std::vector<double> dx(x.size(), 0.0), dqkv(qkv.size()), datt(att.size());
+      attn.backward(ps, w.data(), x.data(), B, L, valid.data(), qkv.data(), att.data(), lse.data(), dqkv.data(),
+                    datt.data(), dx.data(), ws);
+      CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
+      // A padded token is never attended to: changing it changes only its own output row.
+      loss();
+      const std::vector<double> before = y;
+      x[std::size_t(1) * d + 2] += 1.0;
+      loss();
+      x[std::size_t(1) * d + 2] -= 1.0;
+      double other = 0, own = 0;
+      for (std::size_t i = 0; i < y.size(); ++i)
+        (i / d == 1 ? own : other) = std::max(i / d == 1 ? own : other, std::abs(y[i] - before[i]));
+      CHECK(other < 1e-14);
+      CHECK(own > 1e-6);
+      test::check_param_gradients(ps, loss);
+    }
+    SUBCASE("batch 1, long sequence: query blocks over threads equal the reference kernel") {
+      const int L1 = 100;
+      auto x1 = test::normal_vector(std::size_t(L1) * d, rng);
+      std::vector<double> qkv1(std::size_t(L1) * 3 * d), att1(std::size_t(L1) * d), y1(att1.size());
+      std::vector<double> ref_att(att1.size()), ref_lse(std::size_t(3) * L1), lse1(ref_lse.size());
+      attn.forward(ps, x1.data(), 1, L1, nullptr, qkv1.data(), att1.data(), lse1.data(), y1.data(), false, ws);
+      ref::attention_forward(AttentionShape::fused_self(L1, 3, d / 3), qkv1.data(), qkv1.data() + d,
+                             qkv1.data() + 2 * d, nullptr, ref_att.data(), ref_lse.data());
+      double diff = 0;
+      for (std::size_t i = 0; i < att1.size(); ++i) diff = std::max(diff, std::abs(att1[i] - ref_att[i]));
+      for (std::size_t i = 0; i < lse1.size(); ++i) diff = std::max(diff, std::abs(lse1[i] - ref_lse[i]));
+      CHECK(diff < 1e-12);
+    }
+    SUBCASE("mlp") {
+      const int M = B * L;
+      auto w = test::normal_vector(std::size_t(M) * 7, rng);
+      std::vector<double> y(w.size()), hp(std::size_t(M) * 20), h(hp.size()), dh(hp.size());
+      auto loss = [&] {
+        mlp.forward(ps, x.data(), hp.data(), h.data(), y.data(), M, false);
+        return test::dot(w.data(), y.data(), y.size());
+      };
+      ps.zero_grad();
+      loss();
+      std::vector<double> dx(x.size(), 0.0);
+      mlp.backward(ps, w.data(), x.data(), hp.data(), h.data(), dh.data(), dx.data(), M);
+      CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
+      test::check_param_gradients(ps, loss);
+    }
+  }
+
+  TEST_CASE("Tokenizer, per taxel and grouped with padding: gradients of inputs and parameters") {
+    ParamSet<double> ps;
+    const int B = 2, d = 12;
+    Tokenizer tok;
+    int in_used = 0;
+    SUBCASE("per taxel") {
+      tok = Tokenizer::per_taxel(ps, 5, 6, d);
+      CHECK(ps.contains("patch_embed.proj.weight"));
+      CHECK(ps.contains("patch_embed.norm.bias"));
+    }
+    SUBCASE("grouped") {
+      tok = Tokenizer::grouped(ps, {4, 5, 4, 4, 5}, 3, d);
+      CHECK(ps.infos()[ps.id("tokenizer.direct4.0.weight").index].shape == std::vector<std::int64_t>{12, 12});
+      CHECK(ps.infos()[ps.id("tokenizer.direct5.0.weight").index].shape == std::vector<std::int64_t>{12, 15});
+      CHECK(ps.contains("tokenizer.direct5.1.weight"));
+      CHECK(tok.width == 15);
+      in_used = 12;  // token 0 has 4 members: columns 12..14 are padding
+    }
+    ps.allocate();
+    test::randomize(ps, 10);
+    Rng rng(11);
+    const int G = tok.num_tokens;
+    auto x = test::normal_vector(std::size_t(B) * G * tok.width, rng);
+    auto w = test::normal_vector(std::size_t(B) * G * d, rng);
+    std::vector<double> y(w.size());
+    Workspace<double> ws;
+    auto loss = [&] {
+      tok.forward(ps, x.data(), B, y.data(), nullptr, ws);
+      return test::dot(w.data(), y.data(), y.size());
+    };
+    TokenizerCache<double> cache;
+    ps.zero_grad();
+    tok.forward(ps, x.data(), B, y.data(), &cache, ws);
+    std::vector<double> dx(x.size(), 0.0);
+    tok.backward(ps, w.data(), dx.data(), cache, ws);
+    CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
+    if (in_used > 0) {
+      const double before = loss();
+      x[std::size_t(in_used) + 1] += 5.0;  // a padding value of token 0
+      CHECK(loss() == before);
+      CHECK(dx[std::size_t(in_used) + 1] == 0.0);
+    }
+    test::check_param_gradients(ps, loss);
+  }
+
+  TEST_CASE("AttentiveProbe with padded tokens: gradients of inputs and parameters") {
+    ParamSet<double> ps;
+    AttentiveProbe probe(ps, ProbeConfig{12, 3, 2.0, 10, 4, 1e-6});
+    ps.allocate();
+    test::randomize(ps, 12);
+    CHECK(ps.contains("probe.query_tokens"));
+    CHECK(ps.contains("probe.cross_attention_block.xattn.kv.weight"));
+    CHECK(ps.contains("probe.head.fc2.bias"));
+    const int B = 3, L = 6, d = 12;
+    Rng rng(13);
+    auto x = test::normal_vector(std::size_t(B) * L * d, rng);
+    std::vector<std::uint8_t> valid(std::size_t(B) * L, 1);
+    valid[2] = valid[L + 5] = 0;
+    auto w = test::normal_vector(std::size_t(B) * 4, rng);
+    std::vector<double> y(w.size());
+    Workspace<double> ws;
+    auto loss = [&] {
+      probe.forward(ps, x.data(), B, L, valid.data(), y.data(), nullptr, ws);
+      return test::dot(w.data(), y.data(), y.size());
+    };
+    ProbeCache<double> cache;
+    ps.zero_grad();
+    probe.forward(ps, x.data(), B, L, valid.data(), y.data(), &cache, ws);
+    CHECK(test::dot(w.data(), y.data(), y.size()) == doctest::Approx(loss()).epsilon(1e-13));
+    std::vector<double> dx(x.size(), 0.0);
+    probe.backward(ps, w.data(), dx.data(), cache, ws);
+    CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
+    for (int c = 0; c < d; ++c) CHECK(dx[std::size_t(2) * d + c] == 0.0);  // a padded token
+    test::check_param_gradients(ps, loss);
+  }
+
+  TEST_CASE("init_params: REFERENCE §4 values, deterministic from the seed") {
+    ParamSet<float> a, b;
+    Encoder ea(a, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});
+    Encoder eb(b, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});
+    Predictor pa(a, PredictorConfig{24, 24, 1, 3, 4.0, false, 1e-6});
+    Predictor pb(b, PredictorConfig{24, 24, 1, 3, 4.0, false, 1e-6});
+    a.allocate();
+    b.allocate();
+    CHECK(a.same_layout(b));
+    init_params(a, 42);
+    init_params(b, 42);
+    CHECK(std::equal(a.values().begin(), a.values().end(), b.values().begin()));
+    init_params(b, 43);
+    CHECK_FALSE(std::equal(a.values().begin(), a.values().end(), b.values().begin()));
+    auto v = [&](const char* name) { return a.value_span(a.id(name)); };
+    for (float x : v("blocks.0.norm1.weight")) CHECK(x == 1.0f);
+    for (float x : v("blocks.0.attn.qkv.bias")) CHECK(x == 0.0f);
+    for (float x : v("predictor.mask_token")) CHECK(x == 0.0f);
+    double s = 0, s2 = 0, mx = 0;
+    for (float x : v("blocks.1.mlp.fc1.weight")) {
+      s += x;
+      s2 += double(x) * x;
+      mx = std::max(mx, double(std::abs(x)));
+    }
+    const double n = double(v("blocks.1.mlp.fc1.weight").size());
+    CHECK(std::abs(s / n) < 0.003);
+    CHECK(std::sqrt(s2 / n) == doctest::Approx(0.02).epsilon(0.05));
+    CHECK(mx <= 2.0);
+    // Weight decay groups: 2-D weights, position table and mask token; not biases or norms.
+    CHECK(a.infos()[a.id("pos_embed").index].decay);
+    CHECK(a.infos()[a.id("predictor.mask_token").index].decay);
+    CHECK_FALSE(a.infos()[a.id("norm.weight").index].decay);
+  }
+
+  TEST_CASE("Inference after warm-up makes no heap allocation (counting allocator)") {
+    ParamSet<float> ps;
+    const int N = 40, d = 48, B = 2, K = 23, t = 7;
+    Tokenizer tok = Tokenizer::per_taxel(ps, N, 30, d);
+    Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
+    Predictor pred(ps, PredictorConfig{d, d, 2, 3, 4.0, false, 1e-6});
+    AttentiveProbe probe(ps, ProbeConfig{d, 3, 4.0, 32, 3, 1e-6});
+    ps.allocate();
+    init_params(ps, 1);
+    Rng rng(14);
+    std::vector<float> x(std::size_t(B) * N * 30), tokens(std::size_t(B) * N * d), z(std::size_t(B) * N * d);
+    test::fill_normal(x, rng);
+    std::vector<int> ctx(std::size_t(B) * K), tg(std::size_t(2 * B) * t);
+    for (std::size_t i = 0; i < ctx.size(); ++i) ctx[i] = int((i * 7) % N);
+    for (std::size_t i = 0; i < tg.size(); ++i) tg[i] = int((i * 5 + 3) % N);
+    std::vector<float> zc(std::size_t(B) * K * d), out(std::size_t(2 * B) * t * d), y(std::size_t(B) * 3);
+    Workspace<float> ws;
+    auto run = [&] {
+      tok.forward(ps, x.data(), B, tokens.data(), nullptr, ws);
+      enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, ws);            // target encoder
+      enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), nullptr, ws);        // context
+      pred.forward(ps, zc.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), 2 * B, t, out.data(), nullptr, ws);
+      probe.forward(ps, z.data(), B, N, nullptr, y.data(), nullptr, ws);
+    };
+    run();
+    const std::vector<float> first = out;
+    const long n = count_allocations(run);
+#ifdef TJEPA_TEST_COUNTS_MALLOC
+    MESSAGE("counted operator new and malloc");
+#else
+    MESSAGE("counted operator new only (malloc belongs to the sanitizer)");
+#endif
+    CHECK(n == 0);
+    CHECK(out == first);
+    // The counter is live: a fresh workspace allocates.
+    Workspace<float> fresh;
+    CHECK(count_allocations([&] { enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, fresh); }) > 0);
+  }
 }
+

@@ -143,7 +143,7 @@ TEST_SUITE("train") {
     }
   }
 
-  TEST_CASE("gradient clipping: the joint norm, the PyTorch coefficient, thread independence") {
+  TEST_CASE("gradient clipping: joint norm and PyTorch coefficient and thread independence") {
     auto a = make_params<double>(1);
     auto b = make_params<double>(2, 4);
     fill_grads(a, 3, 2.0);
@@ -386,7 +386,7 @@ TEST_SUITE("train") {
                          tjepa::FileError);
   }
 
-  TEST_CASE("a checkpoint restores models, optimizer moments, step, RNG, config and statistics") {
+  TEST_CASE("a checkpoint restores models and optimizer moments and step and RNG and config and statistics") {
     TempDir dir("ckpt");
     auto enc = make_params<float>(21), tgt = make_params<float>(22), pred = make_params<float>(23, 4);
     tjepa::AdamW<float> opt({{"context_encoder.", &enc}, {"predictor.", &pred}});
@@ -508,7 +508,7 @@ TEST_SUITE("train") {
                     tjepa::FileError);
   }
 
-  TEST_CASE("the encoder-only export holds plain state-dict names, config and statistics") {
+  TEST_CASE("the encoder-only export holds plain state-dict names and config and statistics") {
     TempDir dir("export");
     auto tgt = make_params<float>(31);
     tjepa::CheckpointState st;

@@ -27,7 +27,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
-#include "tjepa/data/detail/atomic_write.hpp"
+#include "tjepa/core/atomic_write.hpp"
 #include "tjepa/data/detail/float_storage.hpp"
 #include "tjepa/data/detail/mapped_file.hpp"
 #include "tjepa/data/recording.hpp"
@@ -121,7 +121,9 @@ class NpyHeaderParser {
 
  private:
   [[noreturn]] void error(const std::string& what) const {
-    fail<FileError>(file_, ": malformed .npy header: ", what, " (at character ", pos_, " of \"", text_, "\")");
+    const std::string_view shown = text_.substr(0, 200);
+    fail<FileError>(file_, ": malformed .npy header: ", what, " (at character ", pos_, " of \"", shown,
+                    text_.size() > shown.size() ? "..." : "", "\")");
   }
   char peek() const { return pos_ < text_.size() ? text_[pos_] : '\0'; }
   bool eat(char c) {
@@ -204,13 +206,10 @@ inline NpyHeader parse_npy_header(const char* bytes, std::size_t size, const std
   require<FileError>(size >= 6 && std::memcmp(bytes, magic, 6) == 0, file,
                      ": bad magic: not a NumPy .npy file (expected the bytes \\x93NUMPY at the start)");
   require<FileError>(size >= 8, file, ": truncated header: the file ends inside the version bytes");
-  NpyHeader h;
-  h.major_version = static_cast<unsigned char>(bytes[6]);
-  h.minor_version = static_cast<unsigned char>(bytes[7]);
-  require<FileError>(h.major_version >= 1 && h.major_version <= 3 && h.minor_version == 0, file,
-                     ": unsupported .npy format version ", h.major_version, ".", h.minor_version,
-                     ", expected 1.0, 2.0 or 3.0");
-  const std::size_t len_bytes = h.major_version == 1 ? 2 : 4;
+  const int major = static_cast<unsigned char>(bytes[6]), minor = static_cast<unsigned char>(bytes[7]);
+  require<FileError>(major >= 1 && major <= 3 && minor == 0, file, ": unsupported .npy format version ", major, ".",
+                     minor, ", expected 1.0, 2.0 or 3.0");
+  const std::size_t len_bytes = major == 1 ? 2 : 4;
   require<FileError>(size >= 8 + len_bytes, file, ": truncated header: the file ends inside the header length");
   std::size_t header_len = 0;
   for (std::size_t i = 0; i < len_bytes; ++i)
@@ -218,12 +217,9 @@ inline NpyHeader parse_npy_header(const char* bytes, std::size_t size, const std
   const std::size_t prefix = 8 + len_bytes;
   require<FileError>(header_len <= size - prefix, file, ": truncated header: it claims ", header_len,
                      " bytes but the file has only ", size - prefix, " after the header length");
-  h = [&] {
-    NpyHeader parsed = detail::NpyHeaderParser(std::string_view(bytes + prefix, header_len), file).parse();
-    parsed.major_version = h.major_version;
-    parsed.minor_version = h.minor_version;
-    return parsed;
-  }();
+  NpyHeader h = detail::NpyHeaderParser(std::string_view(bytes + prefix, header_len), file).parse();
+  h.major_version = major;
+  h.minor_version = minor;
   h.data_offset = prefix + header_len;
   // numel·item_size without overflow.
   std::size_t need = h.item_size();
@@ -354,7 +350,7 @@ void write_npy(const std::filesystem::path& path, std::span<const T> values, std
   const std::size_t total = (prefix + dict.size() + 1 + 63) / 64 * 64;
   dict.append(total - prefix - dict.size() - 1, ' ');
   dict.push_back('\n');
-  detail::write_file_atomically(path, [&](std::ostream& out) {
+  write_file_atomic_with(path, [&](std::ostream& out) {
     const char magic[8] = {'\x93', 'N', 'U', 'M', 'P', 'Y', static_cast<char>(v2 ? 2 : 1), 0};
     out.write(magic, 8);
     const std::size_t len = dict.size();

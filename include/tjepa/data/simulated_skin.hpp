@@ -5,13 +5,13 @@
 // Model, per contact event (one at a time; events follow each other with free gaps):
 //   * An indenter of one of four shapes lands on a random pad at a random point (a random taxel of
 //     the pad, jittered by up to half the pad's pitch):
-//       sphere       radius R ∈ [3, 12] mm: Hertz contact, radius a = (3·F·R / 4E*)^(1/3) grows with
+//       sphere       radius R ∈ [4, 15] mm: Hertz contact, radius a = (3·F·R / 4E*)^(1/3) grows with
 //                    force; pressure variance a²/5 per axis (that of √(1 − r²/a²)).
-//       flat         cylinder punch of radius R ∈ [1.5, 6] mm: contact radius R at any force, pressure
+//       flat         cylinder punch of radius R ∈ [3, 8] mm: contact radius R at any force, pressure
 //                    concentrated at the rim (a centre lobe plus a ring of six lobes at 0.7·R).
-//       edge         a ridge of half-length L ∈ [3, 10] mm at a random angle: five lobes along the
+//       edge         a ridge of half-length L ∈ [6, 15] mm at a random angle: five lobes along the
 //                    line, line-contact half-width b = √(4·F'·1 mm / πE*), F' = F / 2L.
-//       multi-point  three small spheres (R = 1.5 mm) at a radius s ∈ [3, 6] mm around the centre,
+//       multi-point  three small spheres (R = 1.5 mm) at a radius s ∈ [5, 9] mm around the centre,
 //                    each carrying F/3.
 //     The pressure is a mixture of 2-D Gaussian lobes in the pad's plane, so the elastomer cover
 //     (thickness h: a Gaussian blur of std h) is exact: each lobe's covariance grows by h²·I.
@@ -55,6 +55,7 @@
 #include "tjepa/core/random.hpp"
 #include "tjepa/data/labels.hpp"
 #include "tjepa/data/recording.hpp"
+#include "tjepa/layout/taxel_layout.hpp"
 
 namespace tjepa {
 
@@ -66,22 +67,16 @@ struct SkinGeometry {
   int size() const { return static_cast<int>(position.size()); }
   int num_pads() const { return pad.empty() ? 0 : *std::max_element(pad.begin(), pad.end()) + 1; }
 
-  // From any layout type with `dim` (2 or 3), `coords` ([N·dim] mm) and `group` ([N]) members,
-  // e.g. TaxelLayout.
-  template <class Layout>
-  static SkinGeometry from_layout(const Layout& layout) {
-    require<ConfigError>(layout.dim == 2 || layout.dim == 3, "SkinGeometry::from_layout: the layout has dim = ",
-                         layout.dim, "; the simulated skin needs taxel coordinates (dim 2 or 3)");
+  // From a layout with 2-D or 3-D coordinates; the pads are its groups.
+  static SkinGeometry from_layout(const TaxelLayout& layout) {
+    layout.validate();
+    require<ConfigError>(layout.has_coords(), "SkinGeometry::from_layout: the layout has no coordinates; the "
+                                              "simulated skin needs taxel positions (dim 2 or 3)");
     SkinGeometry g;
-    const std::size_t n = layout.group.size();
-    require<ShapeError>(layout.coords.size() == n * static_cast<std::size_t>(layout.dim),
-                        "SkinGeometry::from_layout: ", layout.coords.size(), " coordinates for ", n, " taxels of dim ",
-                        layout.dim);
-    g.position.resize(n);
-    for (std::size_t i = 0; i < n; ++i)
-      for (int a = 0; a < 3; ++a)
-        g.position[i][a] = a < layout.dim ? static_cast<double>(layout.coords[i * layout.dim + a]) : 0.0;
-    g.pad.assign(layout.group.begin(), layout.group.end());
+    g.position.resize(static_cast<std::size_t>(layout.size()));
+    for (int i = 0; i < layout.size(); ++i)
+      for (int a = 0; a < 3; ++a) g.position[i][a] = layout.coord(i, a);
+    g.pad = layout.group;
     return g;
   }
 };
@@ -228,6 +223,9 @@ class SimulatedSkin {
     dropout_left_.assign(n, 0);
     next_dropout_ = draw_dropout_gap();
   }
+
+  SimulatedSkin(const TaxelLayout& layout, SimConfig config = {}, std::uint64_t seed = 0)
+      : SimulatedSkin(SkinGeometry::from_layout(layout), std::move(config), seed) {}
 
   const SkinGeometry& geometry() const { return geo_; }
   const SimConfig& config() const { return cfg_; }
@@ -470,17 +468,15 @@ class SimulatedSkin {
   void sensor_frame(float* f) {
     const std::size_t n = gain_.size();
     const float noise = static_cast<float>(cfg_.noise_std);
-    if (cfg_.drift_std > 0) {
-      const double rho = std::exp(-1.0 / (cfg_.drift_time * cfg_.rate_hz));
+    // The drift is slow (seconds) against the frame rate: one Ornstein–Uhlenbeck step per
+    // drift_stride frames is indistinguishable and halves the random draws.
+    if (cfg_.drift_std > 0 && frame_++ % drift_stride == 0) {
+      const double rho = std::exp(-static_cast<double>(drift_stride) / (cfg_.drift_time * cfg_.rate_hz));
       const auto r = static_cast<float>(rho);
       const auto s = static_cast<float>(cfg_.drift_std * std::sqrt(1.0 - rho * rho));
-      for (std::size_t k = 0; k < n; ++k) {
-        drift_[k] = r * drift_[k] + s * detail::fast_normal(rng_);
-        f[k] = offset_[k] + drift_[k] + noise * detail::fast_normal(rng_);
-      }
-    } else {
-      for (std::size_t k = 0; k < n; ++k) f[k] = offset_[k] + noise * detail::fast_normal(rng_);
+      for (std::size_t k = 0; k < n; ++k) drift_[k] = r * drift_[k] + s * detail::fast_normal(rng_);
     }
+    for (std::size_t k = 0; k < n; ++k) f[k] = offset_[k] + drift_[k] + noise * detail::fast_normal(rng_);
   }
 
   // Geometric gap (in taxel-frames) to the next drop-out start.
@@ -514,7 +510,7 @@ class SimulatedSkin {
   Event draw_event() {
     Event e;
     e.shape = static_cast<IndenterShape>(rng_.below(num_indenter_shapes));
-    static constexpr double size_lo[] = {3.0, 1.5, 3.0, 3.0}, size_hi[] = {12.0, 6.0, 10.0, 6.0};
+    static constexpr double size_lo[] = {4.0, 3.0, 6.0, 5.0}, size_hi[] = {15.0, 8.0, 15.0, 9.0};
     const int s = static_cast<int>(e.shape);
     e.size = rng_.uniform(size_lo[s], size_hi[s]);
     e.orientation = rng_.uniform(0.0, std::numbers::pi);
@@ -612,6 +608,8 @@ class SimulatedSkin {
   std::vector<float> gain_;      // [N, 3]
   std::vector<float> offset_;    // [N, 3]
   std::vector<float> drift_;     // [N, 3]
+  static constexpr int drift_stride = 8;
+  std::int64_t frame_ = 0;       // frames generated so far
   std::vector<int> dropout_left_;  // [N] frames of drop-out left
   std::int64_t next_dropout_ = 0;  // taxel-frames until the next drop-out starts
   std::optional<Event> event_;

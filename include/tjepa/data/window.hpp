@@ -39,7 +39,9 @@ inline void copy_window(const Recording& rec, int start, int length, float* out)
   const std::size_t row = static_cast<std::size_t>(length) * m;
   for (int j = 0; j < length; ++j) {
     const float* f = rec.frame(start + j);
-    for (int n = 0; n < n_tax; ++n) std::copy_n(f + static_cast<std::size_t>(n) * m, m, out + n * row + j * m);
+    float* o = out + static_cast<std::size_t>(j) * m;
+    for (int n = 0; n < n_tax; ++n, f += m, o += row)
+      for (int a = 0; a < m; ++a) o[a] = f[a];
   }
 }
 

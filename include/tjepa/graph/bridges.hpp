@@ -3,6 +3,7 @@
 // groups, the k closest cross-group taxel pairs by Euclidean distance (the reference uses k = 4),
 // weighted by that distance (mm). Ties break on (taxel a, taxel b), so the result is deterministic.
 #include <algorithm>
+#include <cmath>
 #include <span>
 #include <tuple>
 #include <vector>
@@ -25,7 +26,7 @@ inline std::vector<Edge> bridge_edges(const TaxelLayout& layout, std::span<const
   std::vector<std::vector<int>> members(layout.num_groups());
   for (int i = 0; i < layout.size(); ++i) members[layout.group[i]].push_back(i);
   std::vector<Edge> out;
-  std::vector<std::tuple<double, int, int>> cand;
+  std::vector<std::tuple<double, int, int>> best;
   for (const GroupPair& gp : pairs) {
     require<ConfigError>(gp.a >= 0 && gp.a < layout.num_groups() && gp.b >= 0 &&
                              gp.b < layout.num_groups(),
@@ -39,12 +40,25 @@ inline std::vector<Edge> bridge_edges(const TaxelLayout& layout, std::span<const
     require<ConfigError>(static_cast<std::size_t>(k) <= cands, "bridge_edges: k = ", k, " is larger than the ",
                          cands, " candidate pairs between groups '", layout.group_names[gp.a], "' and '",
                          layout.group_names[gp.b], "'");
-    cand.clear();
+    // The k best (squared distance, lower taxel, higher taxel), kept sorted by insertion: the
+    // candidate lists are large (palm x pad: ~9000 pairs) and k is small.
+    best.clear();
     for (int i : A)
-      for (int j : B) cand.emplace_back(layout.distance(i, j), std::min(i, j), std::max(i, j));
-    std::partial_sort(cand.begin(), cand.begin() + k, cand.end());
-    for (int t = 0; t < k; ++t)
-      out.push_back({std::get<1>(cand[t]), std::get<2>(cand[t]), std::get<0>(cand[t])});
+      for (int j : B) {
+        double d2 = 0;
+        for (int ax = 0; ax < layout.dim; ++ax) {
+          const double d = layout.coords[static_cast<std::size_t>(i) * layout.dim + ax] -
+                           layout.coords[static_cast<std::size_t>(j) * layout.dim + ax];
+          d2 += d * d;
+        }
+        const bool full = static_cast<int>(best.size()) == k;
+        if (full && d2 > std::get<0>(best.back())) continue;
+        const std::tuple<double, int, int> c(d2, std::min(i, j), std::max(i, j));
+        if (full && !(c < best.back())) continue;
+        if (full) best.pop_back();
+        best.insert(std::upper_bound(best.begin(), best.end(), c), c);
+      }
+    for (const auto& [d2, a, b] : best) out.push_back({a, b, std::sqrt(d2)});
   }
   return out;
 }

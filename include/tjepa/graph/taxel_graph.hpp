@@ -156,4 +156,27 @@ class TaxelGraph {
   std::vector<int> comp_, comp_size_;
 };
 
+// Whether the nodes induce a connected subgraph of g (false for no nodes). Nodes must be distinct
+// and in [0, g.num_nodes()).
+inline bool induces_connected(const TaxelGraph& g, std::span<const int> nodes) {
+  if (nodes.empty()) return false;
+  std::vector<int> in(nodes.begin(), nodes.end()), stack{nodes[0]};
+  std::sort(in.begin(), in.end());
+  std::vector<std::uint8_t> reached(in.size(), 0);
+  reached[std::lower_bound(in.begin(), in.end(), nodes[0]) - in.begin()] = 1;
+  std::size_t count = 1;
+  while (!stack.empty()) {
+    const int u = stack.back();
+    stack.pop_back();
+    for (int v : g.neighbors(u)) {
+      const auto it = std::lower_bound(in.begin(), in.end(), v);
+      if (it == in.end() || *it != v || reached[it - in.begin()]) continue;
+      reached[it - in.begin()] = 1;
+      ++count;
+      stack.push_back(v);
+    }
+  }
+  return count == in.size();
+}
+
 }  // namespace tjepa

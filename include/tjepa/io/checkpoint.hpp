@@ -90,6 +90,14 @@ void read_params(const SafetensorsFile& file, std::string_view prefix, ParamSet<
   }
 }
 
+// Calls f(part index, tensor info, full name) for every tensor the optimizer holds moments of.
+template <class T, class F>
+void for_each_moment(const AdamW<T>& optimizer, F&& f) {
+  const auto& parts = optimizer.parts();
+  for (std::size_t k = 0; k < parts.size(); ++k)
+    for (const ParamInfo& info : parts[k].params->infos()) f(k, info, parts[k].prefix + info.name);
+}
+
 inline std::int64_t metadata_int(const SafetensorsFile& file, const std::string& key) {
   auto it = file.metadata.find(key);
   if (it == file.metadata.end()) fail<FileError>(file.source(), ": metadata has no '", key, "'");
@@ -161,18 +169,12 @@ void save_checkpoint(const std::filesystem::path& path, std::span<const Prefixed
   file.metadata["step"] = std::to_string(state.step);
   if (optimizer) {
     file.metadata["opt.step"] = std::to_string(optimizer->steps());
-    const auto& parts = optimizer->parts();
-    for (std::size_t k = 0; k < parts.size(); ++k) {
-      const ParamSet<T>& ps = *parts[k].params;
-      for (std::size_t i = 0; i < ps.count(); ++i) {
-        const auto& info = ps.infos()[i];
-        const std::string full = parts[k].prefix + info.name;
-        require<ConfigError>(file.contains(full), "save_checkpoint: optimizer parameter '", full,
-                             "' is not among the model parts");
-        file.add("opt.exp_avg." + full, optimizer->exp_avg(k).subspan(info.offset, info.size), info.shape);
-        file.add("opt.exp_avg_sq." + full, optimizer->exp_avg_sq(k).subspan(info.offset, info.size), info.shape);
-      }
-    }
+    detail::for_each_moment(*optimizer, [&](std::size_t k, const ParamInfo& info, const std::string& full) {
+      require<ConfigError>(file.contains(full), "save_checkpoint: optimizer parameter '", full,
+                           "' is not among the model parts");
+      file.add("opt.exp_avg." + full, optimizer->exp_avg(k).subspan(info.offset, info.size), info.shape);
+      file.add("opt.exp_avg_sq." + full, optimizer->exp_avg_sq(k).subspan(info.offset, info.size), info.shape);
+    });
   }
   save_safetensors(path, file);
 }
@@ -210,22 +212,16 @@ CheckpointState load_checkpoint(const std::filesystem::path& path, std::span<con
     const bool copy = pass == 1;
     for (const auto& part : models) detail::read_params(file, part.prefix, *part.params, copy, used);
     if (optimizer) {
-      const auto& parts = optimizer->parts();
-      for (std::size_t k = 0; k < parts.size(); ++k) {
-        const ParamSet<T>& ps = *parts[k].params;
-        for (std::size_t i = 0; i < ps.count(); ++i) {
-          const auto& info = ps.infos()[i];
-          const std::string full = parts[k].prefix + info.name;
-          const Tensor& m = detail::expect_tensor<T>(file, "opt.exp_avg." + full, info.shape);
-          const Tensor& v = detail::expect_tensor<T>(file, "opt.exp_avg_sq." + full, info.shape);
-          if (copy) {
-            m.copy_to(optimizer->exp_avg(k).subspan(info.offset, info.size));
-            v.copy_to(optimizer->exp_avg_sq(k).subspan(info.offset, info.size));
-          }
-          used.insert("opt.exp_avg." + full);
-          used.insert("opt.exp_avg_sq." + full);
+      detail::for_each_moment(*optimizer, [&](std::size_t k, const ParamInfo& info, const std::string& full) {
+        const Tensor& m = detail::expect_tensor<T>(file, "opt.exp_avg." + full, info.shape);
+        const Tensor& v = detail::expect_tensor<T>(file, "opt.exp_avg_sq." + full, info.shape);
+        if (copy) {
+          m.copy_to(optimizer->exp_avg(k).subspan(info.offset, info.size));
+          v.copy_to(optimizer->exp_avg_sq(k).subspan(info.offset, info.size));
         }
-      }
+        used.insert("opt.exp_avg." + full);
+        used.insert("opt.exp_avg_sq." + full);
+      });
       if (copy) optimizer->set_steps(detail::metadata_int(file, "opt.step"));
       else (void)detail::metadata_int(file, "opt.step");
     } else {

@@ -102,12 +102,9 @@ class MaskCollator {
   explicit MaskCollator(TaxelGraph graph, MaskConfig config = {},
                         std::optional<GridPlacement> grid = std::nullopt)
       : graph_(std::move(graph)), cfg_(config) {
-    const int n = graph_.num_nodes();
     pieces_ = part_pieces(graph_);
     domains_.emplace_back(graph_, pieces_, -1);
     for (int p = 0; p < graph_.num_parts(); ++p) domains_.emplace_back(graph_, pieces_, p);
-    min_context_ = std::max(cfg_.min_context_tokens,
-                            static_cast<int>(std::ceil(cfg_.min_context_ratio * n - 1e-9)));
     if (grid) blocks_ = BlockMasker(std::move(*grid));
     validate(grid.has_value());
   }
@@ -181,11 +178,7 @@ class MaskCollator {
 #pragma omp parallel for schedule(dynamic, 4) num_threads(threads)
 #endif
     for (int i = 0; i < B; ++i) {
-#ifdef _OPENMP
-      MaskWorkspace& ws = ws_[omp_get_thread_num()];
-#else
-      MaskWorkspace& ws = ws_[0];
-#endif
+      MaskWorkspace& ws = thread_workspace();
       try {
         Rng rng(seed ^ kSampleSalt, batch_index * static_cast<std::uint64_t>(B) + i);
         if (blocks)
@@ -214,11 +207,7 @@ class MaskCollator {
 #pragma omp parallel for schedule(static) num_threads(threads)
 #endif
     for (int i = 0; i < B; ++i) {
-#ifdef _OPENMP
-      MaskWorkspace& ws = ws_[omp_get_thread_num()];
-#else
-      MaskWorkspace& ws = ws_[0];
-#endif
+      MaskWorkspace& ws = thread_workspace();
       sorted_prefix(ctx_row(i), K, ws, out.context.data() + static_cast<std::size_t>(i) * K);
       if (blocks)
         for (int j = 0; j < T; ++j) {
@@ -237,6 +226,14 @@ class MaskCollator {
 
   static int size_from_ratio(int n, const RatioRange& r, Rng& rng) {
     return static_cast<int>(std::floor(n * rng.uniform(r.lo, r.hi)));
+  }
+
+  MaskWorkspace& thread_workspace() const {
+#ifdef _OPENMP
+    return ws_[omp_get_thread_num()];
+#else
+    return ws_[0];
+#endif
   }
 
   int num_threads(int B) const {
@@ -348,6 +345,10 @@ class MaskCollator {
                  std::to_string(sizes.context_block.h) + " x " + std::to_string(sizes.context_block.w) + " block");
   }
 
+  static std::string domain_name(const MaskDomain& d) {
+    return d.part() < 0 ? std::string("the sensor") : "part " + std::to_string(d.part());
+  }
+
   // Throws ConfigError unless the configuration can work on this graph.
   void validate(bool has_grid) {
     const int n = num_tokens();
@@ -359,6 +360,7 @@ class MaskCollator {
                          c.min_context_tokens, ", expected >= 0");
     require<ConfigError>(c.min_context_ratio >= 0.0 && c.min_context_ratio < 1.0,
                          "MaskConfig: min_context_ratio = ", c.min_context_ratio, ", expected in [0, 1)");
+    min_context_ = std::max(c.min_context_tokens, static_cast<int>(std::ceil(c.min_context_ratio * n - 1e-9)));
     require<ConfigError>(min_context_ >= 1 && min_context_ <= n, "MaskConfig: the context minimum max(",
                          c.min_context_tokens, ", ceil(", c.min_context_ratio, " * ", n, ")) = ",
                          min_context_, ", expected in [1, N = ", n, "]");
@@ -405,12 +407,12 @@ class MaskCollator {
       const int tmax = static_cast<int>(std::floor(d.size() * c.target_ratio.hi));
       require<ConfigError>(tmin >= 1, "MaskConfig: target size t = floor(", d.size(), " * target_ratio.lo = ",
                            c.target_ratio.lo, ") = ", tmin, " for ",
-                           d.part() < 0 ? std::string("the sensor") : "part " + std::to_string(d.part()),
+                           domain_name(d),
                            ", expected t >= 1; raise target_ratio.lo");
       if (nl > 0)
         require<ConfigError>(d.largest_piece() >= tmax, "MaskConfig: local targets of up to t = ", tmax,
                              " tokens, but the largest connected piece of ",
-                             d.part() < 0 ? std::string("the sensor") : "part " + std::to_string(d.part()),
+                             domain_name(d),
                              " holds ", d.largest_piece(), "; lower target_ratio.hi");
     }
 
@@ -422,14 +424,11 @@ class MaskCollator {
     if (c.context_sampling == ContextSampling::local) {
       // The largest share each part can get (shares grow with c).
       const int cmax = static_cast<int>(std::floor(n * c.context_ratio.hi));
-      long long cum = 0;
-      int given = 0;
+      long long before = 0;
       for (int p = 0; p < graph_.num_parts(); ++p) {
         const MaskDomain& d = domains_[p + 1];
-        cum += d.size();
-        const int upto = static_cast<int>((2 * static_cast<long long>(cmax) * cum + n) / (2LL * n));
-        const int share = upto - given;
-        given = upto;
+        const int share = detail::local_context_share(cmax, before, before + d.size(), n);
+        before += d.size();
         require<ConfigError>(share <= d.largest_piece(), "MaskConfig: a local context gives part ", p,
                              " up to ", share, " tokens, but its largest connected piece holds ",
                              d.largest_piece(), "; lower context_ratio.hi or use the uniform context");

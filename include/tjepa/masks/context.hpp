@@ -18,6 +18,15 @@
 
 namespace tjepa {
 
+namespace detail {
+// Part p's share of a local context of c tokens, given the parts' cumulative sizes before and
+// through p: round(c·through/N) − round(c·before/N), so that the shares sum to c exactly.
+inline int local_context_share(int c, long long before, long long through, int n) {
+  const auto rounded = [&](long long cum) { return (2 * static_cast<long long>(c) * cum + n) / (2LL * n); };
+  return static_cast<int>(rounded(through) - rounded(before));
+}
+}  // namespace detail
+
 // c uniform random tokens of [0, n) minus ws.excluded, written to out[0, kept) in draw order.
 // Returns kept. out must hold at least c entries.
 inline int sample_uniform_context(int n, int c, Rng& rng, MaskWorkspace& ws, std::span<int> out) {
@@ -44,13 +53,10 @@ inline int sample_local_context(const TaxelGraph& g, std::span<const MaskDomain>
   require<ShapeError>(static_cast<int>(out.size()) >= c, "sample_local_context: out holds ",
                       out.size(), " entries, expected >= c = ", c);
   int kept = 0;
-  long long cum = 0;
-  int given = 0;
+  long long before = 0;
   for (const MaskDomain& d : parts) {
-    cum += d.size();
-    const int upto = static_cast<int>((2 * static_cast<long long>(c) * cum + n) / (2LL * n));  // round
-    const int cp = upto - given;
-    given = upto;
+    const int cp = detail::local_context_share(c, before, before + d.size(), n);
+    before += d.size();
     if (cp == 0) continue;
     const int eligible = d.num_seeds(cp);
     require<DataError>(eligible > 0, "sample_local_context: no connected piece of part ", d.part(),

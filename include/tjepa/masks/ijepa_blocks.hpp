@@ -22,6 +22,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/masks/config.hpp"
+#include "tjepa/layout/taxel_layout.hpp"
 #include "tjepa/masks/detail/workspace.hpp"
 
 namespace tjepa {
@@ -68,6 +69,17 @@ struct GridPlacement {
       gp.cols = std::max(gp.cols, gp.col[i] + 1);
     }
     return gp;
+  }
+
+  // The layout's taxels on a grid of the given pitch (mm), from their x-y coordinates.
+  static GridPlacement from_layout(const TaxelLayout& layout, double pitch_mm) {
+    require<ConfigError>(layout.has_coords(), "GridPlacement::from_layout: the layout has no coordinates");
+    std::vector<double> xy(static_cast<std::size_t>(layout.size()) * 2);
+    for (int i = 0; i < layout.size(); ++i) {
+      xy[2 * i] = layout.coord(i, 0);
+      xy[2 * i + 1] = layout.coord(i, 1);
+    }
+    return from_points(xy, pitch_mm);
   }
 };
 

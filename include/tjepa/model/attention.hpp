@@ -36,57 +36,70 @@ struct SelfAttention {
   }
   int dim() const { return proj.out; }
 
-  // Head h of sample b as a kernel shape over the fused qkv buffer.
-  AttentionShape head_shape(int L) const {
+  // Head h of one sample as a kernel shape over the fused qkv buffer: queries are the rows
+  // [q_from, L) of the sample, keys and values all L rows.
+  AttentionShape head_shape(int L, int q_from) const {
     const int d = dim();
-    return {L, L, 1, d / heads, 3 * d, 3 * d, 3 * d, d};
+    return {L - q_from, L, 1, d / heads, 3 * d, 3 * d, 3 * d, d};
   }
 
-  // x [B·L, d] → y [B·L, d] (y += when accumulate). qkv_buf [B·L, 3d] and att [B·L, d] are
-  // filled (kept for backward); lse [B, H, L] may be nullptr (inference). key_valid [B, L] or
-  // nullptr.
+  // x [B·L, d] → y [B·Lq, d] (y += when accumulate), Lq = L - q_from: the outputs of the query
+  // rows [q_from, L) of each sample (q_from = 0: every row; the predictor's last block keeps only
+  // its target rows). qkv_buf [B·L, 3d] and att [B·Lq, d] are filled (kept for backward); lse
+  // [B, H, L] may be nullptr (inference). key_valid [B, L] or nullptr.
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* qkv_buf,
-               T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws) const {
-    const int M = B * L, d = dim(), Dh = d / heads;
-    qkv.forward(ps, x, qkv_buf, M);
-    const AttentionShape s = head_shape(L);
+               T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws, int q_from = 0) const {
+    const int d = dim(), Dh = d / heads, Lq = L - q_from;
+    qkv.forward(ps, x, qkv_buf, B * L);
+    // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
+    // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads).
+    const int pairs = B * heads, threads = detail::max_threads();
+    const int chunks = pairs >= 2 * threads ? 1 : std::max(1, std::min((2 * threads + pairs - 1) / pairs, Lq / 32));
+    const int rows_per = (Lq + chunks - 1) / chunks;
     AttentionWorkspace<T>* aws = ws.attention_per_thread();
-    TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
-    for (int bh = 0; bh < B * heads; ++bh) {
-      const int b = bh / heads, h = bh % heads;
-      const T* q = qkv_buf + std::size_t(b) * L * 3 * d + std::size_t(h) * Dh;
-      attention_forward(s, q, q + d, q + 2 * d, key_valid ? key_valid + std::size_t(b) * L : nullptr,
-                        att + std::size_t(b) * L * d + std::size_t(h) * Dh,
-                        lse ? lse + std::size_t(bh) * L : nullptr, aws[detail::thread_id()]);
+    TJEPA_OMP(omp parallel for schedule(dynamic) if (pairs * chunks > 1))
+    for (int task = 0; task < pairs * chunks; ++task) {
+      const int bh = task / chunks, b = bh / heads, h = bh % heads;
+      const int r0 = (task % chunks) * rows_per, r1 = std::min(Lq, r0 + rows_per);
+      if (r0 >= r1) continue;
+      AttentionShape s = head_shape(L, q_from);
+      s.Lq = r1 - r0;
+      const T* k = qkv_buf + std::size_t(b) * L * 3 * d + d + std::size_t(h) * Dh;
+      attention_forward(s, k - d + std::size_t(q_from + r0) * 3 * d, k, k + d,
+                        key_valid ? key_valid + std::size_t(b) * L : nullptr,
+                        att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
+                        lse ? lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()]);
     }
     if (accumulate)
-      proj.forward_accumulate(ps, att, y, M);
+      proj.forward_accumulate(ps, att, y, B * Lq);
     else
-      proj.forward(ps, att, y, M);
+      proj.forward(ps, att, y, B * Lq);
   }
 
-  // dx [B·L, d] += ∂L/∂x given dy. dqkv [B·L, 3d] and datt [B·L, d] are scratch.
+  // dx [B·L, d] += ∂L/∂x given dy [B·Lq, d]. dqkv [B·L, 3d] and datt [B·Lq, d] are scratch.
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, const T* x, int B, int L, const std::uint8_t* key_valid,
-                const T* qkv_buf, const T* att, const T* lse, T* dqkv, T* datt, T* dx, Workspace<T>& ws) const {
-    const int M = B * L, d = dim(), Dh = d / heads;
-    std::fill(datt, datt + std::size_t(M) * d, T(0));
-    proj.backward(ps, dy, att, datt, M);  // y = att · Wprojᵀ + b
-    std::fill(dqkv, dqkv + std::size_t(M) * 3 * d, T(0));
-    const AttentionShape s = head_shape(L);
+                const T* qkv_buf, const T* att, const T* lse, T* dqkv, T* datt, T* dx, Workspace<T>& ws,
+                int q_from = 0) const {
+    const int d = dim(), Dh = d / heads, Lq = L - q_from;
+    const std::size_t Mq = std::size_t(B) * Lq;
+    std::fill(datt, datt + Mq * d, T(0));
+    proj.backward(ps, dy, att, datt, int(Mq));  // y = att · Wprojᵀ + b
+    std::fill(dqkv, dqkv + std::size_t(B) * L * 3 * d, T(0));
+    const AttentionShape s = head_shape(L, q_from);
     AttentionWorkspace<T>* aws = ws.attention_per_thread();
     TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
     for (int bh = 0; bh < B * heads; ++bh) {
       const int b = bh / heads, h = bh % heads;
-      const std::size_t qo = std::size_t(b) * L * 3 * d + std::size_t(h) * Dh;
-      const std::size_t oo = std::size_t(b) * L * d + std::size_t(h) * Dh;
-      const T* q = qkv_buf + qo;
-      T* dq = dqkv + qo;
-      attention_backward(s, q, q + d, q + 2 * d, key_valid ? key_valid + std::size_t(b) * L : nullptr, att + oo,
-                         lse + std::size_t(bh) * L, datt + oo, dq, dq + d, dq + 2 * d, aws[detail::thread_id()]);
+      const std::size_t ko = std::size_t(b) * L * 3 * d + d + std::size_t(h) * Dh;
+      const std::size_t qo = ko - d + std::size_t(q_from) * 3 * d;
+      const std::size_t oo = std::size_t(b) * Lq * d + std::size_t(h) * Dh;
+      attention_backward(s, qkv_buf + qo, qkv_buf + ko, qkv_buf + ko + d,
+                         key_valid ? key_valid + std::size_t(b) * L : nullptr, att + oo, lse + std::size_t(bh) * L,
+                         datt + oo, dqkv + qo, dqkv + ko, dqkv + ko + d, aws[detail::thread_id()]);
     }
-    qkv.backward(ps, dqkv, x, dx, M);  // qkv = x · Wqkvᵀ + b
+    qkv.backward(ps, dqkv, x, dx, B * L);  // qkv = x · Wqkvᵀ + b
   }
 };
 

@@ -100,7 +100,7 @@ struct AttentiveProbe {
 
   // dy [B, out] → parameter gradients and dx [B, L, d] += (may be nullptr).
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dy, T* dx, const ProbeCache<T>& c, Workspace<T>& ws) const {
+  void backward(ParamSet<T>& ps, const T* dy, std::type_identity_t<T>* dx, const ProbeCache<T>& c, Workspace<T>& ws) const {
     const int d = config.dim, B = c.B, L = c.L, hid = mlp.hidden(), hh = head.hidden();
     const std::size_t M = std::size_t(B) * L;
     const std::uint8_t* kv = c.key_valid.empty() ? nullptr : c.key_valid.data();

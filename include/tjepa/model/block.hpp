@@ -60,9 +60,10 @@ struct BlockBuffers {
 // Activations of a BlockStack's forward that its backward needs.
 template <class T>
 struct BlockStackCache {
-  int B = 0, L = 0;
+  int B = 0, L = 0, keep_from = 0;
   AlignedVector<T> xs;                          // [depth+1, M, d] residual stream, block inputs + output
-  AlignedVector<T> ln1, att, x_mid, ln2;        // [depth, M, d]
+  AlignedVector<T> ln1, att, x_mid, ln2;        // [depth, M, d] (the last block's att, x_mid, ln2,
+                                                // h_pre, mean2, rstd2 hold kept rows only)
   AlignedVector<T> qkv;                         // [depth, M, 3d]
   AlignedVector<T> h_pre;                       // [depth, M, hidden]
   AlignedVector<T> mean1, rstd1, mean2, rstd2;  // [depth, M]
@@ -85,13 +86,18 @@ struct BlockStack {
   }
   int depth() const { return static_cast<int>(blocks.size()); }
 
-  // x_in [B, L, d] → x_out [B, L, d] (may alias x_in). cache == nullptr: inference, nothing kept.
-  // key_valid [B, L] (nonzero = attend) or nullptr.
+  // x_in [B, L, d] → x_out [B, Lk, d], Lk = L - keep_from: the block outputs of rows
+  // [keep_from, L) of each sample (keep_from = 0: all rows, and x_out may alias x_in). The last
+  // block then computes attention queries, proj and MLP for the kept rows only: the predictor keeps
+  // just its target rows. cache == nullptr: inference, nothing kept. key_valid [B, L] or nullptr.
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x_in, T* x_out, int B, int L, const std::uint8_t* key_valid,
-               const DropPath& dp, std::type_identity_t<BlockStackCache<T>>* cache, Workspace<T>& ws) const {
-    const int d = config.dim, hid = config.hidden(), H = config.heads, D = depth();
-    const std::size_t M = std::size_t(B) * L, Md = M * d;
+               const DropPath& dp, std::type_identity_t<BlockStackCache<T>>* cache, Workspace<T>& ws,
+               int keep_from = 0) const {
+    require<ShapeError>(keep_from >= 0 && keep_from < L, "BlockStack::forward: keep_from = ", keep_from,
+                        ", expected [0, ", L, ")");
+    const int d = config.dim, hid = config.hidden(), H = config.heads, D = depth(), Lk = L - keep_from;
+    const std::size_t M = std::size_t(B) * L, Md = M * d, Mk = std::size_t(B) * Lk;
     const bool drop = dp.rate > 0.0 && D > 0;
     T* scales = nullptr;
     if (drop) {
@@ -100,25 +106,37 @@ struct BlockStack {
     } else if (cache) {
       cache->scales.clear();
     }
+    auto scale = [&](int i, int k) { return drop ? scales + std::size_t(2 * i + k) * B : nullptr; };
     T* branch = drop ? detail::grow(ws.branch, Md) : nullptr;
+    if (D == 0) {
+      keep_rows(x_out, x_in, B, L, keep_from, d);
+      if (cache) {
+        cache->B = B;
+        cache->L = L;
+        cache->keep_from = keep_from;
+      }
+      return;
+    }
     if (!cache) {
-      if (x_out != x_in) std::copy(x_in, x_in + Md, x_out);
-      BlockBuffers<T> buf{detail::grow(ws.ln, Md), nullptr, nullptr, detail::grow(ws.qkv, 3 * Md),
-                          detail::grow(ws.att, Md), nullptr, x_out, detail::grow(ws.ln, Md), nullptr, nullptr,
-                          detail::grow(ws.hidden, M * hid), nullptr, nullptr, nullptr};
-      buf.h = buf.h_pre;
+      // The residual stream runs in place: in x_out when every row is kept, else in scratch
+      // until the last block writes the kept rows to x_out.
+      T* x = keep_from == 0 ? x_out : detail::grow(ws.stream, Md);
+      if (x != x_in) std::copy(x_in, x_in + Md, x);
+      T* hidden = detail::grow(ws.hidden, M * hid);
       for (int i = 0; i < D; ++i) {
-        if (drop) {
-          buf.scale1 = scales + std::size_t(2 * i) * B;
-          buf.scale2 = scales + std::size_t(2 * i + 1) * B;
-        }
-        block_forward(ps, blocks[std::size_t(i)], x_out, x_out, B, L, key_valid, buf, branch, ws);
+        const bool last = i == D - 1;
+        T* out = last ? x_out : x;
+        BlockBuffers<T> buf{detail::grow(ws.ln, Md), nullptr, nullptr, detail::grow(ws.qkv, 3 * Md),
+                            detail::grow(ws.att, Md), nullptr, out, detail::grow(ws.ln, Md), nullptr, nullptr,
+                            hidden, hidden, scale(i, 0), scale(i, 1)};
+        block_forward(ps, blocks[std::size_t(i)], x, out, B, L, last ? keep_from : 0, key_valid, buf, branch, ws);
       }
       return;
     }
     BlockStackCache<T>& c = *cache;
     c.B = B;
     c.L = L;
+    c.keep_from = keep_from;
     if (key_valid)
       c.key_valid.assign(key_valid, key_valid + M);
     else
@@ -136,80 +154,162 @@ struct BlockStack {
     for (int i = 0; i < D; ++i) {
       const std::size_t o = std::size_t(i) * Md, r = std::size_t(i) * M;
       BlockBuffers<T> buf{ln1 + o, m1 + r, r1 + r, qkv + 3 * o, att + o, lse + std::size_t(i) * B * H * L,
-                          xm + o, ln2 + o, m2 + r, r2 + r, hp + std::size_t(i) * M * hid, h,
-                          drop ? scales + std::size_t(2 * i) * B : nullptr,
-                          drop ? scales + std::size_t(2 * i + 1) * B : nullptr};
-      block_forward(ps, blocks[std::size_t(i)], xs + o, xs + o + Md, B, L, kv, buf, branch, ws);
+                          xm + o, ln2 + o, m2 + r, r2 + r, hp + std::size_t(i) * M * hid, h, scale(i, 0), scale(i, 1)};
+      block_forward(ps, blocks[std::size_t(i)], xs + o, xs + o + Md, B, L, i == D - 1 ? keep_from : 0, kv, buf,
+                    branch, ws);
     }
-    if (x_out != xs + D * Md) std::copy(xs + D * Md, xs + (D + 1) * Md, x_out);
+    const T* y = xs + D * Md;
+    if (x_out != y) std::copy(y, y + Mk * d, x_out);
   }
 
-  // dx [B, L, d]: on entry ∂L/∂x_out, on return ∂L/∂x_in. Parameter gradients are added to ps.
+  // dx: on entry ∂L/∂x_out ([B, Lk, d] in its first B·Lk·d values), on return ∂L/∂x_in
+  // [B, L, d] (dx holds B·L·d values). Parameter gradients are added to ps.
   template <class T>
   void backward(ParamSet<T>& ps, T* dx, const BlockStackCache<T>& c, Workspace<T>& ws) const {
     const int d = config.dim, hid = config.hidden(), H = config.heads, D = depth(), B = c.B, L = c.L;
-    const std::size_t M = std::size_t(B) * L, Md = M * d;
+    const int kf = c.keep_from, Lk = L - kf;
+    const std::size_t M = std::size_t(B) * L, Md = M * d, Mk = std::size_t(B) * Lk;
     const bool drop = !c.scales.empty();
     const std::uint8_t* kv = c.key_valid.empty() ? nullptr : c.key_valid.data();
     T* dbranch = drop ? detail::grow(ws.dbranch, Md) : nullptr;
     T* dln = detail::grow(ws.dln, Md);
     T* dqkv = detail::grow(ws.dqkv, 3 * Md);
+    T* datt = detail::grow(ws.att, Md);  // forward scratch, free during backward
     T* h = detail::grow(ws.hidden2, M * hid);
     T* dh = detail::grow(ws.dhidden, M * hid);
-    T* datt = detail::grow(ws.att, Md);  // forward scratch, free during backward
+    // ∂L/∂x_out of the kept rows, while dx becomes the full-size gradient.
+    T* g = dx;
+    if (kf > 0) {
+      g = detail::grow(ws.dkept, Mk * d);
+      std::copy(dx, dx + Mk * d, g);
+      if (D == 0) {
+        std::fill(dx, dx + Md, T(0));
+        scatter_kept_rows(dx, g, B, L, kf, d);
+        return;
+      }
+    }
     for (int i = D - 1; i >= 0; --i) {
       const Block& blk = blocks[std::size_t(i)];
       const std::size_t o = std::size_t(i) * Md, r = std::size_t(i) * M;
+      const int q_from = i == D - 1 ? kf : 0;
+      const std::size_t per_sample = std::size_t(L - q_from) * d;
+      T* gq = q_from > 0 ? g : dx;  // ∂L/∂x_out, then ∂L/∂x_mid, of this block's query rows
       const T* s1 = drop ? c.scales.data() + std::size_t(2 * i) * B : nullptr;
       const T* s2 = drop ? c.scales.data() + std::size_t(2 * i + 1) * B : nullptr;
-      // x_out = x_mid + s2 · mlp(ln2),  ln2 = norm2(x_mid)
-      const T* g2 = dx;
-      if (s2) {
-        std::fill(dbranch, dbranch + Md, T(0));
-        drop_path_backward(dbranch, dx, s2, B, std::size_t(L) * d);
-        g2 = dbranch;
+      const int Lq = L - q_from;
+      // x_out = x_mid + s2 · mlp(ln2), ln2 = norm2(x_mid): only samples whose branch was kept.
+      for_each_kept_run(s2, B, [&](int b0, int b1) {
+        const int n = b1 - b0, rows = n * Lq;
+        const std::size_t q = std::size_t(b0) * Lq;
+        const T* g2 = gq + q * d;
+        if (s2) {
+          std::fill(dbranch + q * d, dbranch + (q + rows) * d, T(0));
+          drop_path_backward(dbranch + q * d, gq + q * d, s2 + b0, n, per_sample);
+          g2 = dbranch + q * d;
+        }
+        std::fill(dln + q * d, dln + (q + rows) * d, T(0));
+        blk.mlp.backward(ps, g2, c.ln2.data() + o + q * d, c.h_pre.data() + std::size_t(i) * M * hid + q * hid,
+                         h + q * hid, dh + q * hid, dln + q * d, rows);
+        blk.norm2.backward(ps, dln + q * d, c.x_mid.data() + o + q * d, c.mean2.data() + r + q,
+                           c.rstd2.data() + r + q, gq + q * d, rows);
+      });
+      // x_mid = x_in[query rows] + s1 · attn(ln1), ln1 = norm1(x_in)
+      if (q_from > 0) {
+        std::fill(dx, dx + Md, T(0));
+        scatter_kept_rows(dx, gq, B, L, q_from, d);
       }
-      std::fill(dln, dln + Md, T(0));
-      blk.mlp.backward(ps, g2, c.ln2.data() + o, c.h_pre.data() + std::size_t(i) * M * hid, h, dh, dln, int(M));
-      blk.norm2.backward(ps, dln, c.x_mid.data() + o, c.mean2.data() + r, c.rstd2.data() + r, dx, int(M));
-      // x_mid = x_in + s1 · attn(ln1),  ln1 = norm1(x_in)
-      const T* g1 = dx;
-      if (s1) {
-        std::fill(dbranch, dbranch + Md, T(0));
-        drop_path_backward(dbranch, dx, s1, B, std::size_t(L) * d);
-        g1 = dbranch;
-      }
-      std::fill(dln, dln + Md, T(0));
-      blk.attn.backward(ps, g1, c.ln1.data() + o, B, L, kv, c.qkv.data() + 3 * o, c.att.data() + o,
-                        c.lse.data() + std::size_t(i) * B * H * L, dqkv, datt, dln, ws);
-      blk.norm1.backward(ps, dln, c.xs.data() + o, c.mean1.data() + r, c.rstd1.data() + r, dx, int(M));
+      for_each_kept_run(s1, B, [&](int b0, int b1) {
+        const int n = b1 - b0;
+        const std::size_t f = std::size_t(b0) * L, q = std::size_t(b0) * Lq;
+        const T* g1 = gq + q * d;
+        if (s1) {
+          std::fill(dbranch + q * d, dbranch + (q + std::size_t(n) * Lq) * d, T(0));
+          drop_path_backward(dbranch + q * d, gq + q * d, s1 + b0, n, per_sample);
+          g1 = dbranch + q * d;
+        }
+        std::fill(dln + f * d, dln + (f + std::size_t(n) * L) * d, T(0));
+        blk.attn.backward(ps, g1, c.ln1.data() + o + f * d, n, L, kv ? kv + f : nullptr, c.qkv.data() + 3 * o + f * 3 * d,
+                          c.att.data() + o + q * d, c.lse.data() + std::size_t(i) * B * H * L + std::size_t(b0) * H * L,
+                          dqkv + f * 3 * d, datt + q * d, dln + f * d, ws, q_from);
+        blk.norm1.backward(ps, dln + f * d, c.xs.data() + o + f * d, c.mean1.data() + r + f, c.rstd1.data() + r + f,
+                           dx + f * d, n * L);
+      });
     }
   }
 
  private:
-  // One block, x_in → x_out (x_out may alias x_in when buf.x_mid does too).
+  // dst[b, j] = src[b, keep_from + j] for j < L - keep_from (a copy when keep_from = 0).
+  template <class T>
+  static void keep_rows(T* dst, const T* src, int B, int L, int keep_from, int d) {
+    const std::size_t n = std::size_t(L - keep_from) * d;
+    if (keep_from == 0 && dst == src) return;
+    for (int b = 0; b < B; ++b) {
+      const T* s = src + (std::size_t(b) * L + keep_from) * d;
+      std::copy(s, s + n, dst + std::size_t(b) * n);
+    }
+  }
+  // dst[b, keep_from + j] += src[b, j]
+  template <class T>
+  static void scatter_kept_rows(T* dst, const T* src, int B, int L, int keep_from, int d) {
+    const std::size_t n = std::size_t(L - keep_from) * d;
+    for (int b = 0; b < B; ++b) {
+      T* o = dst + (std::size_t(b) * L + keep_from) * d;
+      const T* s = src + std::size_t(b) * n;
+      for (std::size_t i = 0; i < n; ++i) o[i] += s[i];
+    }
+  }
+
+  // Calls f(b0, b1) for each maximal run of samples [b0, b1) whose branch is kept (scale ≠ 0),
+  // or once for all samples without drop-path: a dropped branch is never computed.
+  template <class T, class F>
+  static void for_each_kept_run(const T* scale, int B, F&& f) {
+    if (!scale) {
+      f(0, B);
+      return;
+    }
+    for (int b = 0; b < B;) {
+      if (scale[b] == T(0)) {
+        ++b;
+        continue;
+      }
+      int e = b;
+      while (e < B && scale[e] != T(0)) ++e;
+      f(b, e);
+      b = e;
+    }
+  }
+
+  // One block, x_in [B, L, d] → x_out [B, L - q_from, d]: attention queries, proj, norm2 and MLP
+  // for the rows [q_from, L) of each sample only. With q_from = 0, x_out may alias x_in when
+  // buf.x_mid does too. Under drop-path each branch runs on the samples that keep it.
   template <class T>
   static void block_forward(const ParamSet<T>& ps, const Block& blk, const T* x_in, T* x_out, int B, int L,
-                            const std::uint8_t* key_valid, const BlockBuffers<T>& buf, T* branch,
+                            int q_from, const std::uint8_t* key_valid, const BlockBuffers<T>& buf, T* branch,
                             Workspace<T>& ws) {
-    const int M = B * L;
-    const std::size_t Md = std::size_t(M) * blk.attn.dim(), per_sample = std::size_t(L) * blk.attn.dim();
-    blk.norm1.forward(ps, x_in, buf.ln1, buf.mean1, buf.rstd1, M);
-    if (buf.x_mid != x_in) std::copy(x_in, x_in + Md, buf.x_mid);
-    if (buf.scale1) {
-      blk.attn.forward(ps, buf.ln1, B, L, key_valid, buf.qkv, buf.att, buf.lse, branch, false, ws);
-      drop_path_forward(buf.x_mid, branch, buf.scale1, B, per_sample);
-    } else {
-      blk.attn.forward(ps, buf.ln1, B, L, key_valid, buf.qkv, buf.att, buf.lse, buf.x_mid, true, ws);
-    }
-    blk.norm2.forward(ps, buf.x_mid, buf.ln2, buf.mean2, buf.rstd2, M);
-    if (x_out != buf.x_mid) std::copy(buf.x_mid, buf.x_mid + Md, x_out);
-    if (buf.scale2) {
-      blk.mlp.forward(ps, buf.ln2, buf.h_pre, buf.h, branch, M, false);
-      drop_path_forward(x_out, branch, buf.scale2, B, per_sample);
-    } else {
-      blk.mlp.forward(ps, buf.ln2, buf.h_pre, buf.h, x_out, M, true);
-    }
+    const int d = blk.attn.dim(), H = blk.attn.heads, hid = blk.mlp.hidden(), Lq = L - q_from;
+    const std::size_t per_sample = std::size_t(Lq) * d;
+    keep_rows(buf.x_mid, x_in, B, L, q_from, d);
+    for_each_kept_run(buf.scale1, B, [&](int b0, int b1) {
+      const int n = b1 - b0;
+      const std::size_t f = std::size_t(b0) * L, q = std::size_t(b0) * Lq;
+      blk.norm1.forward(ps, x_in + f * d, buf.ln1 + f * d, buf.mean1 ? buf.mean1 + f : nullptr,
+                        buf.rstd1 ? buf.rstd1 + f : nullptr, n * L);
+      T* y = buf.scale1 ? branch + q * d : buf.x_mid + q * d;
+      blk.attn.forward(ps, buf.ln1 + f * d, n, L, key_valid ? key_valid + f : nullptr, buf.qkv + f * 3 * d,
+                       buf.att + q * d, buf.lse ? buf.lse + std::size_t(b0) * H * L : nullptr, y, !buf.scale1, ws,
+                       q_from);
+      if (buf.scale1) drop_path_forward(buf.x_mid + q * d, branch + q * d, buf.scale1 + b0, n, per_sample);
+    });
+    if (x_out != buf.x_mid) std::copy(buf.x_mid, buf.x_mid + std::size_t(B) * per_sample, x_out);
+    for_each_kept_run(buf.scale2, B, [&](int b0, int b1) {
+      const int n = b1 - b0, rows = n * Lq;
+      const std::size_t q = std::size_t(b0) * Lq;
+      blk.norm2.forward(ps, buf.x_mid + q * d, buf.ln2 + q * d, buf.mean2 ? buf.mean2 + q : nullptr,
+                        buf.rstd2 ? buf.rstd2 + q : nullptr, rows);
+      T* y = buf.scale2 ? branch + q * d : x_out + q * d;
+      blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, !buf.scale2);
+      if (buf.scale2) drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
+    });
   }
 };
 

@@ -101,7 +101,7 @@ struct Encoder {
 
   // dout [B, K, d] → parameter gradients (added to ps) and dtokens [B, N, d] += (may be nullptr).
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dout, T* dtokens, const EncoderCache<T>& cache, Workspace<T>& ws) const {
+  void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dtokens, const EncoderCache<T>& cache, Workspace<T>& ws) const {
     const int N = config.num_tokens, d = config.dim, B = cache.B, K = cache.K;
     const std::size_t M = std::size_t(B) * K;
     T* g = detail::grow(ws.dx, M * d);

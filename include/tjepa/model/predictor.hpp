@@ -41,7 +41,7 @@ struct PredictorCache {
   std::vector<int> targets;     // [B, t]
   AlignedVector<T> ctx;         // [Bc, K, d_in] copy
   BlockStackCache<T> stack;
-  AlignedVector<T> rows, normed;  // [B·t, pd] block output at the targets, after norm
+  AlignedVector<T> rows, normed;  // [B·t, pd] blocks' output at the targets, after norm
   AlignedVector<T> mean, rstd;    // [B·t]
 };
 
@@ -101,13 +101,10 @@ struct Predictor {
       cache->targets.assign(targets, targets + Mt);
       cache->ctx.assign(ctx, ctx + std::size_t(Bc) * K * din);
     }
-    stack.forward(ps, x, x, B, L, nullptr, DropPath{}, cache ? &cache->stack : nullptr, ws);
-    // Only the target rows go through the final norm and the output projection.
+    // Only the target rows leave the blocks (the last block computes nothing else), then go
+    // through the final norm and the output projection.
     T* rows = cache ? detail::grow(cache->rows, Mt * pd) : detail::grow(ws.rows2, Mt * pd);
-    for (int b = 0; b < B; ++b) {
-      const T* src = x + (std::size_t(b) * L + K) * pd;
-      std::copy(src, src + std::size_t(t) * pd, rows + std::size_t(b) * t * pd);
-    }
+    stack.forward(ps, x, rows, B, L, nullptr, DropPath{}, cache ? &cache->stack : nullptr, ws, K);
     T* normed = cache ? detail::grow(cache->normed, Mt * pd) : rows;
     norm.forward(ps, rows, normed, cache ? detail::grow(cache->mean, Mt) : nullptr,
                  cache ? detail::grow(cache->rstd, Mt) : nullptr, int(Mt));
@@ -117,7 +114,7 @@ struct Predictor {
   // dout [B, t, d_in] → parameter gradients, dctx [Bc, K, d_in] += and dpos [N, pd] += (either
   // may be nullptr: the default reads the target encoder's table, which takes no gradient).
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dout, T* dctx, T* dpos, const PredictorCache<T>& c,
+  void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dctx, std::type_identity_t<T>* dpos, const PredictorCache<T>& c,
                 Workspace<T>& ws) const {
     const int pd = config.dim, Bc = c.Bc, K = c.K, B = c.B, t = c.t, L = K + t;
     const std::size_t M = std::size_t(B) * L, Mt = std::size_t(B) * t;
@@ -126,11 +123,8 @@ struct Predictor {
     std::fill(dn, dn + 2 * Mt * pd, T(0));
     output_projection.backward(ps, dout, c.normed.data(), dn, int(Mt));
     norm.backward(ps, dn, c.rows.data(), c.mean.data(), c.rstd.data(), drows, int(Mt));
-    T* g = detail::grow(ws.dx, M * pd);
-    std::fill(g, g + M * pd, T(0));
-    for (int b = 0; b < B; ++b)
-      std::copy(drows + std::size_t(b) * t * pd, drows + std::size_t(b + 1) * t * pd,
-                g + (std::size_t(b) * L + K) * pd);
+    T* g = detail::grow(ws.dx, M * pd);  // ∂L/∂(target rows of the last block), then ∂L/∂x
+    std::copy(drows, drows + Mt * pd, g);
     stack.backward(ps, g, c.stack, ws);
     // x[b, K + j] = pos[t[b, j]] + u
     T* du = ps.grad(mask_token);

@@ -118,7 +118,7 @@ struct Tokenizer {
   // dout [B, G, dim] → parameter gradients and dx [B, G, width] += (may be nullptr; padding
   // columns get nothing).
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dout, T* dx, const TokenizerCache<T>& c, Workspace<T>& ws) const {
+  void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dx, const TokenizerCache<T>& c, Workspace<T>& ws) const {
     const int B = c.B;
     for (std::size_t i = 0; i < maps.size(); ++i) {
       const Map& m = maps[i];

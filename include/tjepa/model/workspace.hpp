@@ -16,6 +16,7 @@ template <class T>
 struct Workspace {
   // Forward scratch (M = rows = B·L).
   AlignedVector<T> x;       // [M, d] running activation of the inference path
+  AlignedVector<T> stream;  // [M, d] residual stream of a stack that keeps only some rows
   AlignedVector<T> ln;      // [M, d] LayerNorm output
   AlignedVector<T> qkv;     // [M, 3d]
   AlignedVector<T> att;     // [M, d] attention output before proj
@@ -32,6 +33,7 @@ struct Workspace {
   AlignedVector<T> dhidden;  // [M, hidden]
   AlignedVector<T> hidden2;  // [M, hidden] recomputed activation
   AlignedVector<T> drows;    // [rows, ·]
+  AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
   // One attention workspace per OpenMP thread.
   std::vector<AttentionWorkspace<T>> attention;
 

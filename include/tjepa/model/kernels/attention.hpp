@@ -16,27 +16,36 @@
 // P = exp(S - lse) = 0 in backward with no special case.)
 //
 // tjepa::ref:: is the spec: plain loops, materializes each row of scores, accumulates in double.
-// tjepa:: is the fast path: flash-style (online softmax over key tiles, only per-row statistics
-// lse and D = rowsum(dO * O) kept; never an Lq x Lk matrix), SIMD through xsimd, scratch in a
-// caller-owned AttentionWorkspace. Backward adds (+=) into dq, dk, dv.
+// tjepa:: is the fast path: flash-style (online softmax over key tiles; only the per-query
+// statistics lse and D = rowsum(dO * O) are kept, never an Lq x Lk matrix), register-blocked
+// micro-kernels and a polynomial exp2 through xsimd (AVX-512, AVX2 or SSE2, whatever the
+// translation unit is compiled for), the same code in float and double. Its scratch lives in a
+// caller-owned AttentionWorkspace of O((Lq + Lk) * Dh) elements (one head's packed operands plus
+// fixed-size tiles; at L = 2124, Dh = 64 about 3.8 MiB in float).
+// Backward adds (+=) into dq, dk, dv: every entry is summed completely first and added once, so
+// two backward calls give exactly twice the gradient.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
 #include <limits>
 #include <utility>
 #include <vector>
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
-#include "tjepa/model/kernels/detail/attention_simd.hpp"
 
-// g++ 12 reports false "may be used uninitialized" warnings inside its own AVX-512 intrinsics
-// (_mm512_undefined_* operands of max/min/shift) once they are inlined here.
+// g++ 12 reports false "(may be) used uninitialized" warnings inside its own AVX-512 intrinsics
+// (the self-initialized _mm512_undefined_* operands of max/min/shift) once they are inlined into
+// the kernels below and in detail/.
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
 #endif
+
+#include "tjepa/model/kernels/detail/attention_simd.hpp"
 
 namespace tjepa {
 
@@ -72,8 +81,22 @@ inline void check_attention_shape(const AttentionShape& s, const char* where) {
 }
 
 namespace detail {
-inline void require_ptr(const void* p, const char* where, const char* name) {
-  require<ShapeError>(p != nullptr, where, ": ", name, " is null, expected a buffer");
+// Throws ShapeError naming the first null buffer among (pointer, name) pairs.
+inline void require_buffers(const char* where, std::initializer_list<std::pair<const void*, const char*>> buffers) {
+  for (const auto& [p, name] : buffers)
+    require<ShapeError>(p != nullptr, where, ": ", name, " is null, expected a buffer");
+}
+template <class T>
+void check_forward_args(const char* where, const AttentionShape& s, const T* q, const T* k, const T* v, const T* out) {
+  check_attention_shape(s, where);
+  require_buffers(where, {{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"}});
+}
+template <class T>
+void check_backward_args(const char* where, const AttentionShape& s, const T* q, const T* k, const T* v, const T* out,
+                         const T* lse, const T* dout, const T* dq, const T* dk, const T* dv) {
+  check_attention_shape(s, where);
+  require_buffers(where, {{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"}, {lse, "lse"}, {dout, "dout"},
+                          {dq, "dq"}, {dk, "dk"}, {dv, "dv"}});
 }
 }  // namespace detail
 
@@ -102,11 +125,7 @@ namespace ref {
 template <class T>
 void attention_forward(const AttentionShape& s, const T* q, const T* k, const T* v,
                        const std::uint8_t* key_valid, T* out, T* lse) {
-  check_attention_shape(s, "ref::attention_forward");
-  detail::require_ptr(q, "ref::attention_forward", "q");
-  detail::require_ptr(k, "ref::attention_forward", "k");
-  detail::require_ptr(v, "ref::attention_forward", "v");
-  detail::require_ptr(out, "ref::attention_forward", "out");
+  detail::check_forward_args("ref::attention_forward", s, q, k, v, out);
   const double scale = 1.0 / std::sqrt(static_cast<double>(s.Dh));
   std::vector<double> p(static_cast<std::size_t>(s.Lk));
   std::vector<double> o(static_cast<std::size_t>(s.Dh));
@@ -156,11 +175,7 @@ template <class T>
 void attention_backward(const AttentionShape& s, const T* q, const T* k, const T* v,
                         const std::uint8_t* key_valid, const T* out, const T* lse, const T* dout,
                         T* dq, T* dk, T* dv) {
-  const char* where = "ref::attention_backward";
-  check_attention_shape(s, where);
-  for (auto [p, n] : {std::pair<const void*, const char*>{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"},
-                      {lse, "lse"}, {dout, "dout"}, {dq, "dq"}, {dk, "dk"}, {dv, "dv"}})
-    detail::require_ptr(p, where, n);
+  detail::check_backward_args("ref::attention_backward", s, q, k, v, out, lse, dout, dq, dk, dv);
   const double scale = 1.0 / std::sqrt(static_cast<double>(s.Dh));
   // Each gradient entry is summed in double and added to its output once, so that two backward
   // passes give exactly twice the gradient.
@@ -229,15 +244,6 @@ int compact_keys(const AttentionShape& s, const std::uint8_t* key_valid, Attenti
   return n;
 }
 
-template <class T>
-T hmax(Vec<T> x) {
-  alignas(64) T buf[W<T>];
-  x.store_aligned(buf);
-  T m = buf[0];
-  for (int i = 1; i < W<T>; ++i) m = std::max(m, buf[i]);
-  return m;
-}
-
 inline constexpr double log2e = 1.4426950408889634074;
 inline constexpr double ln2 = 0.6931471805599453094;
 
@@ -246,112 +252,79 @@ inline constexpr double ln2 = 0.6931471805599453094;
 template <class T>
 void AttentionWorkspace<T>::reserve(const AttentionShape& shape) {
   check_attention_shape(shape, "AttentionWorkspace::reserve");
-  const detail::attn::ForwardLayout<T> f(shape.Lk, shape.Dh);
+  const detail::attn::ForwardLayout<T> f(shape.Lq, shape.Lk, shape.Dh);
   const detail::attn::BackwardLayout<T> b(shape.Lq, shape.Lk, shape.Dh);
   get(static_cast<std::size_t>(std::max(f.total, b.total)));
   if (keys.size() < static_cast<std::size_t>(shape.Lk)) keys.resize(static_cast<std::size_t>(shape.Lk));
 }
 
-// Flash-style forward: per head, K_h^T and V_h of the valid keys are packed once; then per tile of
-// BQ query rows the key tiles are visited with an online softmax (running row max m and sum l, the
-// output rescaled by alpha = 2^(m_old - m_new)), so only a [BQ, BK] tile of scores ever exists.
-// Scores are kept in base 2 (scaled by scale * log2 e) so the exponential is one exp2.
+// Flash-style forward, in the transposed orientation: per head, Q_h^T (panels of BQ queries), K_h
+// and V_h of the valid keys are packed once; per block of BQ queries the key tiles of BK keys are
+// visited with an online softmax. A tile holds S^T = K_tile Q_blk^T [BK, BQ], so the per-query
+// statistics (running max m and sum l, in base 2: scores scaled by c = scale * log2 e) are vectors
+// across queries and need no horizontal reductions; the output block is rescaled by
+// alpha = 2^(m_old - m_new) in the P V product. Only a [BK, BQ] tile of scores ever exists.
 template <class T>
 void attention_forward(const AttentionShape& s, const T* q, const T* k, const T* v,
                        const std::uint8_t* key_valid, T* out, T* lse, AttentionWorkspace<T>& ws) {
-  const char* where = "attention_forward";
-  check_attention_shape(s, where);
-  detail::require_ptr(q, where, "q");
-  detail::require_ptr(k, where, "k");
-  detail::require_ptr(v, where, "v");
-  detail::require_ptr(out, where, "out");
+  detail::check_forward_args("attention_forward", s, q, k, v, out);
   namespace A = detail::attn;
   using V = A::Vec<T>;
   using Tl = A::Tiles<T>;
   constexpr int w = A::W<T>;
-  const int Dh = s.Dh;
+  constexpr int BQ = Tl::BQ, BK = Tl::BK, NB = BQ / w;
+  const int Dh = s.Dh, Lq = s.Lq;
   const int nk = A::compact_keys(s, key_valid, ws);
   if (nk == 0) {  // every key masked: output 0, lse +inf
-    for (int i = 0; i < s.Lq; ++i)
+    for (int i = 0; i < Lq; ++i)
       for (int c = 0; c < s.d(); ++c) out[static_cast<std::ptrdiff_t>(i) * s.ldo + c] = T(0);
     if (lse != nullptr)
-      for (int i = 0; i < s.H * s.Lq; ++i) lse[i] = std::numeric_limits<T>::infinity();
+      for (int i = 0; i < s.H * Lq; ++i) lse[i] = std::numeric_limits<T>::infinity();
     return;
   }
-  const A::ForwardLayout<T> lay(nk, Dh);
+  const A::ForwardLayout<T> lay(Lq, nk, Dh);
   T* const base = ws.get(static_cast<std::size_t>(lay.total));
-  T* const kt = base + lay.kt;
-  T* const vp = base + lay.vp;
-  T* const S = base + lay.s;
-  T* const O = base + lay.o;
-  T* const m = base + lay.m;
-  T* const l = base + lay.l;
-  T* const alpha = base + lay.alpha;
-  T* const rmax = base + lay.rmax;
-  const int* keys = ws.keys.data();
+  T *const qt = base + lay.qt, *const kp = base + lay.kp, *const vp = base + lay.vp;
+  T *const st = base + lay.st, *const O = base + lay.o, *const m = base + lay.m;
+  T *const l = base + lay.l, *const alpha = base + lay.alpha;
   const T c = static_cast<T>(A::log2e / std::sqrt(static_cast<double>(Dh)));
-  const std::ptrdiff_t Nk = lay.Nk, DhP = lay.DhP;
-  const T ninf = -std::numeric_limits<T>::infinity();
+  const std::ptrdiff_t DhP = lay.DhP;
 
   for (int h = 0; h < s.H; ++h) {
     const int c0 = h * Dh;
-    A::pack_transposed(k + c0, s.ldk, keys, nk, Dh, kt, Nk);
-    A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
+    A::pack_transposed(q + c0, s.ldq, nullptr, Lq, Dh, qt, lay.NqP, BQ);
+    A::pack_rows(k + c0, s.ldk, ws.keys.data(), nk, Dh, kp, DhP, nk);
+    A::pack_rows(v + c0, s.ldv, ws.keys.data(), nk, Dh, vp, DhP, nk);
 
-    for (int q0 = 0; q0 < s.Lq; q0 += Tl::BQ) {
-      const int mq = std::min(Tl::BQ, s.Lq - q0);
-      const T* qblk = q + static_cast<std::ptrdiff_t>(q0) * s.ldq + c0;
-      // Rows past mq keep m = 0, l = 1, so the vector updates below stay finite on them.
-      for (int i = 0; i < Tl::BQ; ++i) {
-        m[i] = i < mq ? ninf : T(0);
-        l[i] = T(1);
-        rmax[i] = T(0);
+    for (int q0 = 0; q0 < Lq; q0 += BQ) {
+      const int mq = std::min(BQ, Lq - q0);
+      const int nb = static_cast<int>(A::round_up(mq, w)) / w;  // query vectors in this block
+      const T* qtb = qt + static_cast<std::ptrdiff_t>(q0) * Dh;  // panel q0 / BQ
+      for (int j = 0; j < nb; ++j) {
+        V(-std::numeric_limits<T>::infinity()).store_aligned(m + j * w);
+        V(T(0)).store_aligned(l + j * w);
       }
-      for (int kb = 0; kb < nk; kb += Tl::BK) {
-        const int kv = std::min(Tl::BK, nk - kb);
-        const int nv = static_cast<int>(A::round_up(kv, w));
-        // S [mq, nv] = Q_blk K_blk^T (unscaled)
-        A::gemm<T, A::Store::overwrite>(mq, nv, Dh, qblk, s.ldq, 1, kt + kb, Nk, S, Tl::BK);
-        for (int i = 0; i < mq; ++i) {
-          T* row = S + i * Tl::BK;
-          for (int j = kv; j < nv; ++j) row[j] = ninf;  // padding keys of the last tile
-          V mx = V::load_aligned(row);
-          for (int j = w; j < nv; j += w) mx = xsimd::max(mx, V::load_aligned(row + j));
-          rmax[i] = A::hmax(mx);
-        }
-        // Per row, in base 2: m_new = max(m, c rowmax), alpha = 2^(m - m_new) (0 on the first tile).
-        for (int i = 0; i < Tl::BQ; i += w) {
-          const V mo = V::load_aligned(m + i);
-          const V mn = xsimd::max(mo, V::load_aligned(rmax + i) * V(c));
-          A::exp2(mo - mn).store_aligned(alpha + i);
-          mn.store_aligned(m + i);
-        }
-        for (int i = 0; i < mq; ++i) {
-          T* row = S + i * Tl::BK;
-          const V mv(m[i]), cv(c);
-          V sum(T(0));
-          for (int j = 0; j < nv; j += w) {
-            const V p = A::exp2(xsimd::fms(V::load_aligned(row + j), cv, mv));
-            p.store_aligned(row + j);
-            sum += p;
-          }
-          rmax[i] = xsimd::hadd(sum);  // now the row sum of this tile
-        }
-        for (int i = 0; i < Tl::BQ; i += w)
-          xsimd::fma(V::load_aligned(l + i), V::load_aligned(alpha + i), V::load_aligned(rmax + i)).store_aligned(l + i);
-        // O [mq, DhP] = alpha O + P V_blk
-        if (kb == 0)
-          A::gemm<T, A::Store::overwrite>(mq, static_cast<int>(DhP), kv, S, Tl::BK, 1, vp, DhP, O, DhP);
+      for (int kb = 0; kb < nk; kb += BK) {
+        const int kv = std::min(BK, nk - kb);
+        // S^T [kv, nb*w] = K_tile Q_blk^T (unscaled); query columns past mq are 0 (zero padding).
+        A::gemm<T, A::Store::overwrite, A::MR_st<T>, A::NV_st<T>>(kv, nb * w, Dh, kp + kb * DhP, DhP, 1, qtb, BQ, st, BQ);
+        if (nb == NB)  // a full query block: the statistics stay in registers
+          A::online_softmax_tile<T, NB, true>(st, BQ, kv, nb, c, m, l, alpha);
         else
-          A::gemm<T, A::Store::rescale_add>(mq, static_cast<int>(DhP), kv, S, Tl::BK, 1, vp + kb * DhP, DhP, O,
-                                            DhP, alpha);
+          A::online_softmax_tile<T, NB, false>(st, BQ, kv, nb, c, m, l, alpha);
+        // O [mq, DhP] = alpha O + P V_tile, P read transposed out of the P^T tile.
+        if (kb == 0)
+          A::gemm<T, A::Store::overwrite>(mq, static_cast<int>(DhP), kv, st, 1, BQ, vp, DhP, O, DhP);
+        else
+          A::gemm<T, A::Store::rescale_add>(mq, static_cast<int>(DhP), kv, st, 1, BQ, vp + kb * DhP, DhP, O, DhP,
+                                            alpha);
       }
       for (int i = 0; i < mq; ++i) {
         const T inv = T(1) / l[i];
         T* orow = out + static_cast<std::ptrdiff_t>(q0 + i) * s.ldo + c0;
         const T* src = O + i * DhP;
         for (int p = 0; p < Dh; ++p) orow[p] = src[p] * inv;
-        if (lse != nullptr) lse[static_cast<std::ptrdiff_t>(h) * s.Lq + q0 + i] = (m[i] + std::log2(l[i])) * T(A::ln2);
+        if (lse != nullptr) lse[static_cast<std::ptrdiff_t>(h) * Lq + q0 + i] = (m[i] + std::log2(l[i])) * T(A::ln2);
       }
     }
   }
@@ -366,11 +339,7 @@ template <class T>
 void attention_backward(const AttentionShape& s, const T* q, const T* k, const T* v,
                         const std::uint8_t* key_valid, const T* out, const T* lse, const T* dout,
                         T* dq, T* dk, T* dv, AttentionWorkspace<T>& ws) {
-  const char* where = "attention_backward";
-  check_attention_shape(s, where);
-  for (auto [p, n] : {std::pair<const void*, const char*>{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"},
-                      {lse, "lse"}, {dout, "dout"}, {dq, "dq"}, {dk, "dk"}, {dv, "dv"}})
-    detail::require_ptr(p, where, n);
+  detail::check_backward_args("attention_backward", s, q, k, v, out, lse, dout, dq, dk, dv);
   namespace A = detail::attn;
   using V = A::Vec<T>;
   using Tl = A::Tiles<T>;
@@ -392,41 +361,25 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
 
   for (int h = 0; h < s.H; ++h) {
     const int c0 = h * Dh;
+    A::pack_rows(q + c0, s.ldq, nullptr, Lq, Dh, qp, DhP, NqP);
+    A::pack_rows(dout + c0, s.ldo, nullptr, Lq, Dh, dop, DhP, NqP);
+    A::pack_transposed(qp, DhP, nullptr, Lq, Dh, qt, NqP, Tl::BQB);
+    A::pack_transposed(dop, DhP, nullptr, Lq, Dh, dot, NqP, Tl::BQB);
+    A::pack_rows(k + c0, s.ldk, keys, nk, Dh, kp, DhP, nk);
+    A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
+    std::fill(dqa, dqa + NqP * DhP, T(0));
     for (std::ptrdiff_t i = 0; i < NqP; ++i) {
-      T* qrow = qp + i * DhP;
-      T* dorow = dop + i * DhP;
-      T* dqrow = dqa + i * DhP;
-      for (std::ptrdiff_t p = 0; p < DhP; ++p) dqrow[p] = T(0);
       if (i >= Lq) {
-        for (std::ptrdiff_t p = 0; p < DhP; ++p) qrow[p] = dorow[p] = T(0);
-        for (int p = 0; p < Dh; ++p) qt[p * NqP + i] = dot[p * NqP + i] = T(0);
         lse2[i] = std::numeric_limits<T>::infinity();  // P = 0 on padding queries
         dd[i] = T(0);
         continue;
       }
-      const T* qi = q + i * s.ldq + c0;
-      const T* doi = dout + i * s.ldo + c0;
+      const T* doi = dop + i * DhP;
       const T* oi = out + i * s.ldo + c0;
       T D = T(0);
-      for (int p = 0; p < Dh; ++p) {
-        qrow[p] = qt[p * NqP + i] = qi[p];
-        dorow[p] = dot[p * NqP + i] = doi[p];
-        D += doi[p] * oi[p];
-      }
-      for (std::ptrdiff_t p = Dh; p < DhP; ++p) qrow[p] = dorow[p] = T(0);
+      for (int p = 0; p < Dh; ++p) D += doi[p] * oi[p];
       lse2[i] = lse[static_cast<std::ptrdiff_t>(h) * Lq + i] * T(A::log2e);
       dd[i] = D;
-    }
-    for (int jj = 0; jj < nk; ++jj) {
-      const T* kj = k + static_cast<std::ptrdiff_t>(keys[jj]) * s.ldk + c0;
-      const T* vj = v + static_cast<std::ptrdiff_t>(keys[jj]) * s.ldv + c0;
-      T* krow = kp + jj * DhP;
-      T* vrow = vp + jj * DhP;
-      for (int p = 0; p < Dh; ++p) {
-        krow[p] = kj[p];
-        vrow[p] = vj[p];
-      }
-      for (std::ptrdiff_t p = Dh; p < DhP; ++p) krow[p] = vrow[p] = T(0);
     }
 
     for (int kb = 0; kb < nk; kb += Tl::BKB) {
@@ -436,8 +389,8 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
       for (int qb = 0; qb < Lq; qb += Tl::BQB) {
         const int nq = std::min(Tl::BQB, Lq - qb);
         const int nv = static_cast<int>(A::round_up(nq, w));
-        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, kblk, DhP, 1, qt + qb, NqP, st, Tl::BQB);   // S^T
-        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, vblk, DhP, 1, dot + qb, NqP, dpt, Tl::BQB);  // dP^T
+        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, kblk, DhP, 1, qt + qb * Dh, Tl::BQB, st, Tl::BQB);   // S^T
+        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, vblk, DhP, 1, dot + qb * Dh, Tl::BQB, dpt, Tl::BQB);  // dP^T
         const V cv(c);
         for (int r = 0; r < mk; ++r) {
           T* srow = st + r * Tl::BQB;

@@ -132,22 +132,29 @@ void layer_norm_backward(T* din, T* dw, T* db, const T* dout, const T* in, const
       }
     }
   }
-  // Parameter gradients: a reduction over rows, kept serial so that the sum order is fixed.
-  for (int m = 0; m < M; ++m) {
-    const T* x = in + std::size_t(m) * n;
-    const T* g = dout + std::size_t(m) * n;
-    const V vmu(mean[m]), vrs(rstd[m]);
-    std::size_t i = 0;
-    for (; i + W <= n; i += W) {
-      const V gv = xsimd::load_unaligned(g + i);
-      const V xh = (xsimd::load_unaligned(x + i) - vmu) * vrs;
-      xsimd::fma(gv, xh, xsimd::load_unaligned(dw + i)).store_unaligned(dw + i);
-      (gv + xsimd::load_unaligned(db + i)).store_unaligned(db + i);
+  // Parameter gradients: a reduction over rows, summed per column block in registers and added
+  // once, so that a second backward adds exactly the same amount (and the order is fixed).
+  std::size_t i = 0;
+  for (; i + W <= n; i += W) {
+    V aw(T(0)), ab(T(0));
+    for (int m = 0; m < M; ++m) {
+      const V gv = xsimd::load_unaligned(dout + std::size_t(m) * n + i);
+      const V xh = (xsimd::load_unaligned(in + std::size_t(m) * n + i) - V(mean[m])) * V(rstd[m]);
+      aw = xsimd::fma(gv, xh, aw);
+      ab += gv;
     }
-    for (; i < n; ++i) {
-      dw[i] += g[i] * (x[i] - mean[m]) * rstd[m];
-      db[i] += g[i];
+    (xsimd::load_unaligned(dw + i) + aw).store_unaligned(dw + i);
+    (xsimd::load_unaligned(db + i) + ab).store_unaligned(db + i);
+  }
+  for (; i < n; ++i) {
+    T aw = 0, ab = 0;
+    for (int m = 0; m < M; ++m) {
+      const T g = dout[std::size_t(m) * n + i];
+      aw += g * (in[std::size_t(m) * n + i] - mean[m]) * rstd[m];
+      ab += g;
     }
+    dw[i] += aw;
+    db[i] += ab;
   }
 }
 

@@ -2,11 +2,13 @@
 // Linear layer on a batch of rows: out[M, N] = in[M, K] · w[N, K]ᵀ + b[N].
 //
 // w is stored PyTorch-style [out, in]. A [B, L, C] activation is a [B·L, C] matrix, so every
-// token-wise layer is one large GEMM (Eigen, row-major maps). Backward ADDS into its gradients
+// token-wise layer is one large GEMM (Eigen's packed kernels through detail/gemm.hpp: no
+// allocation after warm-up, rows split over the OpenMP threads). Backward ADDS into its gradients
 // (llm.c style): one zero_grad serves a whole step.
 #include <cstddef>
 
 #include "tjepa/core/eigen.hpp"
+#include "tjepa/model/detail/gemm.hpp"
 
 namespace tjepa {
 
@@ -39,17 +41,20 @@ void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* 
 // out[M, N] = in[M, K] · wᵀ (+ b); b may be nullptr.
 template <class T>
 void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
+  // The bias is the GEMM's starting value, so bias and product are one pass over out.
   MatrixMap<T> o(out, M, N);
-  o.noalias() = ConstMatrixMap<T>(in, M, K) * ConstMatrixMap<T>(w, N, K).transpose();
-  if (b) o.rowwise() += ConstRowVectorMap<T>(b, N);
+  if (b)
+    o.rowwise() = ConstRowVectorMap<T>(b, N);
+  else
+    o.setZero();
+  detail::gemm_accumulate<Eigen::RowMajor, Eigen::ColMajor>(M, N, K, in, K, w, K, out, N);
 }
 
 // out[M, N] += in[M, K] · wᵀ (+ b): the residual add fused into the GEMM's accumulation.
 template <class T>
 void linear_forward_accumulate(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
-  MatrixMap<T> o(out, M, N);
-  o.noalias() += ConstMatrixMap<T>(in, M, K) * ConstMatrixMap<T>(w, N, K).transpose();
-  if (b) o.rowwise() += ConstRowVectorMap<T>(b, N);
+  if (b) MatrixMap<T>(out, M, N).rowwise() += ConstRowVectorMap<T>(b, N);
+  detail::gemm_accumulate<Eigen::RowMajor, Eigen::ColMajor>(M, N, K, in, K, w, K, out, N);
 }
 
 // Differentiates out = in · wᵀ + b:
@@ -58,10 +63,9 @@ void linear_forward_accumulate(T* out, const T* in, const T* w, const T* b, int 
 template <class T>
 void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* w, int M, int K,
                      int N) {
-  ConstMatrixMap<T> g(dout, M, N);
-  if (din) MatrixMap<T>(din, M, K).noalias() += g * ConstMatrixMap<T>(w, N, K);
-  if (dw) MatrixMap<T>(dw, N, K).noalias() += g.transpose() * ConstMatrixMap<T>(in, M, K);
-  if (db) RowVectorMap<T>(db, N) += g.colwise().sum();
+  if (din) detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, din, K);
+  if (dw) detail::gemm_accumulate<Eigen::ColMajor, Eigen::RowMajor>(N, K, M, dout, N, in, K, dw, K);
+  if (db) RowVectorMap<T>(db, N) += ConstMatrixMap<T>(dout, M, N).colwise().sum();
 }
 
 }  // namespace tjepa

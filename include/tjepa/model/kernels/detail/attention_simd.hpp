@@ -1,5 +1,6 @@
 #pragma once
-// SIMD internals of the fast attention kernels: a vectorized exp2, register-blocked GEMM
+// SIMD internals of the fast attention kernels (included only by ../attention.hpp, inside its
+// g++ warning suppression): a vectorized exp2, register-blocked GEMM
 // micro-kernels on tiles, and the tile sizes. Everything uses xsimd's default architecture (the best
 // one the translation unit is compiled for: AVX-512, AVX2 or plain SSE2).
 #include <algorithm>
@@ -25,6 +26,12 @@ inline constexpr int MR = sizeof(Vec<T>) >= 64 ? 6 : 3;
 inline constexpr int NV = 4;
 template <class T>
 inline constexpr int NR = NV * W<T>;  // columns of one micro-panel
+// The forward's S^T tile is BQ = 6 W queries wide: on AVX-512 an 8 x 3 block covers it in two
+// full panels (a 6 x 4 block would leave a half-empty 6 x 2 one).
+template <class T>
+inline constexpr int MR_st = sizeof(Vec<T>) >= 64 ? 8 : MR<T>;
+template <class T>
+inline constexpr int NV_st = sizeof(Vec<T>) >= 64 ? 3 : NV;
 
 inline constexpr std::ptrdiff_t round_up(std::ptrdiff_t n, std::ptrdiff_t m) { return (n + m - 1) / m * m; }
 
@@ -40,6 +47,7 @@ template <>
 struct Exp2Traits<float> {
   using Int = std::int32_t;
   static constexpr float lo = -127.0f, hi = 127.0f;
+  static constexpr float flush = -151.0f;  // 2^flush rounds to 0 (smallest subnormal 2^-149)
   static constexpr float magic = 0x1.8p23f;  // adding it rounds to an integer in the low bits
   static constexpr Int bias = 127;
   static constexpr int mant = 23;
@@ -58,6 +66,7 @@ template <>
 struct Exp2Traits<double> {
   using Int = std::int64_t;
   static constexpr double lo = -1023.0, hi = 1023.0;
+  static constexpr double flush = -1076.0;  // 2^flush rounds to 0 (smallest subnormal 2^-1074)
   static constexpr double magic = 0x1.8p52;
   static constexpr Int bias = 1023;
   static constexpr int mant = 52;
@@ -86,6 +95,22 @@ struct Exp2Traits<double> {
 template <class T>
 inline Vec<T> exp2(Vec<T> x) {
   using Tr = Exp2Traits<T>;
+#if defined(__AVX512F__)
+  if constexpr (sizeof(Vec<T>) == 64) {
+    // AVX-512: round with vrndscale, multiply by 2^n with vscalef (which also flushes 2^-150 and
+    // below to 0), no integer domain crossing. The low clamp keeps f finite for x = -inf.
+    x = xsimd::max(x, Vec<T>(Tr::flush));
+    if constexpr (std::is_same_v<T, float>) {
+      const __m512 n = _mm512_roundscale_ps(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+      const __m512 p = Tr::poly(Vec<T>(_mm512_sub_ps(x, n)));
+      return Vec<T>(_mm512_scalef_ps(p, n));
+    } else {
+      const __m512d n = _mm512_roundscale_pd(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+      const __m512d p = Tr::poly(Vec<T>(_mm512_sub_pd(x, n)));
+      return Vec<T>(_mm512_scalef_pd(p, n));
+    }
+  }
+#endif
   using IV = xsimd::batch<typename Tr::Int>;
   x = xsimd::min(xsimd::max(x, Vec<T>(Tr::lo)), Vec<T>(Tr::hi));  // also maps -inf to lo
   const Vec<T> t = x + Vec<T>(Tr::magic);                         // low bits of t hold round(x)
@@ -94,6 +119,44 @@ inline Vec<T> exp2(Vec<T> x) {
   // bits(t) = bits(magic) + n; shifting out the high bits leaves (n + bias) in the exponent field.
   const IV e = (xsimd::bitwise_cast<IV>(t) + IV(Tr::bias)) << Tr::mant;
   return Tr::poly(f) * xsimd::bitwise_cast<Vec<T>>(e);
+}
+
+// One key tile of the forward's online softmax on transposed scores st [kv, ld] (key r in row r,
+// queries along the row, nb vectors of them): with mx = max over the tile's keys,
+//   m_new = max(m, c mx), alpha = 2^(m - m_new), P^T = 2^(c S^T - m_new), l = alpha l + sum_r P^T,
+// all in base 2 (c = scale * log2 e); P^T replaces S^T, alpha is left for rescaling the output.
+// Full = true fixes nb = NBmax at compile time so the per-query vectors live in registers.
+template <class T, int NBmax, bool Full>
+inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* l, T* alpha) {
+  const int nb = Full ? NBmax : nb_rt;
+  constexpr int w = W<T>;
+  const Vec<T> cv(c);
+  Vec<T> mx[NBmax], mn[NBmax], sum[NBmax];
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j) mx[j] = Vec<T>::load_aligned(st + j * w);
+  for (int r = 1; r < kv; ++r)
+#pragma GCC unroll 8
+    for (int j = 0; j < nb; ++j) mx[j] = xsimd::max(mx[j], Vec<T>::load_aligned(st + r * ld + j * w));
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j) {
+    const Vec<T> mo = Vec<T>::load_aligned(m + j * w);
+    mn[j] = xsimd::max(mo, mx[j] * cv);
+    exp2(mo - mn[j]).store_aligned(alpha + j * w);  // 0 on the first tile (m = -inf)
+    mn[j].store_aligned(m + j * w);
+    sum[j] = Vec<T>(T(0));
+  }
+  for (int r = 0; r < kv; ++r) {
+    T* row = st + r * ld;
+#pragma GCC unroll 8
+    for (int j = 0; j < nb; ++j) {
+      const Vec<T> p = exp2(xsimd::fms(Vec<T>::load_aligned(row + j * w), cv, mn[j]));
+      p.store_aligned(row + j * w);
+      sum[j] += p;
+    }
+  }
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j)
+    xsimd::fma(Vec<T>::load_aligned(l + j * w), Vec<T>::load_aligned(alpha + j * w), sum[j]).store_aligned(l + j * w);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -110,25 +173,25 @@ inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std:
   Vec<T> acc[MR_][NV_];
 #pragma GCC unroll 8
   for (int i = 0; i < MR_; ++i)
-#pragma GCC unroll 4
+#pragma GCC unroll 8
     for (int j = 0; j < NV_; ++j) acc[i][j] = Vec<T>(T(0));
   for (int p = 0; p < K; ++p) {
     const T* b = B + p * ldb;
     Vec<T> bv[NV_];
-#pragma GCC unroll 4
+#pragma GCC unroll 8
     for (int j = 0; j < NV_; ++j) bv[j] = Vec<T>::load_aligned(b + j * w);
     const T* a = A + p * a_cs;
 #pragma GCC unroll 8
     for (int i = 0; i < MR_; ++i) {
       const Vec<T> ai(a[i * a_rs]);
-#pragma GCC unroll 4
+#pragma GCC unroll 8
       for (int j = 0; j < NV_; ++j) acc[i][j] = xsimd::fma(ai, bv[j], acc[i][j]);
     }
   }
 #pragma GCC unroll 8
   for (int i = 0; i < MR_; ++i) {
     T* c = C + i * ldc;
-#pragma GCC unroll 4
+#pragma GCC unroll 8
     for (int j = 0; j < NV_; ++j) {
       if constexpr (S == Store::overwrite) {
         acc[i][j].store_aligned(c + j * w);
@@ -141,44 +204,35 @@ inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std:
   }
 }
 
-template <class T, int NV_, Store S>
-inline void strip(int mr, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
-                  std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
-  switch (mr) {
-    case 1: return micro_kernel<T, 1, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-    case 2: return micro_kernel<T, 2, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-    case 3: return micro_kernel<T, 3, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-    default:
-      if constexpr (MR<T> >= 6) {
-        switch (mr) {
-          case 4: return micro_kernel<T, 4, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-          case 5: return micro_kernel<T, 5, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-          default: return micro_kernel<T, 6, NV_, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
-        }
-      }
+// Runs the micro-kernel of mr rows (1 <= mr <= MRm) and nv vectors (1 <= nv <= NVm).
+template <class T, Store S, int MRm, int NVm>
+inline void micro_dispatch(int mr, int nv, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
+                           std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
+  if constexpr (MRm > 1) {
+    if (mr < MRm) return micro_dispatch<T, S, MRm - 1, NVm>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
   }
+  if constexpr (NVm > 1) {
+    if (nv < NVm) return micro_dispatch<T, S, MRm, NVm - 1>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+  }
+  micro_kernel<T, MRm, NVm, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
 }
 
-// C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NR outside (the B panel
-// stays in L1), strips of MR rows inside. alpha [M] is read only by Store::rescale_add.
-template <class T, Store S>
+// C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NVm vectors outside (the B
+// panel stays in L1), strips of MRm rows inside. alpha [M] is read only by Store::rescale_add.
+// MRm * NVm accumulators must fit the register file.
+template <class T, Store S, int MRm = MR<T>, int NVm = NV>
 inline void gemm(int M, int N, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
                  std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha = nullptr) {
   constexpr int w = W<T>;
-  for (int n0 = 0; n0 < N; n0 += NR<T>) {
-    const int nv = std::min(NV, (N - n0) / w);
-    for (int m0 = 0; m0 < M; m0 += MR<T>) {
-      const int mr = std::min(MR<T>, M - m0);
+  for (int n0 = 0; n0 < N; n0 += NVm * w) {
+    const int nv = std::min(NVm, (N - n0) / w);
+    for (int m0 = 0; m0 < M; m0 += MRm) {
+      const int mr = std::min(MRm, M - m0);
       const T* a = A + m0 * a_rs;
       const T* b = B + n0;
       T* c = C + m0 * ldc + n0;
       const T* al = alpha == nullptr ? nullptr : alpha + m0;
-      switch (nv) {
-        case 4: strip<T, 4, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        case 3: strip<T, 3, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        case 2: strip<T, 2, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-        default: strip<T, 1, S>(mr, K, a, a_rs, a_cs, b, ldb, c, ldc, al); break;
-      }
+      micro_dispatch<T, S, MRm, NVm>(mr, nv, K, a, a_rs, a_cs, b, ldb, c, ldc, al);
     }
   }
 }
@@ -197,22 +251,22 @@ inline void prefetch_row(const T* src, std::ptrdiff_t lds, const int* rows, int 
   for (std::size_t off = 0; off < Dh * sizeof(T); off += 64) __builtin_prefetch(p + off);
 }
 
-// dst [Dh, ldd] = the rows transposed, columns [n, n_pad) zero (n_pad <= ldd).
+// The rows transposed, in panels of `panel` rows: dst [n_pad / panel][Dh][panel], so the B operand
+// of one tile (row r of the source is column r % panel of panel r / panel) is contiguous; columns
+// [n, n_pad) are zero. n_pad is a multiple of panel.
 template <class T>
 inline void pack_transposed(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
-                            std::ptrdiff_t n_pad) {
-  const std::ptrdiff_t ldd = n_pad;
-  constexpr int blk = 16;  // 16 source rows at a time: reads stay in L1, writes are 16-wide runs
-  for (int r0 = 0; r0 < n; r0 += blk) {
-    const int r1 = std::min(n, r0 + blk);
-    for (int r = r0; r < r1; ++r) {
-      prefetch_row(src, lds, rows, r, n, Dh);
+                            std::ptrdiff_t n_pad, int panel) {
+  for (std::ptrdiff_t r = 0; r < n_pad; ++r) {
+    T* d = dst + (r / panel) * Dh * panel + r % panel;
+    if (r < n) {
+      prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
       const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
-      for (int p = 0; p < Dh; ++p) dst[p * ldd + r] = sr[p];
+      for (int p = 0; p < Dh; ++p) d[p * panel] = sr[p];
+    } else {
+      for (int p = 0; p < Dh; ++p) d[p * panel] = T(0);
     }
   }
-  for (int p = 0; p < Dh; ++p)
-    for (std::ptrdiff_t r = n; r < n_pad; ++r) dst[p * ldd + r] = T(0);
 }
 
 // dst [n_pad, DhP] = the rows, columns [Dh, DhP) and rows [n, n_pad) zero.
@@ -232,40 +286,48 @@ inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, 
 }
 
 // ---------------------------------------------------------------------------------------------
-// Tile sizes. Forward: BQ query rows x BK keys of scores per tile (BQ a multiple of MR, BK of NR).
+// Tile sizes. Forward: BK keys x BQ queries of transposed scores per tile (both multiples of MR,
+// BQ of W).
 // Backward (key blocks outside, query blocks inside): BKB keys x BQB queries.
 template <class T>
 struct Tiles {
-  static constexpr int BQ = 8 * MR<T>;
-  static constexpr int BK = 2 * NR<T>;
+  static constexpr int BQ = 16 * MR<T>;
+  static constexpr int BK = 8 * MR<T>;
   static constexpr int BKB = 8 * MR<T>;
   static constexpr int BQB = NR<T>;
 };
 
-// Offsets (in elements, each W-aligned) of the buffers one head needs, carved out of the workspace.
+// Hands out consecutive W-aligned offsets (in elements) of one workspace buffer.
+template <class T>
+struct Carver {
+  std::ptrdiff_t at = 0;
+  std::ptrdiff_t take(std::ptrdiff_t n) {
+    const std::ptrdiff_t off = at;
+    at += round_up(n, W<T>);
+    return off;
+  }
+};
+
+// Offsets of the buffers one head needs, carved out of the workspace.
 template <class T>
 struct ForwardLayout {
-  std::ptrdiff_t Nk, DhP;                      // padded key count, padded head width
-  std::ptrdiff_t kt, vp, s, o, m, l, alpha, rmax, total;
-  ForwardLayout(int Lk, int Dh) {
+  std::ptrdiff_t NqP, DhP;  // padded query count, padded head width
+  std::ptrdiff_t qt, kp, vp, st, o, m, l, alpha, total;
+  ForwardLayout(int Lq, int Lk, int Dh) {
     using Tl = Tiles<T>;
-    Nk = round_up(Lk, Tl::BK);
+    NqP = round_up(Lq, Tl::BQ);
     DhP = round_up(Dh, W<T>);
-    std::ptrdiff_t at = 0;
-    auto take = [&](std::ptrdiff_t n) {
-      const std::ptrdiff_t off = at;
-      at += round_up(n, W<T>);
-      return off;
-    };
-    kt = take(Dh * Nk);  // K_h^T of the valid keys [Dh, Nk]
-    vp = take(Nk * DhP);  // V_h of the valid keys [Nk, DhP]
-    s = take(std::ptrdiff_t{Tl::BQ} * Tl::BK);  // scores, then probabilities [BQ, BK]
-    o = take(std::ptrdiff_t{Tl::BQ} * DhP);     // unnormalized output [BQ, DhP]
-    m = take(Tl::BQ);
-    l = take(Tl::BQ);
-    alpha = take(Tl::BQ);
-    rmax = take(Tl::BQ);
-    total = at;
+    Carver<T> c;
+    auto take = [&c](std::ptrdiff_t n) { return c.take(n); };
+    qt = take(Dh * NqP);                           // Q_h^T in panels of BQ queries [NqP / BQ][Dh][BQ]
+    kp = take(std::ptrdiff_t{Lk} * DhP);            // K_h of the valid keys [Lk, DhP]
+    vp = take(std::ptrdiff_t{Lk} * DhP);            // V_h of the valid keys [Lk, DhP]
+    st = take(std::ptrdiff_t{Tl::BK} * Tl::BQ);     // S^T, then P^T, of one tile [BK, BQ]
+    o = take(std::ptrdiff_t{Tl::BQ} * DhP);         // unnormalized output of a query block [BQ, DhP]
+    m = take(Tl::BQ);                               // running max (base 2) [BQ]
+    l = take(Tl::BQ);                               // running sum [BQ]
+    alpha = take(Tl::BQ);                           // rescale factor of the current tile [BQ]
+    total = c.at;
   }
 };
 
@@ -278,14 +340,10 @@ struct BackwardLayout {
     Nk = round_up(Lk, Tl::BKB);
     NqP = round_up(Lq, Tl::BQB);
     DhP = round_up(Dh, W<T>);
-    std::ptrdiff_t at = 0;
-    auto take = [&](std::ptrdiff_t n) {
-      const std::ptrdiff_t off = at;
-      at += round_up(n, W<T>);
-      return off;
-    };
-    qt = take(Dh * NqP);   // Q_h^T [Dh, NqP]
-    dot = take(Dh * NqP);  // dO_h^T [Dh, NqP]
+    Carver<T> c;
+    auto take = [&c](std::ptrdiff_t n) { return c.take(n); };
+    qt = take(Dh * NqP);   // Q_h^T in panels of BQB queries [NqP / BQB][Dh][BQB]
+    dot = take(Dh * NqP);  // dO_h^T, same layout
     qp = take(NqP * DhP);  // Q_h [NqP, DhP]
     dop = take(NqP * DhP);  // dO_h [NqP, DhP]
     dq = take(NqP * DhP);   // dQ_h accumulator [NqP, DhP]
@@ -297,7 +355,7 @@ struct BackwardLayout {
     dpt = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB);  // dP^T, then dS^T [BKB, BQB]
     dk = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dK accumulator of one key block
     dv = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dV accumulator of one key block
-    total = at;
+    total = c.at;
   }
 };
 

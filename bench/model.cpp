@@ -1,0 +1,210 @@
+// Benchmarks of the model modules (float): the ViT-Tiny encoder of REFERENCE §4 (12 blocks,
+// d = 192, 3 heads, MLP 768), inference at the token counts of Sparsh-skin (368) and DECO-50
+// (528), a training-shaped forward+backward, the predictor at training shape, and the grouped
+// tokenizer on 2124 taxels.
+//
+// FLOP convention: GEMMs 2·M·K·N (per block: qkv 6d², proj 2d², fc1 + fc2 16d², so 24·M·d²);
+// attention 4·L²·d per sample forward, 3.5× that forward+backward (the attention suite's
+// convention); backward GEMMs 2× forward. LayerNorm, GELU and adds are not counted.
+// Reference points (PyTorch, REFERENCE issue 8): encoder forward L = 368, batch 1: 62 ms;
+// training step batch 8, L = 368: 1368 ms.
+#if defined(__GNUC__) && !defined(__clang__)
+// g++ 12's AVX-512 intrinsics: a false (maybe-)uninitialized once Eigen is inlined (GCC bug 105593).
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
+#include <benchmark/benchmark.h>
+
+#include <vector>
+
+#include <tjepa/core/random.hpp>
+#include <tjepa/model/encoder.hpp>
+#include <tjepa/model/init.hpp>
+#include <tjepa/model/predictor.hpp>
+#include <tjepa/model/tokenizer.hpp>
+
+namespace {
+
+using namespace tjepa;
+
+constexpr int dim = 192, depth = 12, heads = 3;
+
+double encoder_forward_flops(double B, double L, double D = depth) {
+  return D * (24.0 * B * L * dim * dim + B * 4.0 * L * L * dim);
+}
+double encoder_train_flops(double B, double L, double D = depth) {
+  return D * (3 * 24.0 * B * L * dim * dim + 3.5 * B * 4.0 * L * L * dim);
+}
+
+std::vector<float> random_floats(std::size_t n, std::uint64_t seed) {
+  Rng rng(seed);
+  std::vector<float> v(n);
+  for (auto& x : v) x = float(rng.normal());
+  return v;
+}
+
+// A ViT-Tiny encoder on L tokens with initialized parameters, and a batch of B token rows.
+struct EncoderSetup {
+  ParamSet<float> ps;
+  Encoder enc;
+  std::vector<float> tokens, out;
+  Workspace<float> ws;
+  EncoderSetup(int B, int L) : enc(ps, EncoderConfig{L, dim, depth, heads, 4.0, true, 1e-6}) {
+    ps.allocate();
+    init_params(ps, 1);
+    tokens = random_floats(std::size_t(B) * L * dim, 2);
+    out.resize(tokens.size());
+  }
+};
+
+// Encoder inference (target-encoder path: all tokens, no cache), batch B.
+void BM_EncoderForward(benchmark::State& state) {
+  const int L = int(state.range(0)), B = int(state.range(1));
+  EncoderSetup e(B, L);
+  for (auto _ : state) {
+    e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), nullptr, e.ws);
+    benchmark::DoNotOptimize(e.out.data());
+  }
+  state.counters["GFLOP/s"] =
+      benchmark::Counter(encoder_forward_flops(B, L) * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_EncoderForward)->Args({368, 1})->Args({528, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Training-shaped encoder: forward with cache (drop-path 0.3, as the reference trains) and
+// backward to parameters and tokens, batch 8.
+void BM_EncoderForwardBackward(benchmark::State& state) {
+  const int L = int(state.range(0)), B = int(state.range(1));
+  EncoderSetup e(B, L);
+  auto dout = random_floats(e.tokens.size(), 3);
+  std::vector<float> dtokens(e.tokens.size());
+  EncoderCache<float> cache;
+  std::uint64_t step = 0;
+  for (auto _ : state) {
+    e.ps.zero_grad();
+    e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), &cache, e.ws, {DropPath{0.3, ++step}, nullptr});
+    e.enc.backward(e.ps, dout.data(), dtokens.data(), cache, e.ws);
+    benchmark::DoNotOptimize(dtokens.data());
+  }
+  state.counters["GFLOP/s"] =
+      benchmark::Counter(encoder_train_flops(B, L) * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_EncoderForwardBackward)->Args({368, 8})->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Predictor at training shape: batch 8, 4 targets tiled (32 rows), context 258 of 368 tokens
+// (0.7 N), targets 51 tokens (0.14 N), 4 blocks; forward with cache and backward.
+void BM_PredictorForwardBackward(benchmark::State& state) {
+  const int N = 368, Bc = 8, R = 4, K = 258, t = 51, B = Bc * R;
+  ParamSet<float> ps;
+  Predictor pred(ps, PredictorConfig{dim, dim, 4, heads, 4.0, false, 1e-6});
+  ps.allocate();
+  init_params(ps, 1);
+  auto ctx = random_floats(std::size_t(Bc) * K * dim, 2), pos = random_floats(std::size_t(N) * dim, 3);
+  auto dout = random_floats(std::size_t(B) * t * dim, 4);
+  std::vector<int> tg(std::size_t(B) * t);
+  for (std::size_t i = 0; i < tg.size(); ++i) tg[i] = int((i * 37) % N);
+  std::vector<float> out(dout.size()), dctx(ctx.size());
+  Workspace<float> ws;
+  PredictorCache<float> cache;
+  for (auto _ : state) {
+    ps.zero_grad();
+    pred.forward(ps, ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t, out.data(), &cache, ws);
+    pred.backward(ps, dout.data(), dctx.data(), nullptr, cache, ws);
+    benchmark::DoNotOptimize(dctx.data());
+  }
+  state.counters["GFLOP/s"] =
+      benchmark::Counter(encoder_train_flops(B, K + t, 4) * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_PredictorForwardBackward)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The model work of one JEPA training step on Sparsh-skin shapes, batch 8 (no loss, optimizer
+// or masks: those are the training stage's): tokenizer (368 taxels, m·τ = 30) forward+backward,
+// target encoder forward on all 368 tokens (drop-path 0.3, no cache), context encoder
+// forward+backward on 258 tokens, predictor forward+backward on 4 tiled targets of 51 tokens.
+// Compare with PyTorch's 1368 ms per training step.
+void BM_JepaStepModel(benchmark::State& state) {
+  const int N = 368, B = 8, K = 258, t = 51, R = 4, in = 30;
+  ParamSet<float> ps, target, pps;
+  Tokenizer tok = Tokenizer::per_taxel(ps, N, in, dim);
+  Encoder enc(ps, EncoderConfig{N, dim, depth, heads, 4.0, true, 1e-6});
+  Tokenizer::per_taxel(target, N, in, dim);
+  Encoder(target, EncoderConfig{N, dim, depth, heads, 4.0, true, 1e-6});
+  Predictor pred(pps, PredictorConfig{dim, dim, 4, heads, 4.0, false, 1e-6});
+  for (auto* p : {&ps, &target, &pps}) {
+    p->allocate();
+    init_params(*p, 1);
+  }
+  auto x = random_floats(std::size_t(B) * N * in, 2), dout = random_floats(std::size_t(B) * R * t * dim, 3);
+  std::vector<int> ctx(std::size_t(B) * K), tg(std::size_t(B) * R * t);
+  for (std::size_t i = 0; i < ctx.size(); ++i) ctx[i] = int((i * 7) % N);
+  for (std::size_t i = 0; i < tg.size(); ++i) tg[i] = int((i * 37) % N);
+  std::vector<float> tokens(std::size_t(B) * N * dim), ttokens(tokens.size()), z(tokens.size());
+  std::vector<float> zc(std::size_t(B) * K * dim), dzc(zc.size()), dtokens(tokens.size()), out(dout.size());
+  Workspace<float> ws;
+  TokenizerCache<float> tc;
+  EncoderCache<float> ec;
+  PredictorCache<float> pc;
+  std::uint64_t step = 0;
+  for (auto _ : state) {
+    ps.zero_grad();
+    pps.zero_grad();
+    ++step;
+    tok.forward(target, x.data(), B, ttokens.data(), nullptr, ws);
+    enc.forward(target, ttokens.data(), B, nullptr, N, z.data(), nullptr, ws, {DropPath{0.3, step}, nullptr});
+    tok.forward(ps, x.data(), B, tokens.data(), &tc, ws);
+    enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), &ec, ws, {DropPath{0.3, step + (1u << 30)}, nullptr});
+    pred.forward(pps, zc.data(), B, K, target.value(enc.pos_embed()), N, tg.data(), B * R, t, out.data(), &pc, ws);
+    std::fill(dzc.begin(), dzc.end(), 0.0f);
+    pred.backward(pps, dout.data(), dzc.data(), nullptr, pc, ws);
+    std::fill(dtokens.begin(), dtokens.end(), 0.0f);
+    enc.backward(ps, dzc.data(), dtokens.data(), ec, ws);
+    tok.backward(ps, dtokens.data(), nullptr, tc, ws);
+    benchmark::DoNotOptimize(ps.grads().data());
+  }
+  const double flops = encoder_forward_flops(B, N) + encoder_train_flops(B, K) + encoder_train_flops(B * R, K + t, 4);
+  state.counters["GFLOP/s"] = benchmark::Counter(flops * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_JepaStepModel)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Grouped tokenizer of DECO-50: 2124 taxels in 528 groups per window (per hand: 252 2×2 groups
+// of 4, and the six 3×3 regions split into 4 + 5), τ = 3 frames, m = 1; forward only (arg 0) or
+// forward with cache and backward (arg 1), batch B.
+void BM_TokenizerGrouped(benchmark::State& state) {
+  const bool train = state.range(0) != 0;
+  const int B = int(state.range(1)), tau = 3;
+  std::vector<int> sizes;
+  for (int hand = 0; hand < 2; ++hand) {
+    for (int g = 0; g < 252; ++g) sizes.push_back(4);
+    for (int r = 0; r < 6; ++r) {
+      sizes.push_back(4);
+      sizes.push_back(5);
+    }
+  }
+  int taxels = 0;
+  for (int s : sizes) taxels += s;
+  ParamSet<float> ps;
+  Tokenizer tok = Tokenizer::grouped(ps, sizes, tau, dim);
+  ps.allocate();
+  init_params(ps, 1);
+  const int G = tok.num_tokens;
+  auto x = random_floats(std::size_t(B) * G * tok.width, 2);
+  auto dout = random_floats(std::size_t(B) * G * dim, 3);
+  std::vector<float> out(dout.size()), dx(x.size());
+  Workspace<float> ws;
+  TokenizerCache<float> cache;
+  for (auto _ : state) {
+    if (train) {
+      ps.zero_grad();
+      tok.forward(ps, x.data(), B, out.data(), &cache, ws);
+      tok.backward(ps, dout.data(), dx.data(), cache, ws);
+    } else {
+      tok.forward(ps, x.data(), B, out.data(), nullptr, ws);
+    }
+    benchmark::DoNotOptimize(out.data());
+  }
+  state.counters["taxels"] = taxels;
+  state.counters["GFLOP/s"] = benchmark::Counter((train ? 3.0 : 1.0) * 2.0 * B * taxels * tau * dim * 1e-9,
+                                                 benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_TokenizerGrouped)->Args({0, 1})->Args({0, 8})->Args({1, 8})->Unit(benchmark::kMicrosecond)->UseRealTime();
+
+}  // namespace

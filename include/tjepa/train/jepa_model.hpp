@@ -1,0 +1,104 @@
+#pragma once
+// JepaModel: the three parameter sets of Tactile-JEPA and the modules that read them.
+//
+//   context    tokenizer + encoder (position table, blocks, final norm): trained
+//   target     the same layout, the EMA copy of `context` (REFERENCE §5): never gets gradients
+//   predictor  the predictor: trained
+// Checkpoint prefixes are the reference module's attribute names: "context_encoder.",
+// "target_encoder.", "predictor." (tensor names inside follow the reference PyTorch model).
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "tjepa/core/error.hpp"
+#include "tjepa/model/encoder.hpp"
+#include "tjepa/model/init.hpp"
+#include "tjepa/model/predictor.hpp"
+#include "tjepa/model/prefixed_params.hpp"
+#include "tjepa/model/tokenizer.hpp"
+
+namespace tjepa {
+
+struct JepaConfig {
+  // Tokenizer input per token: m·τ values (one token per taxel), or with group_size set, the
+  // m·τ values of each taxel of a group (DECO-50: groups of 4 and 5 taxels).
+  int in_dim = 30;
+  std::vector<int> group_size;  // [N tokens] taxels per token; empty: one token per taxel
+  EncoderConfig encoder;        // encoder.num_tokens = N
+  PredictorConfig predictor;    // in_dim = encoder.dim; dim = encoder.dim (position rows are shared)
+
+  // The reference (REFERENCE §4): ViT-Tiny encoder, 4-block predictor of width 192.
+  static JepaConfig reference(int num_tokens, int in_dim) {
+    JepaConfig c;
+    c.in_dim = in_dim;
+    c.encoder.num_tokens = num_tokens;
+    return c;
+  }
+
+  void validate() const {
+    require<ConfigError>(in_dim > 0, "JepaConfig: in_dim = ", in_dim, ", expected > 0");
+    require<ConfigError>(group_size.empty() || static_cast<int>(group_size.size()) == encoder.num_tokens,
+                         "JepaConfig: group_size has ", group_size.size(), " entries, expected encoder.num_tokens = ",
+                         encoder.num_tokens, " (or none)");
+    require<ConfigError>(predictor.in_dim == encoder.dim, "JepaConfig: predictor.in_dim = ", predictor.in_dim,
+                         ", expected encoder.dim = ", encoder.dim);
+    require<ConfigError>(predictor.dim == encoder.dim, "JepaConfig: predictor.dim = ", predictor.dim,
+                         ", expected encoder.dim = ", encoder.dim,
+                         " (the predictor adds the encoder's position rows in its own width)");
+  }
+
+  nlohmann::json to_json() const {
+    const auto& e = encoder;
+    const auto& p = predictor;
+    return {{"in_dim", in_dim},
+            {"group_size", group_size},
+            {"encoder",
+             {{"num_tokens", e.num_tokens}, {"dim", e.dim}, {"depth", e.depth}, {"heads", e.heads},
+              {"mlp_ratio", e.mlp_ratio}, {"bias", e.bias}, {"eps", e.eps}}},
+            {"predictor",
+             {{"in_dim", p.in_dim}, {"dim", p.dim}, {"depth", p.depth}, {"heads", p.heads},
+              {"mlp_ratio", p.mlp_ratio}, {"bias", p.bias}, {"eps", p.eps}}}};
+  }
+};
+
+template <class T>
+class JepaModel {
+ public:
+  JepaConfig config;
+  ParamSet<T> context, target, predictor_params;
+  Tokenizer tokenizer;
+  Encoder encoder;
+  Predictor predictor;
+
+  // Builds the modules, initializes context and predictor as REFERENCE §4 (seeded), and copies
+  // the context encoder into the target encoder.
+  JepaModel(const JepaConfig& c, std::uint64_t seed) : config(c) {
+    c.validate();
+    const int N = c.encoder.num_tokens, d = c.encoder.dim;
+    tokenizer = c.group_size.empty() ? Tokenizer::per_taxel(context, N, c.in_dim, d, c.encoder.eps)
+                                     : Tokenizer::grouped(context, c.group_size, c.in_dim, d, c.encoder.eps);
+    encoder = Encoder(context, c.encoder);
+    predictor = Predictor(predictor_params, c.predictor, "");
+    context.allocate();
+    predictor_params.allocate();
+    init_params(context, seed);
+    init_params(predictor_params, seed ^ 0x7072656469637472ull);  // "predictr": an unrelated stream
+    target = context;
+  }
+
+  int num_tokens() const { return config.encoder.num_tokens; }
+  int dim() const { return config.encoder.dim; }
+  // Values per token row of the tokenizer's input x [B, N, width].
+  int token_width() const { return tokenizer.width; }
+
+  // What AdamW and gradient clipping see.
+  std::vector<PrefixedParams<T>> trainable() { return {{"context_encoder.", &context}, {"predictor.", &predictor_params}}; }
+  // Everything a checkpoint holds.
+  std::vector<PrefixedParams<T>> parts() {
+    return {{"context_encoder.", &context}, {"target_encoder.", &target}, {"predictor.", &predictor_params}};
+  }
+};
+
+}  // namespace tjepa

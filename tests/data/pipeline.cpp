@@ -1,0 +1,493 @@
+// The simulated skin's physics and labels, the preprocessor, windowing, batches and the grouped
+// gather.
+#include <doctest/doctest.h>
+
+#include <tjepa/tjepa.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <set>
+#include <vector>
+
+namespace {
+
+// Three pads: a flat 6×6 grid (pitch 3 mm), a flat 4×6 grid, and a curved 5×6 "fingertip".
+tjepa::SkinGeometry test_geometry() {
+  tjepa::SkinGeometry g;
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < 6; ++c) {
+      g.position.push_back({3.0 * c, 3.0 * r, 0.0});
+      g.pad.push_back(0);
+    }
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 6; ++c) {
+      g.position.push_back({40.0 + 4.667 * c, 4.667 * r, 0.0});
+      g.pad.push_back(1);
+    }
+  for (int r = 0; r < 5; ++r)
+    for (int c = 0; c < 6; ++c) {
+      const double x = 4.5 * (c - 2.5), y = 60.0 + 4.5 * r;
+      g.position.push_back({x, y, 0.02 * x * x});
+      g.pad.push_back(2);
+    }
+  return g;
+}
+
+tjepa::SimConfig quiet_config() {
+  tjepa::SimConfig c;
+  c.drift_std = 0.0;
+  c.dropout_rate = 0.0;
+  return c;
+}
+
+// z-signal-weighted centroid (layout mm) of pad p's taxels in frame f minus offsets.
+std::array<double, 3> centroid(const tjepa::SimulatedSkin& sim, const float* f, int p) {
+  std::array<double, 3> c{};
+  double w = 0;
+  for (int i : sim.pad_taxels(p)) {
+    const double s = std::max(0.0, static_cast<double>(f[3 * i + 2] - sim.offsets()[3 * i + 2]));
+    for (int a = 0; a < 3; ++a) c[a] += s * sim.geometry().position[i][a];
+    w += s;
+  }
+  for (auto& v : c) v /= std::max(w, 1e-12);
+  return c;
+}
+
+double corr(const std::vector<double>& a, const std::vector<double>& b) {
+  const double n = static_cast<double>(a.size());
+  const double ma = std::accumulate(a.begin(), a.end(), 0.0) / n, mb = std::accumulate(b.begin(), b.end(), 0.0) / n;
+  double sab = 0, saa = 0, sbb = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    sab += (a[i] - ma) * (b[i] - mb);
+    saa += (a[i] - ma) * (a[i] - ma);
+    sbb += (b[i] - mb) * (b[i] - mb);
+  }
+  return sab / std::sqrt(saa * sbb);
+}
+
+}  // namespace
+
+TEST_SUITE("data") {
+  TEST_CASE("simulated skin: more normal force gives more response and nothing off the touched pad") {
+    const tjepa::SimulatedSkin sim(test_geometry(), tjepa::SimConfig{}, 1);
+    std::vector<float> out(static_cast<std::size_t>(sim.taxels()) * 3);
+    for (int shape = 0; shape < tjepa::num_indenter_shapes; ++shape) {
+      CAPTURE(tjepa::indenter_name(shape));
+      double last_total = 0, last_peak = 0;
+      for (double force : {0.25, 0.5, 1.0, 2.0, 4.0, 8.0}) {
+        tjepa::ContactState c;
+        c.shape = static_cast<tjepa::IndenterShape>(shape);
+        c.size = 4.0;
+        c.pad = 0;
+        c.normal = force;
+        sim.respond(c, out);
+        double total = 0, peak = 0;
+        for (int i : sim.pad_taxels(0)) {
+          total += out[3 * i + 2];
+          peak = std::max(peak, static_cast<double>(out[3 * i + 2]));
+        }
+        CHECK(total > last_total);
+        CHECK(peak > last_peak);
+        last_total = total;
+        last_peak = peak;
+        for (int p : {1, 2})
+          for (int i : sim.pad_taxels(p))
+            for (int a = 0; a < 3; ++a) CHECK(out[3 * i + a] == 0.0f);
+      }
+    }
+  }
+
+  TEST_CASE("simulated skin: the response moves with the indenter and shear follows the traction") {
+    const tjepa::SimulatedSkin sim(test_geometry(), quiet_config(), 2);
+    std::vector<float> out(static_cast<std::size_t>(sim.taxels()) * 3);
+    std::vector<float> offsets_zero(out.size(), 0.0f);
+    double last = -1e9;
+    for (double u = -4.0; u <= 4.0; u += 1.0) {
+      tjepa::ContactState c;
+      c.pad = 0;
+      c.u = u;
+      c.v = 0.5;
+      c.size = 5.0;
+      c.normal = 2.0;
+      sim.respond(c, out);
+      // Centroid in the pad plane.
+      double cu = 0, cv = 0, w = 0;
+      for (int i : sim.pad_taxels(0)) {
+        const double s = out[3 * i + 2];
+        cu += s * sim.taxel_uv(i)[0];
+        cv += s * sim.taxel_uv(i)[1];
+        w += s;
+      }
+      cu /= w;
+      cv /= w;
+      CHECK(cu > last);
+      CHECK(std::abs(cu - u) < 1.5);
+      CHECK(std::abs(cv - 0.5) < 1.5);
+      last = cu;
+    }
+    // Tangential force along +u gives positive x shear, and reversing it flips the sign.
+    tjepa::ContactState c;
+    c.pad = 0;
+    c.normal = 2.0;
+    c.shear_u = 1.0;
+    sim.respond(c, out);
+    double sx = 0, sy = 0;
+    for (int i : sim.pad_taxels(0)) {
+      sx += out[3 * i];
+      sy += out[3 * i + 1];
+    }
+    CHECK(sx > 0);
+    CHECK(std::abs(sy) < 0.05 * sx);
+    c.shear_u = -1.0;
+    sim.respond(c, out);
+    double sx2 = 0;
+    for (int i : sim.pad_taxels(0)) sx2 += out[3 * i];
+    CHECK(sx2 == doctest::Approx(-sx).epsilon(0.02));
+  }
+
+  TEST_CASE("simulated skin: a flat punch keeps its contact area while a sphere's grows with force") {
+    const tjepa::SimulatedSkin sim(test_geometry(), quiet_config(), 3);
+    std::vector<float> lo(static_cast<std::size_t>(sim.taxels()) * 3), hi(lo.size());
+    // Forces low enough that the soft saturation is negligible.
+    auto ratios = [&](tjepa::IndenterShape shape, double f) {
+      tjepa::ContactState c;
+      c.shape = shape;
+      c.size = 4.0;
+      c.pad = 0;
+      c.normal = f;
+      sim.respond(c, lo);
+      c.normal = 2 * f;
+      sim.respond(c, hi);
+      std::vector<double> r;
+      for (int i : sim.pad_taxels(0))
+        if (lo[3 * i + 2] > 1.0f) r.push_back(hi[3 * i + 2] / lo[3 * i + 2]);
+      return r;
+    };
+    for (double r : ratios(tjepa::IndenterShape::flat, 0.2)) CHECK(r == doctest::Approx(2.0).epsilon(0.01));
+    const auto s = ratios(tjepa::IndenterShape::sphere, 1.0);
+    CHECK(*std::min_element(s.begin(), s.end()) < 1.9);  // the centre gains less ...
+    CHECK(*std::max_element(s.begin(), s.end()) > 2.1);  // ... than the rim: the contact spreads
+  }
+
+  TEST_CASE("simulated skin: recordings are deterministic and labelled and quiet away from contact") {
+    const auto geo = test_geometry();
+    tjepa::SimulatedSkin a(geo, quiet_config(), 7), b(geo, quiet_config(), 7), c(geo, quiet_config(), 8);
+    const auto ra = a.record(3000), rb = b.record(3000), rc = c.record(3000);
+    REQUIRE(ra.recording.size() == rb.recording.size());
+    CHECK(std::equal(ra.recording.values().begin(), ra.recording.values().end(), rb.recording.values().begin()));
+    CHECK_FALSE(std::equal(ra.recording.values().begin(), ra.recording.values().end(), rc.recording.values().begin()));
+    CHECK(ra.recording.frames() == 3000);
+    CHECK(ra.recording.axes() == 3);
+
+    const tjepa::SimulatedSkin& sim = a;
+    const float noise_bound = static_cast<float>(3.47 * sim.config().noise_std);  // Irwin–Hall support
+    std::set<int> shapes, pads;
+    int contact = 0;
+    std::vector<double> fn, zsum, dist, cx, lx, cy, ly;
+    for (int t = 0; t < 3000; ++t) {
+      const tjepa::FrameLabel& l = ra.labels[t];
+      const float* f = ra.recording.frame(t);
+      CHECK((l.indenter < 0) == (l.pad < 0));
+      for (int i = 0; i < sim.taxels(); ++i) {
+        if (sim.geometry().pad[i] == l.pad) continue;
+        for (int k = 0; k < 3; ++k) {
+          const float d = std::abs(f[3 * i + k] - sim.offsets()[3 * i + k]);
+          if (d > noise_bound) FAIL_CHECK("frame ", t, " taxel ", i, " deviates ", d, " without contact");
+        }
+      }
+      if (l.indenter < 0) {
+        CHECK(l.force[2] == 0.0f);
+        continue;
+      }
+      ++contact;
+      shapes.insert(l.indenter);
+      pads.insert(l.pad);
+      CHECK(l.force[2] > 0.0f);
+      CHECK(std::hypot(l.force[0], l.force[1]) <= sim.config().friction_max * l.force[2] + 1e-6);
+      fn.push_back(l.force[2]);
+      double z = 0;
+      for (int i : sim.pad_taxels(l.pad)) z += f[3 * i + 2] - sim.offsets()[3 * i + 2];
+      zsum.push_back(z);
+      // Compact indenters on the flat pads: the centroid is not cut off by the pad's edge.
+      if (l.force[2] > 1.0f && l.pad != 2 && l.indenter <= 1) {
+        const auto cc = centroid(sim, f, l.pad);
+        dist.push_back(std::hypot(cc[0] - l.location[0], cc[1] - l.location[1]));
+        cx.push_back(cc[0]);
+        cy.push_back(cc[1]);
+        lx.push_back(l.location[0]);
+        ly.push_back(l.location[1]);
+      }
+    }
+    CHECK(shapes.size() == 4);
+    CHECK(pads.size() == 3);
+    CHECK(contact > 1000);
+    CHECK(contact < 2900);
+    CHECK(corr(fn, zsum) > 0.7);
+    REQUIRE(dist.size() > 50);
+    std::sort(dist.begin(), dist.end());
+    CHECK(dist[dist.size() / 2] < 2.0);  // median distance between response centroid and label, mm
+    CHECK(corr(cx, lx) > 0.95);
+    CHECK(corr(cy, ly) > 0.95);
+  }
+
+  TEST_CASE("simulated skin: drop-outs are exact zeros on all axes at about the configured rate") {
+    tjepa::SimConfig cfg;
+    cfg.dropout_rate = 2e-3;
+    cfg.dropout_frames_max = 5;
+    tjepa::SimulatedSkin sim(test_geometry(), cfg, 11);
+    const tjepa::Recording rec = sim.record_baseline(4000);
+    std::size_t zero_taxel_frames = 0, partial = 0;
+    for (int t = 0; t < rec.frames(); ++t)
+      for (int i = 0; i < rec.taxels(); ++i) {
+        const int zeros = (rec(t, i, 0) == 0.0f) + (rec(t, i, 1) == 0.0f) + (rec(t, i, 2) == 0.0f);
+        partial += zeros == 1 || zeros == 2;
+        zero_taxel_frames += zeros == 3;
+      }
+    CHECK(partial == 0);
+    // Expected fraction: rate × mean length (3 frames), a little less where drop-outs overlap.
+    const double frac = static_cast<double>(zero_taxel_frames) / (static_cast<double>(rec.frames()) * rec.taxels());
+    CHECK(frac > 0.5 * 2e-3 * 3);
+    CHECK(frac < 1.5 * 2e-3 * 3);
+    // The magnetic preprocessing maps them (and nothing else) to 0 and removes the offsets.
+    tjepa::Preprocessor pre(tjepa::PreprocessConfig::magnetic());
+    pre.fit_baseline(sim.record_baseline(500));
+    auto noisy = sim.record(2000);
+    pre.fit(noisy.recording);
+    CHECK(pre.baseline().size() == static_cast<std::size_t>(rec.taxels()) * 3);
+    for (int i = 0; i < rec.taxels(); ++i)
+      CHECK(pre.baseline()[3 * i] == doctest::Approx(sim.offsets()[3 * i]).epsilon(0.01));
+  }
+
+  TEST_CASE("simulated skin: runs on the built-in Allegro/Xela layout and rejects bad input") {
+    const tjepa::Skin hand = tjepa::layouts::allegro_xela();
+    tjepa::SimulatedSkin sim(hand.layout, tjepa::SimConfig{}, 5);
+    CHECK(sim.taxels() == 368);
+    CHECK(sim.num_pads() == 18);
+    const auto rec = sim.record(20000);
+    CHECK(rec.recording.taxels() == 368);
+    std::set<int> pads;
+    for (const auto& l : rec.labels)
+      if (l.pad >= 0) pads.insert(l.pad);
+    CHECK(pads.size() == 18);  // ~160 contact events land on every pad
+    // A grid layout converts the same way; a layout without coordinates cannot be simulated.
+    const auto g = tjepa::SkinGeometry::from_layout(tjepa::layouts::grid_skin().layout);
+    CHECK(g.size() == 12 * 16);
+    CHECK(g.position[17][0] == doctest::Approx(4.0));
+    tjepa::TaxelLayout bare = hand.layout;
+    bare.dim = 0;
+    bare.coords.clear();
+    CHECK_THROWS_WITH_AS(tjepa::SimulatedSkin(bare, tjepa::SimConfig{}, 0), doctest::Contains("no coordinates"), tjepa::ConfigError);
+    tjepa::SimConfig bad;
+    bad.force_min = 5;
+    bad.force_max = 1;
+    CHECK_THROWS_WITH_AS(tjepa::SimulatedSkin(g, bad, 0), doctest::Contains("force range [5, 1]"), tjepa::ConfigError);
+    CHECK_THROWS_AS(tjepa::SimulatedSkin(tjepa::SkinGeometry{}, {}, 0), tjepa::DataError);
+    std::vector<float> small(5);
+    CHECK_THROWS_AS(sim.respond(tjepa::ContactState{}, small), tjepa::ShapeError);
+  }
+
+  TEST_CASE("preprocessor: drop-out range then baseline where non-zero then per-axis stats ignoring zeros and NaN") {
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    // 3 frames, 2 taxels, 2 axes (raw counts).
+    tjepa::Recording base(2, 2, 2, tjepa::AlignedVector<float>{30000, 31000, 40000, 41000,  //
+                                                                30002, 70000, 40002, 41002});
+    tjepa::Recording train(3, 2, 2, tjepa::AlignedVector<float>{30010, 31020, 40030, 41040,  //
+                                                                100, 100, 40060, 41080,      //
+                                                                30040, nan, 0, 0});
+    tjepa::PreprocessConfig cfg = tjepa::PreprocessConfig::magnetic();
+    tjepa::Preprocessor pre(cfg);
+    CHECK_FALSE(pre.ready());
+    CHECK_THROWS_WITH_AS(pre.fit(train), doctest::Contains("fit_baseline"), tjepa::ConfigError);
+    pre.fit_baseline(base);
+    // 70000 is a drop-out: the axis-1 baseline of taxel 0 is the single valid reading.
+    CHECK(pre.baseline() == std::vector<float>{30001, 31000, 40001, 41001});
+    pre.fit(train);
+    // After drop-outs and baseline, the non-zero non-NaN values per axis are:
+    //   axis 0: 9, 29, 59, 39      axis 1: 20, 39, 79
+    const double m0 = (9 + 29 + 59 + 39) / 4.0, m1 = (20 + 39 + 79) / 3.0;
+    const double v0 = (81 + 841 + 3481 + 1521) / 4.0 - m0 * m0, v1 = (400 + 1521 + 6241) / 3.0 - m1 * m1;
+    CHECK(pre.mean()[0] == doctest::Approx(m0));
+    CHECK(pre.mean()[1] == doctest::Approx(m1));
+    CHECK(pre.std()[0] == doctest::Approx(std::sqrt(v0)));
+    CHECK(pre.std()[1] == doctest::Approx(std::sqrt(v1)));
+    const tjepa::Recording out = pre.transformed(train);
+    CHECK(train(0, 0, 0) == 30010.0f);  // the input is untouched (copy-on-write)
+    CHECK(out(0, 0, 0) == doctest::Approx((9 - m0) / std::sqrt(v0)));
+    CHECK(out(1, 0, 0) == doctest::Approx((0 - m0) / std::sqrt(v0)));  // drop-out: 0, then standardized
+    CHECK(out(2, 1, 1) == doctest::Approx((0 - m1) / std::sqrt(v1)));  // zero reading: no baseline subtracted
+    CHECK(std::isnan(out(2, 0, 1)));  // NaN stays NaN unless nan_as_dropout
+
+    // State round trip: same outputs from the restored preprocessor.
+    const auto state = pre.state();
+    const tjepa::Preprocessor back = tjepa::Preprocessor::from_state(state);
+    const tjepa::Recording out2 = back.transformed(train);
+    for (std::size_t k = 0; k < out.size(); ++k)
+      if (!std::isnan(out.values()[k])) CHECK(out2.values()[k] == out.values()[k]);
+    std::vector<tjepa::NamedTensor> partial(state.begin(), state.begin() + 1);
+    CHECK_THROWS_WITH_AS(tjepa::Preprocessor::from_state(partial), doctest::Contains("preprocess.baseline"),
+                         tjepa::FileError);
+    // Shape mismatch.
+    tjepa::Recording other(3, 5, 2);
+    CHECK_THROWS_AS(pre.apply(other), tjepa::ShapeError);
+    CHECK_THROWS_AS(tjepa::Preprocessor(tjepa::PreprocessConfig::magnetic()).apply(other), tjepa::ConfigError);
+  }
+
+  TEST_CASE("preprocessor: scalar standardization and fixed per-part maxima") {
+    tjepa::Recording r(2, 3, 1, tjepa::AlignedVector<float>{1, 2, 0, 3, 4, 6});
+    tjepa::Preprocessor s(tjepa::PreprocessConfig::scalar_standardization());
+    s.fit(r);
+    const double m = 16.0 / 5, var = (1 + 4 + 9 + 16 + 36) / 5.0 - m * m;
+    CHECK(s.mean()[0] == doctest::Approx(m));
+    CHECK(s.std()[0] == doctest::Approx(std::sqrt(var)));
+    CHECK(s.transformed(r)(1, 2, 0) == doctest::Approx((6 - m) / std::sqrt(var)));
+    tjepa::Preprocessor p(tjepa::PreprocessConfig::per_part_max({3486.0f, 4050.0f}, {0, 0, 1}));
+    CHECK(p.ready());
+    const auto q = p.transformed(r);
+    CHECK(q(1, 1, 0) == doctest::Approx(4.0 / 3486.0));
+    CHECK(q(1, 2, 0) == doctest::Approx(6.0 / 4050.0));
+    CHECK(tjepa::Preprocessor::from_state(p.state()).transformed(r)(1, 2, 0) == q(1, 2, 0));
+    CHECK_THROWS_AS(tjepa::Preprocessor(tjepa::PreprocessConfig::per_part_max({1.0f}, {0, 1})), tjepa::ConfigError);
+    tjepa::Recording zeros(4, 2, 1);
+    tjepa::Preprocessor fresh(tjepa::PreprocessConfig::scalar_standardization());
+    CHECK_THROWS_WITH_AS(fresh.fit(zeros), doctest::Contains("no non-zero finite value"), tjepa::DataError);
+  }
+
+  TEST_CASE("windows: starts and taxel-major copies and batches equal to preprocessing the recording") {
+    CHECK(tjepa::window_starts(100, {10, 0}) == std::vector<std::int64_t>{0, 10, 20, 30, 40, 50, 60, 70, 80, 90});
+    CHECK(tjepa::window_starts(25, {10, 5}) == std::vector<std::int64_t>{0, 5, 10, 15});
+    CHECK(tjepa::window_starts(9, {10, 0}).empty());
+    CHECK_THROWS_AS(tjepa::window_starts(9, {0, 0}), tjepa::ConfigError);
+
+    tjepa::SimulatedSkin sim(test_geometry(), tjepa::SimConfig{}, 21);
+    tjepa::Preprocessor pre(tjepa::PreprocessConfig::magnetic());
+    pre.fit_baseline(sim.record_baseline(300));
+    auto data = sim.record(1000);
+    pre.fit(data.recording);
+    const tjepa::Recording reference = pre.transformed(data.recording);
+    tjepa::WindowSource src(data.recording, {10, 0}, data.labels, pre);
+    CHECK(src.size() == 100);
+    const auto order = src.epoch_order(5, 0);
+    CHECK(order == src.epoch_order(5, 0));
+    CHECK(order != src.epoch_order(5, 1));
+    std::vector<std::int64_t> sorted = order;
+    std::sort(sorted.begin(), sorted.end());
+    for (std::int64_t i = 0; i < src.size(); ++i) CHECK(sorted[i] == i);
+    CHECK(src.batches_per_epoch(32) == 3);
+
+    tjepa::WindowBatch batch;
+    src.gather(std::span<const std::int64_t>(order).subspan(0, 8), batch);
+    CHECK(batch.x.size() == 8u * sim.taxels() * 10 * 3);
+    for (int b = 0; b < 8; ++b) {
+      const int t0 = src.start_of(order[b]);
+      for (int n = 0; n < sim.taxels(); n += 7)
+        for (int j = 0; j < 10; ++j)
+          for (int a = 0; a < 3; ++a)
+            CHECK(batch.x[((static_cast<std::size_t>(b) * sim.taxels() + n) * 10 + j) * 3 + a] ==
+                  doctest::Approx(reference(t0 + j, n, a)).epsilon(1e-5));
+      const tjepa::WindowLabel l = src.label(order[b]);
+      CHECK(batch.indenter[b] == l.indenter);
+      CHECK(batch.force[3 * b + 2] == l.force[2]);
+      float mean_fn = 0;
+      for (int j = 0; j < 10; ++j) mean_fn += data.labels[t0 + j].force[2] / 10.0f;
+      CHECK(l.force[2] == doctest::Approx(mean_fn));
+    }
+    const auto touched = src.windows_with_contact(10);
+    CHECK(!touched.empty());
+    for (auto i : touched) CHECK(src.label(i).indenter >= 0);
+    const std::int64_t bad_id = src.size();
+    CHECK_THROWS_AS(src.gather(std::span<const std::int64_t>(&bad_id, 1), batch), tjepa::ConfigError);
+  }
+
+  TEST_CASE("windows: NaN entering training is a DataError naming frame and taxel and axis") {
+    tjepa::Recording rec(40, 6, 3, 1.0f);
+    rec.set_source("trial.npy");
+    rec.at(23, 4, 2) = std::numeric_limits<float>::quiet_NaN();
+    tjepa::WindowSource src(rec, {10, 0});
+    tjepa::WindowBatch batch;
+    const std::vector<std::int64_t> ok = {0, 1, 3};
+    CHECK_NOTHROW(src.gather(ok, batch));
+    const std::vector<std::int64_t> bad = {0, 2};
+    CHECK_THROWS_WITH_AS(src.gather(bad, batch), doctest::Contains("trial.npy gives nan at frame 23, taxel 4, axis 2"),
+                         tjepa::DataError);
+    CHECK_THROWS_WITH_AS(tjepa::require_finite(rec, "train"), doctest::Contains("frame 23, taxel 4, axis 2"),
+                         tjepa::DataError);
+    // Treating NaN as a drop-out lets it through as 0.
+    tjepa::PreprocessConfig cfg;
+    cfg.nan_as_dropout = true;
+    tjepa::WindowSource tolerant(rec, {10, 0}, {}, tjepa::Preprocessor(cfg));
+    tolerant.gather(bad, batch);
+    CHECK(batch.x[((1 * 6 + 4) * 10 + 3) * 3 + 2] == 0.0f);
+    CHECK_FALSE(batch.has_labels());
+  }
+
+  TEST_CASE("grouped gather: groups with padding and its adjoint") {
+    // B = 2, N = 5, L = 3; groups {4, 0}, {2, -1}, {1, 3}.
+    const int B = 2, N = 5, L = 3, G = 3, ng = 2;
+    std::vector<double> x(B * N * L);
+    for (std::size_t k = 0; k < x.size(); ++k) x[k] = static_cast<double>(k) + 0.5;
+    const std::vector<int> index = {4, 0, 2, -1, 1, 3};
+    tjepa::check_group_index(index, G, ng, N);
+    std::vector<double> out(B * G * ng * L, -1.0);
+    tjepa::gather_groups(x.data(), B, N, L, index.data(), G, ng, out.data());
+    for (int b = 0; b < B; ++b)
+      for (int s = 0; s < G * ng; ++s)
+        for (int l = 0; l < L; ++l) {
+          const double got = out[(b * G * ng + s) * L + l];
+          CHECK(got == (index[s] < 0 ? 0.0 : x[(b * N + index[s]) * L + l]));
+        }
+    // <gather(x), y> = <x, gather_backward(y)>
+    tjepa::Rng rng(3);
+    std::vector<double> y(out.size()), dx(x.size(), 0.0);
+    for (auto& v : y) v = rng.normal();
+    tjepa::gather_groups_backward(dx.data(), y.data(), B, N, L, index.data(), G, ng);
+    double lhs = 0, rhs = 0;
+    for (std::size_t k = 0; k < y.size(); ++k) lhs += out[k] * y[k];
+    for (std::size_t k = 0; k < x.size(); ++k) rhs += x[k] * dx[k];
+    CHECK(lhs == doctest::Approx(rhs).epsilon(1e-12));
+    CHECK_THROWS_WITH_AS(tjepa::check_group_index(std::vector<int>{0, 5}, 1, 2, 5), doctest::Contains("index[0][1] = 5"),
+                         tjepa::DataError);
+    CHECK_THROWS_WITH_AS(tjepa::check_group_index(std::vector<int>{0, 0}, 1, 2, 5), doctest::Contains("taxel 0 appears"),
+                         tjepa::DataError);
+    CHECK_THROWS_AS(tjepa::check_group_index(std::vector<int>{0, 1, 2}, 2, 2, 5), tjepa::ShapeError);
+  }
+
+  TEST_CASE("simulate_dataset: train and validation sources with statistics fitted on training data only") {
+    tjepa::SimulatedDatasetOptions opt;
+    opt.train_windows = 300;
+    opt.validation_windows = 50;
+    auto data = tjepa::simulate_dataset(tjepa::layouts::allegro_xela().layout, opt, 9);
+    CHECK(data.train.size() == 300);
+    CHECK(data.validation.size() == 50);
+    CHECK(data.train.has_labels());
+    CHECK(data.preprocessor.ready());
+    // The statistics are those of the training recording: refitting on it reproduces them.
+    // The statistics are the training recording's, not the validation recording's.
+    tjepa::Preprocessor direct = tjepa::Preprocessor::from_state(data.preprocessor.state());
+    direct.fit(data.train.recordings()[0]);
+    CHECK(direct.mean() == data.preprocessor.mean());
+    CHECK(direct.std() == data.preprocessor.std());
+    direct.fit(data.validation.recordings()[0]);
+    CHECK(direct.mean() != data.preprocessor.mean());
+    // Standardized training batches: per-axis mean near 0 and std near 1 over the non-drop-out values.
+    tjepa::WindowBatch b;
+    const auto order = data.train.epoch_order(1, 0);
+    data.train.gather(std::span<const std::int64_t>(order).subspan(0, 128), b);
+    double s[3] = {0, 0, 0}, q[3] = {0, 0, 0};
+    for (std::size_t k = 0; k < b.x.size(); ++k) {
+      s[k % 3] += b.x[k];
+      q[k % 3] += static_cast<double>(b.x[k]) * b.x[k];
+    }
+    const double n = static_cast<double>(b.x.size()) / 3;
+    for (int a = 0; a < 3; ++a) {
+      CHECK(std::abs(s[a] / n) < 0.1);
+      CHECK(std::sqrt(q[a] / n) == doctest::Approx(1.0).epsilon(0.1));
+    }
+    // Same seed, same data.
+    auto again = tjepa::simulate_dataset(tjepa::layouts::allegro_xela().layout, opt, 9);
+    CHECK(std::equal(again.validation.recordings()[0].values().begin(), again.validation.recordings()[0].values().end(),
+                     data.validation.recordings()[0].values().begin()));
+  }
+}

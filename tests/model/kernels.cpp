@@ -1,0 +1,282 @@
+// nn suite, kernels: each fast kernel against its scalar reference on sizes that are not
+// multiples of the SIMD width, central-difference gradient checks in double, and accumulation
+// (two backward passes give exactly twice the gradient).
+#if defined(__GNUC__) && !defined(__clang__)
+// g++ 12's AVX-512 intrinsics: a false (maybe-)uninitialized once Eigen's double kernels are
+// inlined (GCC bug 105593); the state that counts is the one where the header is first read.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
+#include <doctest/doctest.h>
+
+#include <tjepa/tjepa.hpp>
+
+#include "gradcheck.hpp"
+
+using namespace tjepa;
+using test::gradient_error;
+using test::grad_tolerance;
+
+namespace {
+
+template <class T>
+std::vector<T> random_vector(std::size_t n, Rng& rng, double std = 1.0) {
+  std::vector<T> v(n);
+  test::fill_normal(v, rng, std);
+  return v;
+}
+
+// max |a - b| / max(1, max |b|)
+template <class T>
+double max_rel_diff(const std::vector<T>& a, const std::vector<T>& b) {
+  double d = 0, s = 1;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    d = std::max(d, std::abs(double(a[i]) - double(b[i])));
+    s = std::max(s, std::abs(double(b[i])));
+  }
+  return d / s;
+}
+
+template <class T>
+double simd_tolerance() {
+  return std::is_same_v<T, float> ? 2e-5 : 1e-12;
+}
+
+// Runs backward once and twice into zeroed gradients; checks grad₂ == 2·grad₁, exactly unless a
+// tolerance is given (a scatter-add over repeated indices adds several terms into one row, so
+// the second pass rounds differently).
+void check_accumulates(const std::function<void(std::vector<std::vector<double>>&)>& backward,
+                       std::vector<std::size_t> sizes, double tolerance = 0.0) {
+  std::vector<std::vector<double>> once, twice;
+  for (auto n : sizes) {
+    once.emplace_back(n, 0.0);
+    twice.emplace_back(n, 0.0);
+  }
+  backward(once);
+  backward(twice);
+  backward(twice);
+  for (std::size_t k = 0; k < once.size(); ++k)
+    for (std::size_t i = 0; i < once[k].size(); ++i)
+      REQUIRE(std::abs(twice[k][i] - 2 * once[k][i]) <= tolerance * std::abs(once[k][i]));
+}
+
+}  // namespace
+
+TEST_SUITE("nn") {
+  TEST_CASE_TEMPLATE("fast row kernels match the scalar reference on awkward sizes", T, float, double) {
+    Rng rng(21);
+    for (int C : {1, 3, 7, 17, 67, 197}) {
+      CAPTURE(C);
+      const int M = 5;
+      const std::size_t n = std::size_t(M) * C;
+      auto x = random_vector<T>(n, rng, 2.0), g = random_vector<T>(n, rng);
+      auto w = random_vector<T>(std::size_t(C), rng), b = random_vector<T>(std::size_t(C), rng);
+      // LayerNorm
+      std::vector<T> y1(n), y2(n), m1(M), m2(M), r1(M), r2(M);
+      ref::layer_norm_forward(y1.data(), m1.data(), r1.data(), x.data(), w.data(), b.data(), M, C, T(1e-6));
+      layer_norm_forward(y2.data(), m2.data(), r2.data(), x.data(), w.data(), b.data(), M, C, T(1e-6));
+      CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
+      CHECK(max_rel_diff(r2, r1) < simd_tolerance<T>());
+      std::vector<T> dx1(n, T(0.5)), dx2(n, T(0.5)), dw1(C, T(0)), dw2(C, T(0)), db1(C, T(0)), db2(C, T(0));
+      ref::layer_norm_backward(dx1.data(), dw1.data(), db1.data(), g.data(), x.data(), w.data(), m1.data(), r1.data(), M, C);
+      layer_norm_backward(dx2.data(), dw2.data(), db2.data(), g.data(), x.data(), w.data(), m1.data(), r1.data(), M, C);
+      CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
+      CHECK(max_rel_diff(dw2, dw1) < simd_tolerance<T>());
+      CHECK(max_rel_diff(db2, db1) < simd_tolerance<T>());
+      // GELU, and fc1's fused bias + GELU
+      ref::gelu_forward(y1.data(), x.data(), n);
+      gelu_forward(y2.data(), x.data(), n);
+      CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
+      std::fill(dx1.begin(), dx1.end(), T(0.5));
+      std::fill(dx2.begin(), dx2.end(), T(0.5));
+      ref::gelu_backward(dx1.data(), g.data(), x.data(), n);
+      gelu_backward(dx2.data(), g.data(), x.data(), n);
+      CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
+      std::vector<T> pre = x, xb(n);
+      for (int m = 0; m < M; ++m)
+        for (int c = 0; c < C; ++c) xb[std::size_t(m) * C + c] = x[std::size_t(m) * C + c] + b[std::size_t(c)];
+      bias_gelu_forward(y2.data(), pre.data(), b.data(), M, C);
+      ref::gelu_forward(y1.data(), xb.data(), n);
+      CHECK(max_rel_diff(pre, xb) < simd_tolerance<T>());
+      CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
+      // Softmax
+      ref::softmax_forward(y1.data(), x.data(), M, C);
+      softmax_forward(y2.data(), x.data(), M, C);
+      CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
+      std::fill(dx1.begin(), dx1.end(), T(0.5));
+      std::fill(dx2.begin(), dx2.end(), T(0.5));
+      ref::softmax_backward(dx1.data(), g.data(), y1.data(), M, C);
+      softmax_backward(dx2.data(), g.data(), y1.data(), M, C);
+      CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
+      // Linear: [M, C] → [M, C + 2]
+      const int N = C + 2;
+      auto W = random_vector<T>(std::size_t(N) * C, rng), bias = random_vector<T>(std::size_t(N), rng);
+      std::vector<T> o1(std::size_t(M) * N), o2(o1.size());
+      ref::linear_forward(o1.data(), x.data(), W.data(), bias.data(), M, C, N);
+      linear_forward(o2.data(), x.data(), W.data(), bias.data(), M, C, N);
+      CHECK(max_rel_diff(o2, o1) < simd_tolerance<T>());
+      auto go = random_vector<T>(o1.size(), rng);
+      std::vector<T> di1(n, T(0)), di2(n, T(0)), dW1(W.size(), T(0)), dW2(W.size(), T(0)), dB1(N, T(0)), dB2(N, T(0));
+      ref::linear_backward(di1.data(), dW1.data(), dB1.data(), go.data(), x.data(), W.data(), M, C, N);
+      linear_backward(di2.data(), dW2.data(), dB2.data(), go.data(), x.data(), W.data(), M, C, N);
+      CHECK(max_rel_diff(di2, di1) < simd_tolerance<T>());
+      CHECK(max_rel_diff(dW2, dW1) < simd_tolerance<T>());
+      CHECK(max_rel_diff(dB2, dB1) < simd_tolerance<T>());
+      // Drop-path: samples are the M rows
+      std::vector<T> scale(M);
+      drop_path_sample(scale.data(), 1, M, 0.4, 5);
+      std::vector<T> a1 = g, a2 = g;
+      ref::drop_path_forward(a1.data(), x.data(), scale.data(), M, std::size_t(C));
+      drop_path_forward(a2.data(), x.data(), scale.data(), M, std::size_t(C));
+      CHECK(a1 == a2);
+    }
+  }
+
+  TEST_CASE("a large GEMM split over threads equals the scalar reference") {
+    Rng rng(22);
+    const int M = 301, K = 67, N = 131;
+    auto x = random_vector<double>(std::size_t(M) * K, rng), W = random_vector<double>(std::size_t(N) * K, rng);
+    auto g = random_vector<double>(std::size_t(M) * N, rng);
+    std::vector<double> o1(std::size_t(M) * N), o2(o1.size(), 1.0), o3(o1.size(), 1.0);
+    ref::linear_forward(o1.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
+    linear_forward(o2.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
+    CHECK(max_rel_diff(o2, o1) < 1e-12);
+    linear_forward_accumulate(o3.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
+    for (auto& v : o3) v -= 1.0;
+    CHECK(max_rel_diff(o3, o1) < 1e-12);
+    std::vector<double> di1(x.size(), 0.0), di2(x.size(), 0.0), dW1(W.size(), 0.0), dW2(W.size(), 0.0);
+    ref::linear_backward(di1.data(), dW1.data(), static_cast<double*>(nullptr), g.data(), x.data(), W.data(), M, K, N);
+    linear_backward(di2.data(), dW2.data(), static_cast<double*>(nullptr), g.data(), x.data(), W.data(), M, K, N);
+    CHECK(max_rel_diff(di2, di1) < 1e-12);
+    CHECK(max_rel_diff(dW2, dW1) < 1e-12);
+  }
+
+  TEST_CASE("kernel gradients match central differences (double)") {
+    Rng rng(23);
+    const int M = 4, C = 9, N = 6;
+    const std::size_t n = std::size_t(M) * C;
+    auto x = random_vector<double>(n, rng);
+    SUBCASE("linear") {
+      auto W = random_vector<double>(std::size_t(N) * C, rng), b = random_vector<double>(std::size_t(N), rng);
+      auto w = random_vector<double>(std::size_t(M) * N, rng);
+      std::vector<double> y(w.size());
+      auto loss = [&] {
+        linear_forward(y.data(), x.data(), W.data(), b.data(), M, C, N);
+        return test::dot(w.data(), y.data(), y.size());
+      };
+      auto bwd = [&](std::vector<std::vector<double>>& gr) {
+        linear_backward(gr[0].data(), gr[1].data(), gr[2].data(), w.data(), x.data(), W.data(), M, C, N);
+      };
+      std::vector<std::vector<double>> gr{std::vector<double>(n), std::vector<double>(W.size()), std::vector<double>(b.size())};
+      bwd(gr);
+      CHECK(gradient_error(x.data(), gr[0].data(), n, loss) < grad_tolerance);
+      CHECK(gradient_error(W.data(), gr[1].data(), W.size(), loss) < grad_tolerance);
+      CHECK(gradient_error(b.data(), gr[2].data(), b.size(), loss) < grad_tolerance);
+      check_accumulates(bwd, {n, W.size(), b.size()});
+    }
+    SUBCASE("layer_norm") {
+      auto g = random_vector<double>(std::size_t(C), rng), b = random_vector<double>(std::size_t(C), rng);
+      auto w = random_vector<double>(n, rng);
+      std::vector<double> y(n), mean(M), rstd(M);
+      auto loss = [&] {
+        layer_norm_forward(y.data(), mean.data(), rstd.data(), x.data(), g.data(), b.data(), M, C);
+        return test::dot(w.data(), y.data(), n);
+      };
+      loss();
+      auto bwd = [&](std::vector<std::vector<double>>& gr) {
+        layer_norm_backward(gr[0].data(), gr[1].data(), gr[2].data(), w.data(), x.data(), g.data(), mean.data(),
+                            rstd.data(), M, C);
+      };
+      std::vector<std::vector<double>> gr{std::vector<double>(n), std::vector<double>(C), std::vector<double>(C)};
+      bwd(gr);
+      CHECK(gradient_error(x.data(), gr[0].data(), n, loss) < grad_tolerance);
+      CHECK(gradient_error(g.data(), gr[1].data(), g.size(), loss) < grad_tolerance);
+      CHECK(gradient_error(b.data(), gr[2].data(), b.size(), loss) < grad_tolerance);
+      check_accumulates(bwd, {n, std::size_t(C), std::size_t(C)});
+    }
+    SUBCASE("gelu") {
+      auto w = random_vector<double>(n, rng);
+      std::vector<double> y(n);
+      auto loss = [&] {
+        gelu_forward(y.data(), x.data(), n);
+        return test::dot(w.data(), y.data(), n);
+      };
+      auto bwd = [&](std::vector<std::vector<double>>& gr) { gelu_backward(gr[0].data(), w.data(), x.data(), n); };
+      std::vector<std::vector<double>> gr{std::vector<double>(n)};
+      bwd(gr);
+      CHECK(gradient_error(x.data(), gr[0].data(), n, loss) < grad_tolerance);
+      check_accumulates(bwd, {n});
+    }
+    SUBCASE("softmax") {
+      auto w = random_vector<double>(n, rng);
+      std::vector<double> y(n);
+      auto loss = [&] {
+        softmax_forward(y.data(), x.data(), M, C);
+        return test::dot(w.data(), y.data(), n);
+      };
+      loss();
+      auto bwd = [&](std::vector<std::vector<double>>& gr) { softmax_backward(gr[0].data(), w.data(), y.data(), M, C); };
+      std::vector<std::vector<double>> gr{std::vector<double>(n)};
+      bwd(gr);
+      CHECK(gradient_error(x.data(), gr[0].data(), n, loss) < grad_tolerance);
+      check_accumulates(bwd, {n});
+    }
+    SUBCASE("drop_path") {
+      std::vector<double> scale(M);
+      // The first seed whose draws keep some samples and drop others.
+      for (std::uint64_t seed = 0; seed < 64; ++seed) {
+        drop_path_sample(scale.data(), 1, M, 0.5, seed);
+        if (std::count(scale.begin(), scale.end(), 0.0) % M != 0) break;
+      }
+      CHECK(std::count(scale.begin(), scale.end(), 0.0) > 0);
+      CHECK(std::count(scale.begin(), scale.end(), 2.0) > 0);
+      auto base = random_vector<double>(n, rng), w = random_vector<double>(n, rng);
+      std::vector<double> y(n);
+      auto loss = [&] {
+        y = base;
+        drop_path_forward(y.data(), x.data(), scale.data(), M, std::size_t(C));
+        return test::dot(w.data(), y.data(), n);
+      };
+      auto bwd = [&](std::vector<std::vector<double>>& gr) {
+        drop_path_backward(gr[0].data(), w.data(), scale.data(), M, std::size_t(C));
+      };
+      std::vector<std::vector<double>> gr{std::vector<double>(n)};
+      bwd(gr);
+      CHECK(gradient_error(x.data(), gr[0].data(), n, loss) < grad_tolerance);
+      check_accumulates(bwd, {n});
+    }
+    SUBCASE("gather and scatter-add, batched source and shared table") {
+      const int B = 2, K = 5, Nsrc = 4;
+      const std::vector<int> idx{0, 3, 3, 1, 2, 2, 2, 0, 1, 3};
+      for (std::size_t batch : {std::size_t(Nsrc) * C, std::size_t(0)}) {
+        auto src = random_vector<double>(batch ? B * batch : std::size_t(Nsrc) * C, rng);
+        auto base = random_vector<double>(std::size_t(B) * K * C, rng), w = random_vector<double>(base.size(), rng);
+        std::vector<double> y(base.size());
+        auto loss = [&] {
+          y = base;
+          gather_add_rows(y.data(), src.data(), batch, idx.data(), B, K, C);
+          double l = test::dot(w.data(), y.data(), y.size());
+          gather_rows(y.data(), src.data(), batch, idx.data(), B, K, C);
+          return l + test::dot(w.data(), y.data(), y.size());
+        };
+        auto bwd = [&](std::vector<std::vector<double>>& gr) {
+          scatter_add_rows(gr[0].data(), batch, w.data(), idx.data(), B, K, C);
+          scatter_add_rows(gr[0].data(), batch, w.data(), idx.data(), B, K, C);
+        };
+        std::vector<std::vector<double>> gr{std::vector<double>(src.size())};
+        bwd(gr);
+        CHECK(gradient_error(src.data(), gr[0].data(), src.size(), loss) < grad_tolerance);
+        check_accumulates(bwd, {src.size()}, 1e-15);
+      }
+    }
+  }
+
+  TEST_CASE("drop-path draws are per sample: independent of the batch they sit in") {
+    std::vector<float> a(3 * 8), b(3 * 5);
+    drop_path_sample(a.data(), 3, 8, 0.3, 77);
+    drop_path_sample(b.data(), 3, 5, 0.3, 77);
+    for (int s = 0; s < 3; ++s)
+      for (int i = 0; i < 5; ++i) CHECK(a[std::size_t(s) * 8 + i] == b[std::size_t(s) * 5 + i]);
+    CHECK_THROWS_AS(drop_path_sample(a.data(), 1, 2, 1.0, 0), ConfigError);
+  }
+}

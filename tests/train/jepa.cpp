@@ -1,0 +1,399 @@
+// The JEPA step end to end on a tiny model in double: the full loss against central differences
+// for every trainable parameter, tiling against one predictor pass per target, the optimizer step
+// with EMA, and the NaN stop.
+// g++ 12 reports a false (maybe-)uninitialized inside its AVX-512 intrinsics once Eigen's double
+// kernels are inlined (GCC bug 105593); see tests/model/modules.cpp.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
+#include <doctest/doctest.h>
+
+#include <tjepa/tjepa.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <sstream>
+#include <vector>
+
+#include "../model/gradcheck.hpp"
+
+using namespace tjepa;
+
+namespace {
+
+// 9 tokens, d = 8, 2 heads, 2 encoder blocks, 1 predictor block; m·τ = 4 values per taxel.
+JepaConfig tiny_config(int depth = 2) {
+  JepaConfig c;
+  c.in_dim = 4;
+  c.encoder = EncoderConfig{9, 8, depth, 2, 2.0, true, 1e-6};
+  c.predictor = PredictorConfig{8, 8, 1, 2, 2.0, false, 1e-6};
+  return c;
+}
+
+// Every parameter of all three sets away from its degenerate init, so every gradient path counts.
+JepaModel<double> random_model(std::uint64_t seed, int depth = 2) {
+  JepaModel<double> model(tiny_config(depth), seed);
+  test::randomize(model.context, seed + 1);
+  test::randomize(model.target, seed + 2);
+  test::randomize(model.predictor_params, seed + 3);
+  return model;
+}
+
+// B = 2 samples, K = 4 context tokens, 3 targets: sizes 2, 3, 2 (two share a predictor pass),
+// overlapping each other, disjoint from the context.
+MaskBatch tiny_masks() {
+  MaskBatch m;
+  m.B = 2;
+  m.K = 4;
+  m.context = {0, 1, 4, 8, 2, 3, 6, 7};
+  TargetSet a{2, TargetKind::local, -1, {2, 3, 0, 1}};
+  TargetSet b{3, TargetKind::global, -1, {3, 5, 6, 4, 5, 8}};
+  TargetSet c{2, TargetKind::local, -1, {5, 7, 1, 8}};
+  m.targets = {a, b, c};
+  return m;
+}
+
+// Runs a scope on one OpenMP thread: the tiny model's thousands of forward passes would spend
+// their time in thread barriers (results do not depend on the thread count).
+struct SingleThread {
+#if defined(_OPENMP)
+  int previous = omp_get_max_threads();
+  SingleThread() { omp_set_num_threads(1); }
+  ~SingleThread() { omp_set_num_threads(previous); }
+#endif
+};
+
+std::vector<double> tiny_input(std::uint64_t seed, int B = 2) {
+  Rng rng(seed);
+  return test::normal_vector(static_cast<std::size_t>(B) * 9 * 4, rng);
+}
+
+// A 6 x 6 sheet (36 taxels, 4 pads) with m = 2 axes, windows of τ = 2 frames: Gaussian blobs
+// drift across it (the first axis their pressure, the second its change), plus noise. Smooth in
+// space and time, so context tokens predict target tokens.
+WindowSource blob_source(int frames, std::uint64_t seed) {
+  const int side = 6, N = side * side, m = 2;
+  AlignedVector<float> v(static_cast<std::size_t>(frames) * N * m, 0.0f);
+  Rng rng(seed);
+  double cx = 2.5, cy = 2.5, vx = 0.3, vy = 0.2, amp = 1.0;
+  std::vector<double> prev(N, 0.0);
+  for (int t = 0; t < frames; ++t) {
+    if (rng.uniform() < 0.05) {  // a new contact now and then
+      cx = rng.uniform(0, side - 1);
+      cy = rng.uniform(0, side - 1);
+      vx = rng.uniform(-0.4, 0.4);
+      vy = rng.uniform(-0.4, 0.4);
+      amp = rng.uniform(0.5, 2.0);
+    }
+    cx += vx;
+    cy += vy;
+    if (cx < 0 || cx > side - 1) vx = -vx;
+    if (cy < 0 || cy > side - 1) vy = -vy;
+    for (int n = 0; n < N; ++n) {
+      const double dx = n % side - cx, dy = n / side - cy;
+      const double p = amp * std::exp(-(dx * dx + dy * dy) / 3.0);
+      v[(static_cast<std::size_t>(t) * N + n) * m] = static_cast<float>(p + 0.02 * rng.normal());
+      v[(static_cast<std::size_t>(t) * N + n) * m + 1] = static_cast<float>(p - prev[n] + 0.02 * rng.normal());
+      prev[n] = p;
+    }
+  }
+  return WindowSource(Recording(frames, N, m, std::move(v), "blobs"), WindowSpec{2});
+}
+
+MaskCollator blob_collator() {
+  layouts::GridSkinOptions o;
+  o.rows = o.cols = 6;
+  o.group_rows = o.group_cols = 3;
+  MaskConfig mc;
+  mc.min_context_tokens = 6;
+  return MaskCollator(layouts::grid_skin(o).graph, mc);
+}
+
+JepaConfig blob_config() {
+  JepaConfig c;
+  c.in_dim = 4;  // m·τ
+  c.encoder = EncoderConfig{36, 16, 2, 2, 2.0, true, 1e-6};
+  c.predictor = PredictorConfig{16, 16, 1, 2, 2.0, false, 1e-6};
+  return c;
+}
+
+// The reference schedule shortened: batches of 16, one warm-up epoch, a higher peak rate.
+TrainerConfig blob_trainer_config(int epochs, std::uint64_t seed) {
+  TrainerConfig tc;
+  tc.epochs = epochs;
+  tc.batch_size = 16;
+  tc.warmup_epochs = 1;
+  tc.ref_lr = 1e-3;
+  tc.seed = seed;
+  tc.step.drop_path = 0.0;
+  return tc;
+}
+
+struct TempPath {
+  std::filesystem::path path;
+  explicit TempPath(const std::string& name)
+      : path(std::filesystem::temp_directory_path() / ("tjepa_train_" + name + ".safetensors")) {
+    std::filesystem::remove(path);
+  }
+  ~TempPath() {
+    std::error_code ec;
+    std::filesystem::remove(path, ec);
+  }
+};
+
+}  // namespace
+
+TEST_SUITE("train") {
+  TEST_CASE("full JEPA loss: analytic gradient of every trainable parameter = central differences") {
+    const SingleThread one_thread;
+    auto model = random_model(1);
+    const auto x = tiny_input(5);
+    const MaskBatch masks = tiny_masks();
+    JepaStepConfig cfg;
+    cfg.drop_path = 0.0;
+    SUBCASE("MSE, target encoder's position rows (the reference)") {}
+    SUBCASE("drop-path 0.5 in both encoders, fixed noise seed") { cfg.drop_path = 0.5; }
+    SUBCASE("smooth-L1 against re-normalized targets, context encoder's position rows") {
+      cfg.loss = JepaLossKind::smooth_l1;
+      cfg.normalize_targets = true;
+      cfg.predictor_pos_from_context = true;
+    }
+    JepaWorkspace<double> w;
+    const std::uint64_t noise = 77;
+    auto loss = [&] { return jepa_loss(model, x.data(), 2, masks, w, cfg, noise, false).loss; };
+    const auto target_before = model.target;
+    model.context.zero_grad();
+    model.predictor_params.zero_grad();
+    const double l = jepa_loss(model, x.data(), 2, masks, w, cfg, noise, true).loss;
+    CHECK(l == doctest::Approx(loss()).epsilon(1e-13));
+    CHECK(l > 0);
+    test::check_param_gradients(model.context, loss);
+    test::check_param_gradients(model.predictor_params, loss);
+    // The target encoder gets no gradient and is not changed by the loss.
+    for (double g : model.target.grads()) CHECK(g == 0.0);
+    CHECK(std::equal(model.target.values().begin(), model.target.values().end(), target_before.values().begin()));
+    // Position rows get a gradient through the predictor only when it reads the context's table.
+    const auto pos = model.context.grad_span(model.encoder.pos_embed());
+    const bool pos_grad = std::any_of(pos.begin(), pos.end(), [](double g) { return g != 0.0; });
+    CHECK(pos_grad);  // the context encoder's own use of its rows always gives one
+  }
+
+  TEST_CASE("two backward passes accumulate twice the gradient") {
+    auto model = random_model(11, 1);
+    const auto x = tiny_input(14);
+    JepaWorkspace<double> w;
+    JepaStepConfig cfg;
+    model.context.zero_grad();
+    model.predictor_params.zero_grad();
+    (void)jepa_loss(model, x.data(), 2, tiny_masks(), w, cfg, 5, true);
+    const auto once = model.context;
+    (void)jepa_loss(model, x.data(), 2, tiny_masks(), w, cfg, 5, true);
+    for (std::size_t i = 0; i < once.grads().size(); ++i)
+      CHECK(model.context.grads()[i] == doctest::Approx(2 * once.grads()[i]).epsilon(1e-12));
+  }
+
+  TEST_CASE("tiling targets gives the loss of one predictor pass per target averaged over targets") {
+    auto model = random_model(21);
+    const auto x = tiny_input(25);
+    const MaskBatch masks = tiny_masks();
+    JepaStepConfig cfg;
+    cfg.drop_path = 0.0;
+    JepaWorkspace<double> w;
+    const auto r = jepa_loss(model, x.data(), 2, masks, w, cfg, 1, false);
+    // Each target on its own, the way the reference's formula reads.
+    const int B = 2, N = 9, d = 8;
+    Workspace<double> ws;
+    std::vector<double> tok(B * N * d), h(B * N * d), z(B * masks.K * d);
+    model.tokenizer.forward(model.target, x.data(), B, tok.data(), nullptr, ws);
+    model.encoder.forward(model.target, tok.data(), B, nullptr, N, h.data(), nullptr, ws);
+    model.tokenizer.forward(model.context, x.data(), B, tok.data(), nullptr, ws);
+    model.encoder.forward(model.context, tok.data(), B, masks.context.data(), masks.K, z.data(), nullptr, ws);
+    double mean = 0;
+    for (int j = 0; j < masks.num_targets(); ++j) {
+      const TargetSet& ts = masks.targets[j];
+      std::vector<double> p(B * ts.size * d);
+      model.predictor.forward(model.predictor_params, z.data(), B, masks.K,
+                              model.target.value(model.encoder.pos_embed()), N, ts.indices.data(), B, ts.size,
+                              p.data(), nullptr, ws);
+      double s = 0;
+      for (int b = 0; b < B; ++b)
+        for (int k = 0; k < ts.size; ++k)
+          for (int c = 0; c < d; ++c) {
+            const double e = p[(b * ts.size + k) * d + c] - h[(b * N + ts.row(b)[k]) * d + c];
+            s += e * e;
+          }
+      const double lj = s / (B * ts.size * d);
+      CHECK(r.target_losses[j] == doctest::Approx(lj).epsilon(1e-12));
+      mean += lj / masks.num_targets();
+    }
+    CHECK(r.loss == doctest::Approx(mean).epsilon(1e-12));
+    // The target-embedding std is the per-dimension std over all B·N embeddings, averaged.
+    double stdsum = 0;
+    for (int c = 0; c < d; ++c) {
+      double mu = 0, v = 0;
+      for (int i = 0; i < B * N; ++i) mu += h[i * d + c];
+      mu /= B * N;
+      for (int i = 0; i < B * N; ++i) v += (h[i * d + c] - mu) * (h[i * d + c] - mu);
+      stdsum += std::sqrt(v / (B * N - 1));
+    }
+    CHECK(r.target_std == doctest::Approx(stdsum / d).epsilon(1e-12));
+  }
+
+  TEST_CASE("a training step: scheduled AdamW on the trainable sets then the EMA of the target encoder") {
+    JepaModel<double> model(tiny_config(1), 31);
+    test::randomize(model.predictor_params, 32);
+    const auto x = tiny_input(33);
+    AdamW<double> opt(model.trainable());
+    const auto schedule = TrainingSchedule::reference(10, 4, 2);
+    JepaWorkspace<double> w;
+    JepaStepConfig cfg;
+    const auto context0 = model.context;
+    const auto target0 = model.target;
+    const auto st = jepa_train_step(model, opt, schedule, 5, x.data(), 2, tiny_masks(), w, cfg, 9);
+    CHECK(st.step == 5);
+    CHECK(st.lr == doctest::Approx(schedule.lr(6)).epsilon(1e-15));
+    CHECK(st.weight_decay == doctest::Approx(schedule.wd(6)).epsilon(1e-15));
+    CHECK(st.momentum == doctest::Approx(schedule.momentum(5)).epsilon(1e-15));
+    CHECK(st.grad_norm > 0);
+    CHECK(st.target_std > 0);
+    CHECK(st.target_losses.size() == 3);
+    CHECK(opt.steps() == 1);
+    bool moved = false;
+    for (std::size_t i = 0; i < model.context.flat_size(); ++i) {
+      moved |= model.context.values()[i] != context0.values()[i];
+      CHECK(model.target.values()[i] == doctest::Approx(st.momentum * target0.values()[i] +
+                                                        (1 - st.momentum) * model.context.values()[i])
+                                            .epsilon(1e-14));
+    }
+    CHECK(moved);
+  }
+
+  TEST_CASE("a NaN stops the step with NumericError before any parameter changes") {
+    JepaModel<double> model(tiny_config(1), 41);
+    auto x = tiny_input(42);
+    x[7] = std::numeric_limits<double>::quiet_NaN();
+    AdamW<double> opt(model.trainable());
+    const auto schedule = TrainingSchedule::reference(10, 4, 2);
+    JepaWorkspace<double> w;
+    const auto before = model;
+    CHECK_THROWS_WITH_AS(jepa_train_step(model, opt, schedule, 0, x.data(), 2, tiny_masks(), w, JepaStepConfig{}, 1),
+                         doctest::Contains("JEPA step 0: the loss is nan"), NumericError);
+    CHECK(opt.steps() == 0);
+    for (auto [a, b] : {std::pair{&model.context, &before.context}, std::pair{&model.target, &before.target},
+                        std::pair{&model.predictor_params, &before.predictor_params}})
+      CHECK(std::equal(a->values().begin(), a->values().end(), b->values().begin()));
+    // Masks that do not fit the model are rejected.
+    MaskBatch bad = tiny_masks();
+    bad.context[3] = 9;
+    CHECK_THROWS_AS(jepa_loss(model, x.data(), 2, bad, w, JepaStepConfig{}, 1), ShapeError);
+  }
+
+  TEST_CASE("windows reach the tokenizer axis-major as the reference's patch embedding reads them") {
+    WindowBatch b;
+    b.batch = 1;
+    b.taxels = 2;
+    b.length = 3;
+    b.axes = 2;
+    b.x = {0, 1, 2, 3, 4, 5, 10, 11, 12, 13, 14, 15};  // [1, 2, τ = 3, m = 2]: value = 10·taxel + 2·frame + axis
+    AlignedVector<double> out;
+    windows_to_tokens(b, out);
+    CHECK(std::vector<double>(out.begin(), out.end()) == std::vector<double>{0, 2, 4, 1, 3, 5, 10, 12, 14, 11, 13, 15});
+  }
+
+  TEST_CASE("save then load then continue: the loss curve is bitwise that of an uninterrupted run") {
+    const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
+    const auto collator = blob_collator();
+    TrainerConfig tc = blob_trainer_config(3, 5);
+    tc.step.drop_path = 0.1;  // exercises the checkpointed noise generator
+    TempPath ckpt("resume");
+    tc.checkpoint = ckpt.path;
+    tc.checkpoint_every = 4;  // steps 4 and 8 land mid-epoch
+
+    JepaModel<float> straight_model(blob_config(), 7);
+    Trainer<float> straight(straight_model, source, collator, tc);
+    CHECK(straight.total_steps() == 18);
+    std::vector<double> straight_loss;
+    for (const auto& st : straight.run()) straight_loss.push_back(st.loss);
+
+    JepaModel<float> first_model(blob_config(), 7);
+    Trainer<float> first(first_model, source, collator, tc);
+    const auto head = first.run(10);  // checkpoints after steps 4 and 8
+    REQUIRE(head.size() == 10);
+    for (int s = 0; s < 10; ++s) CHECK(head[s].loss == straight_loss[s]);
+
+    JepaModel<float> resumed_model(blob_config(), 12345);  // a different init: everything must come from the file
+    Trainer<float> resumed(resumed_model, source, collator, tc);
+    resumed.resume(ckpt.path);
+    CHECK(resumed.step() == 8);
+    const auto tail = resumed.run();
+    REQUIRE(tail.size() == 10);
+    for (int s = 0; s < 10; ++s) {
+      CHECK(tail[s].step == 8 + s);
+      CHECK(tail[s].loss == straight_loss[8 + s]);  // bitwise
+    }
+    for (auto [a, b] : {std::pair{&resumed_model.context, &straight_model.context},
+                        std::pair{&resumed_model.target, &straight_model.target},
+                        std::pair{&resumed_model.predictor_params, &straight_model.predictor_params}})
+      CHECK(std::memcmp(a->values().data(), b->values().data(), a->values().size_bytes()) == 0);
+
+    // A run with another shape or schedule refuses the checkpoint.
+    TrainerConfig other = tc;
+    other.epochs = 4;
+    JepaModel<float> m2(blob_config(), 1);
+    Trainer<float> t2(m2, source, collator, other);
+    CHECK_THROWS_WITH_AS(t2.resume(ckpt.path), doctest::Contains("was written with trainer"), ConfigError);
+  }
+
+  TEST_CASE("a NaN stops the trainer with NumericError and leaves the last checkpoint intact") {
+    const auto source = blob_source(100, 2);
+    const auto collator = blob_collator();
+    TrainerConfig tc = blob_trainer_config(2, 0);
+    TempPath ckpt("nan");
+    tc.checkpoint = ckpt.path;
+    tc.checkpoint_every = 2;
+    JepaModel<float> model(blob_config(), 3);
+    Trainer<float> trainer(model, source, collator, tc);
+    (void)trainer.run(2);
+    REQUIRE(std::filesystem::exists(ckpt.path));
+    const auto good = load_safetensors(ckpt.path);
+    model.context.values()[model.context.id(3).offset] = std::numeric_limits<float>::infinity();
+    CHECK_THROWS_WITH_AS(trainer.run(), doctest::Contains("JEPA step 2"), NumericError);
+    CHECK(trainer.step() == 2);
+    const auto after = load_safetensors(ckpt.path);
+    CHECK(after.metadata.at("step") == "2");
+    for (const auto& name : good.names()) CHECK(after.at(name).data == good.at(name).data);
+  }
+
+  TEST_CASE("on a small synthetic set the loss falls and the target embeddings do not collapse") {
+    const auto source = blob_source(1200, 3);  // 600 windows: 37 batches of 16 per epoch
+    const auto collator = blob_collator();
+    TrainerConfig tc = blob_trainer_config(8, 11);
+    tc.log_every = 100;
+    JepaModel<float> model(blob_config(), 13);
+    Trainer<float> trainer(model, source, collator, tc);
+    std::ostringstream log;
+    trainer.log = &log;
+    const auto stats = trainer.run();
+    CHECK(log.str().find("step 1/296 epoch 0 loss ") == 0);
+    CHECK(log.str().find("step 296/296 epoch 7 loss ") != std::string::npos);
+    const std::size_t n = stats.size(), k = 20;
+    auto mean = [&](std::size_t from, double JepaStepStats::*f) {
+      double s = 0;
+      for (std::size_t i = from; i < from + k; ++i) s += stats[i].*f;
+      return s / k;
+    };
+    const double loss0 = mean(0, &JepaStepStats::loss), loss1 = mean(n - k, &JepaStepStats::loss);
+    const double std0 = mean(0, &JepaStepStats::target_std), std1 = mean(n - k, &JepaStepStats::target_std);
+    double min_std = 1e9;
+    for (const auto& st : stats) {
+      CHECK(std::isfinite(st.loss));
+      min_std = std::min(min_std, st.target_std);
+    }
+    MESSAGE("steps ", n, ": loss ", loss0, " -> ", loss1, ", target std ", std0, " -> ", std1, " (min ", min_std, ")");
+    CHECK(loss1 < 0.5 * loss0);
+    CHECK(min_std > 0.1);
+  }
+}
