@@ -1,6 +1,11 @@
 // The `tjepa` command: layout / pretrain / probe / embed / demo. `tjepa demo` is the README's
 // main job. The subcommands live in cli/commands.hpp; this file only parses the command line.
 // Any error is one line on stderr ("tjepa: error: ...") and a non-zero exit.
+// GCC 12 flags Eigen's AVX-512 GEMM kernel (avx512fintrin.h, -Wmaybe-uninitialized), a known
+// false positive in a system header that -Werror would otherwise turn into an error.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
@@ -112,8 +117,12 @@ int main(int argc, char** argv) {
   run_override<int>(demo, "--predictor-depth", "predictor_depth", demo_overrides, "predictor blocks");
   run_override<double>(demo, "--lr", "lr", demo_overrides, "pre-training peak learning rate");
   demo->add_option("--pretrain-frames", dm.pretrain_frames, "unlabelled simulated frames")->capture_default_str();
+  demo->add_option("--probe-frames", dm.probe_frames, "labelled simulated frames (probe training)")->capture_default_str();
   demo->add_option("--probe-windows", dm.probe_windows, "labelled training windows")->capture_default_str();
   demo->add_option("--probe-epochs", dm.probe.epochs, "probe epochs (also the end-to-end budget)")->capture_default_str();
+  demo->add_option("--probe-lr", dm.probe.lr, "probe learning rate")->capture_default_str();
+  demo->add_option("--end-to-end-epochs", dm.end_to_end_epochs, "epochs of (c) (0: as the probes)")->capture_default_str();
+  demo->add_option("--checkpoint", dm.checkpoint, "skip pre-training and probe this demo checkpoint");
   demo->add_flag("--no-end-to-end", [&dm](std::int64_t) { dm.end_to_end = false; }, "skip (c)");
   demo->add_flag("--quiet", dm.quiet, "no progress line");
 

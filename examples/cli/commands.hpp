@@ -392,8 +392,10 @@ struct DemoOptions {
   int min_contact = 5;
   int probe_windows = 600;         // labelled training windows (a label-scarce regime)
   int test_windows = 1000;
-  ProbeTrainConfig probe{.epochs = 12, .batch = 32, .lr = 1e-3};
+  ProbeTrainConfig probe{.epochs = 60, .batch = 32, .lr = 3e-3};
   bool end_to_end = true;
+  int end_to_end_epochs = 0;       // (c)'s epochs; 0: the probes' (the same budget)
+  std::string checkpoint;          // skip pre-training: probe this checkpoint of an earlier demo
   bool force = true;               // the demo overwrites its own output directory
   bool quiet = false;
 };
@@ -425,8 +427,16 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
 
   OutputFiles files;
   files.make_dir(dir);
+  std::optional<LoadedModel> loaded;
+  if (!o.checkpoint.empty()) {
+    loaded = load_model(o.checkpoint);
+    const int steps = o.run.steps;
+    o.run = loaded->run;
+    o.run.steps = steps;
+  }
   const JepaConfig mc = o.run.model(skin.size(), SimulatedSkin::axes);
-  JepaModel<float> model(mc, o.seed);
+  JepaModel<float> fresh(mc, o.seed);
+  JepaModel<float>& model = loaded ? *loaded->model : fresh;
   AdamW<float> opt(model.trainable());
   out << "model: encoder d=" << o.run.dim << ", " << o.run.depth << " blocks, " << o.run.heads << " heads ("
       << model.context.numel() << " parameters); predictor " << o.run.predictor_depth << " blocks ("
@@ -434,8 +444,14 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   out << "pre-training: " << pre_src.size() << " unlabelled windows, " << o.run.steps << " steps of " << o.run.batch
       << ", lr " << o.run.lr << ", reference masks (2 local + 2 global targets over the taxel graph)\n"
       << std::flush;
-  const PretrainOutcome pr = pretrain(model, opt, o.run, pre_src, skin.graph, o.quiet);
-  write_pretrain_outputs(dir, model, opt, o.run, pre, pr, files);
+  PretrainOutcome pr;
+  if (loaded) {
+    out << "(skipped: using the pre-trained encoder of " << o.checkpoint << ")\n";
+    pr.log.rows.push_back(std::vector<double>(pretrain_log_columns().size(), NAN));
+  } else {
+    pr = pretrain(model, opt, o.run, pre_src, skin.graph, o.quiet);
+    write_pretrain_outputs(dir, model, opt, o.run, pre, pr, files);
+  }
   out << "pre-training: loss " << pr.log.rows.front()[1] << " -> " << pr.log.rows.back()[1]
       << ", target-embedding std " << pr.log.rows.front()[6] << " -> " << pr.final_target_std << ", "
       << pr.windows_per_second << " windows/s, " << format_duration(pr.seconds) << "\n";
@@ -450,10 +466,15 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   JepaModel<float> random_model(mc, o.seed + 1000);
   rows.push_back(frozen_probe("(b) random init, frozen", random_model.target, random_model.tokenizer,
                               random_model.encoder, probe_src, train, test_src, test, o.probe, o.run.heads, o.quiet));
-  if (o.end_to_end)
-    rows.push_back(end_to_end_probe("(c) end to end, same labels", random_model.context, random_model.tokenizer,
-                                    random_model.encoder, probe_src, train, test_src, test, o.probe, o.run.heads,
-                                    o.quiet));
+  if (o.end_to_end) {
+    ProbeTrainConfig e2e = o.probe;
+    if (o.end_to_end_epochs > 0) e2e.epochs = o.end_to_end_epochs;
+    const std::string name = e2e.epochs == o.probe.epochs
+                                 ? "(c) end to end, same labels"
+                                 : "(c) end to end, " + std::to_string(e2e.epochs) + " epochs";
+    rows.push_back(end_to_end_probe(name, random_model.context, random_model.tokenizer, random_model.encoder,
+                                    probe_src, train, test_src, test, e2e, o.run.heads, o.quiet));
+  }
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   out << "\nheld-out results (seed " << o.seed << ", " << test.size() << " windows; force RMSE in N, indenter "
       << "accuracy over " << num_indenter_shapes << " classes):\n";
