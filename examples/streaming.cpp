@@ -1,10 +1,11 @@
 // The control loop runs one window at a time (batch 1), and the library parallelizes over the
 // batch: OpenMP would add nothing but a team allocation per parallel region (libgomp allocates
 // its team each time), so this program is single-threaded by construction.
-// GCC 12 flags Eigen's AVX-512 GEMM kernel (avx512fintrin.h, -Wmaybe-uninitialized), a known
+// GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
 // false positive in a system header that -Werror would otherwise turn into an error.
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
 #endif
 #undef _OPENMP
 

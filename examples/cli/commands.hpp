@@ -394,7 +394,9 @@ struct DemoOptions {
   int test_windows = 1000;
   ProbeTrainConfig probe{.epochs = 60, .batch = 32, .lr = 3e-3};
   bool end_to_end = true;
-  int end_to_end_epochs = 0;       // (c)'s epochs; 0: the probes' (the same budget)
+  // (c)'s epochs; 0: the probes' (the same budget). Each end-to-end step runs the encoder forward
+  // and backward (about 30x a frozen probe step), so the default caps it to fit the 10 minutes.
+  int end_to_end_epochs = 6;
   std::string checkpoint;          // skip pre-training: probe this checkpoint of an earlier demo
   bool force = true;               // the demo overwrites its own output directory
   bool quiet = false;
