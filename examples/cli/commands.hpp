@@ -217,6 +217,19 @@ inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& t
   return row;
 }
 
+// train_probe with a progress line (step, loss, windows/s, ETA).
+template <class Features>
+void train_with_progress(ForceIndenterProbe<float>& probe, Features& features, const ProbeLabels& labels,
+                         const ProbeTrainConfig& cfg, const std::string& label, bool quiet) {
+  ProgressLine bar(label, 1, quiet);
+  train_probe(probe, features, labels, cfg, [&](const ProbeStepInfo& s) {
+    char extra[64];
+    std::snprintf(extra, sizeof extra, "loss %.4f", s.loss);
+    if (s.step == 0) bar = ProgressLine(label, s.total_steps, quiet);
+    bar.update(s.step + 1, (s.step + 1) * cfg.batch, extra);
+  });
+}
+
 // A probe on the frozen encoder (tokenizer + encoder reading `params`).
 inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& params, const Tokenizer& tok,
                              const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
@@ -233,13 +246,7 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
   FrozenFeatures<float> ftrain(std::move(emb_train), enc.num_tokens(), enc.dim());
   FrozenFeatures<float> ftest(std::move(emb_test), enc.num_tokens(), enc.dim());
   ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
-  ProgressLine bar("  probe " + name, 1, quiet);
-  train_probe(probe, ftrain, train, cfg, [&](const ProbeStepInfo& s) {
-    char extra[64];
-    std::snprintf(extra, sizeof extra, "loss %.4f", s.loss);
-    if (s.step == 0) bar = ProgressLine("  probe " + name, s.total_steps, quiet);
-    bar.update(s.step + 1, (s.step + 1) * cfg.batch, extra);
-  });
+  train_with_progress(probe, ftrain, train, cfg, "  probe " + name, quiet);
   ProbeRow row{name, evaluate_probe(probe, ftest, test), 0};
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return row;
@@ -253,13 +260,7 @@ inline ProbeRow end_to_end_probe(const std::string& name, ParamSet<float>& param
   const auto t0 = std::chrono::steady_clock::now();
   EncoderFeatures<float> ftrain(params, tok, enc, train_src, train.window);
   ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
-  ProgressLine bar("  train " + name, 1, quiet);
-  train_probe(probe, ftrain, train, cfg, [&](const ProbeStepInfo& s) {
-    char extra[64];
-    std::snprintf(extra, sizeof extra, "loss %.4f", s.loss);
-    if (s.step == 0) bar = ProgressLine("  train " + name, s.total_steps, quiet);
-    bar.update(s.step + 1, (s.step + 1) * cfg.batch, extra);
-  });
+  train_with_progress(probe, ftrain, train, cfg, "  train " + name, quiet);
   EncoderFeatures<float> ftest(params, tok, enc, test_src, test.window);
   ProbeRow row{name, evaluate_probe(probe, ftest, test), 0};
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -95,7 +95,7 @@ class ProgressLine {
     if (tty_ && !last && std::chrono::duration<double>(now - last_).count() < 0.2) return;
     last_ = now;
     const double t = elapsed();
-    const double rate = t > 0 ? static_cast<double>(items) / t : 0.0;
+    const double rate = t > 0.05 ? static_cast<double>(items) / t : 0.0;  // no rate from a first instant
     const double eta = done > 0 ? t * static_cast<double>(total_ - done) / static_cast<double>(done) : NAN;
     constexpr int width = 24;
     const int fill = static_cast<int>(width * static_cast<double>(done) / static_cast<double>(total_));
