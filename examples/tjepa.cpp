@@ -1,46 +1,159 @@
-// The `tjepa` command. `tjepa demo` is the README's main job.
+// The `tjepa` command: layout / pretrain / probe / embed / demo. `tjepa demo` is the README's
+// main job. The subcommands live in cli/commands.hpp; this file only parses the command line.
+// Any error is one line on stderr ("tjepa: error: ...") and a non-zero exit.
+// GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
+// false positive in a system header that -Werror would otherwise turn into an error.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
 #include <CLI/CLI.hpp>
-
-#include <tjepa/tjepa.hpp>
 
 #include <cstdio>
 #include <exception>
-#include <vector>
+#include <iostream>
+#include <string>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#include "cli/commands.hpp"
 
 namespace {
 
-// A rows x cols grid skin with 4-neighbour edges of the given pitch.
-tjepa::TaxelGraph grid_graph(int rows, int cols, double pitch) {
-  std::vector<tjepa::Edge> e;
-  for (int r = 0; r < rows; ++r)
-    for (int c = 0; c < cols; ++c) {
-      const int i = r * cols + c;
-      if (c + 1 < cols) e.push_back({i, i + 1, pitch});
-      if (r + 1 < rows) e.push_back({i, i + cols, pitch});
-    }
-  return tjepa::TaxelGraph(rows * cols, e);
+// --<flag> VALUE sets key in the JSON of RunConfig overrides.
+template <class T>
+void run_override(CLI::App* app, const std::string& flag, const std::string& key, nlohmann::json& j,
+                  const std::string& help) {
+  app->add_option_function<T>(flag, [&j, key](const T& v) { j[key] = v; }, help);
 }
 
-int demo() {
-  const auto g = grid_graph(16, 16, 4.667e-3);
-  std::printf("tjepa %s\n", tjepa::version_string);
-  std::printf("built-in grid skin: %d taxels, %zu edges, %d part(s), %d component(s)\n",
-              g.num_nodes(), g.num_edges(), g.num_parts(), g.num_components());
-  return 0;
+void add_run_overrides(CLI::App* app, nlohmann::json& j) {
+  run_override<std::string>(app, "--layout", "layout", j, "built-in layout (allegro, grid, two-part) or layout CSV");
+  run_override<int>(app, "--tau", "tau", j, "frames per window");
+  run_override<int>(app, "--dim", "dim", j, "encoder width d");
+  run_override<int>(app, "--depth", "depth", j, "encoder blocks");
+  run_override<int>(app, "--heads", "heads", j, "attention heads");
+  run_override<int>(app, "--predictor-depth", "predictor_depth", j, "predictor blocks");
+  run_override<int>(app, "--steps", "steps", j, "optimizer steps");
+  run_override<int>(app, "--batch", "batch", j, "windows per step");
+  run_override<int>(app, "--warmup", "warmup_steps", j, "learning-rate warm-up steps");
+  run_override<double>(app, "--lr", "lr", j, "peak learning rate");
+  run_override<double>(app, "--drop-path", "drop_path", j, "stochastic depth rate");
+  run_override<std::uint64_t>(app, "--seed", "seed", j, "random seed (init, masks, data order, simulation)");
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
+  using namespace tjepa::cli;
   CLI::App app{"tjepa: Tactile-JEPA for distributed tactile skins"};
   app.set_version_flag("--version", std::string(tjepa::version_string));
   app.require_subcommand(1);
-  auto* demo_cmd = app.add_subcommand("demo", "Run the demo: pre-train on simulated data, then evaluate");
-  CLI11_PARSE(app, argc, argv);
+  int threads = 0;
+  app.add_option("--threads", threads, "OpenMP threads (0: all cores)");
+
+  LayoutOptions lo;
+  auto* layout = app.add_subcommand("layout", "Draw a layout, its graph, groups or sampled masks; print a summary");
+  layout->add_option("layout", lo.layout, "built-in layout (allegro, grid, two-part) or layout CSV")->capture_default_str();
+  layout->add_option("--svg", lo.svg, "write an SVG drawing here");
+  layout->add_option("--draw", lo.draw, "graph | groups | parts | masks")->capture_default_str();
+  layout->add_option("--mask-seed", lo.seed, "seed of the drawn masks");
+  layout->add_flag("--json", lo.json, "machine-readable summary on stdout");
+  layout->add_flag("--force", lo.force, "overwrite the SVG");
+
+  PretrainOptions po;
+  auto* pretrain = app.add_subcommand("pretrain", "Pre-train Tactile-JEPA: checkpoint, CSV log, loss-curve SVG");
+  pretrain->add_option("--config", po.config, "JSON run configuration (keys as in the checkpoint's config.run)");
+  add_run_overrides(pretrain, po.overrides);
+  pretrain->add_option("--data", po.data, "recordings (.npy [T, N, m] or CSV); default: simulated data");
+  pretrain->add_option("--baseline", po.baseline, "no-contact recording (for magnetic preprocessing)");
+  pretrain->add_option("--preprocess", po.preprocess, "magnetic | standardize | none");
+  pretrain->add_option("--axes", po.axes, "axes per taxel of text recordings")->capture_default_str();
+  pretrain->add_option("--simulate", po.simulate_frames, "frames of simulated data")->capture_default_str();
+  pretrain->add_option("--out", po.out, "output directory")->capture_default_str();
+  pretrain->add_flag("--force", po.force, "overwrite an existing checkpoint");
+  pretrain->add_flag("--quiet", po.quiet, "no progress line");
+
+  ProbeOptions pb;
+  auto* probe = app.add_subcommand("probe", "Train and evaluate an attentive probe (force, indenter) on a frozen checkpoint");
+  probe->add_option("--checkpoint", pb.checkpoint, "checkpoint of `tjepa pretrain`")->required();
+  probe->add_option("--encoder", pb.encoder, "target | context")->capture_default_str();
+  probe->add_option("--train-data", pb.train_data, "labelled training recording (default: simulated)");
+  probe->add_option("--train-labels", pb.train_labels, "[T, 4] .npy: force u, v, normal (N), indenter class or -1");
+  probe->add_option("--test-data", pb.test_data, "held-out recording");
+  probe->add_option("--test-labels", pb.test_labels, "held-out labels");
+  probe->add_option("--simulate-seed", pb.simulate_seed, "seed of the simulated labelled data")->capture_default_str();
+  probe->add_option("--max-windows", pb.max_windows, "labelled windows per split (0: all)")->capture_default_str();
+  probe->add_option("--epochs", pb.probe.epochs, "probe epochs")->capture_default_str();
+  probe->add_option("--batch", pb.probe.batch, "probe batch")->capture_default_str();
+  probe->add_option("--lr", pb.probe.lr, "probe learning rate")->capture_default_str();
+  probe->add_option("--out", pb.out, "write the results as JSON here");
+  probe->add_flag("--force", pb.force, "overwrite --out");
+  probe->add_flag("--quiet", pb.quiet, "no progress line");
+
+  EmbedOptions eo;
+  auto* embed = app.add_subcommand("embed", "Frozen encoder over a recording's windows -> embeddings .npy [W, N, d]");
+  embed->add_option("--checkpoint", eo.checkpoint, "checkpoint of `tjepa pretrain`")->required();
+  embed->add_option("--data", eo.data, "recording (.npy [T, N, m] or CSV)")->required();
+  embed->add_option("--out", eo.out, "output .npy")->required();
+  embed->add_option("--encoder", eo.encoder, "target | context")->capture_default_str();
+  embed->add_option("--stride", eo.stride, "frames between windows (0: tau)")->capture_default_str();
+  embed->add_option("--axes", eo.axes, "axes per taxel of text recordings")->capture_default_str();
+  embed->add_flag("--force", eo.force, "overwrite --out");
+  embed->add_flag("--quiet", eo.quiet, "no progress line");
+
+  DemoOptions dm;
+  nlohmann::json demo_overrides = nlohmann::json::object();
+  auto* demo = app.add_subcommand("demo", "Pre-train on simulated Allegro data, then compare probes on held-out data");
+  demo->add_option("--seed", dm.seed, "seed of everything (data, init, masks)")->capture_default_str();
+  demo->add_option("--out", dm.out, "output directory")->capture_default_str();
+  run_override<int>(demo, "--steps", "steps", demo_overrides, "pre-training steps");
+  run_override<int>(demo, "--batch", "batch", demo_overrides, "pre-training batch");
+  run_override<int>(demo, "--warmup", "warmup_steps", demo_overrides, "pre-training warm-up steps");
+  run_override<int>(demo, "--dim", "dim", demo_overrides, "encoder width d");
+  run_override<int>(demo, "--depth", "depth", demo_overrides, "encoder blocks");
+  run_override<int>(demo, "--heads", "heads", demo_overrides, "attention heads");
+  run_override<int>(demo, "--predictor-depth", "predictor_depth", demo_overrides, "predictor blocks");
+  run_override<double>(demo, "--lr", "lr", demo_overrides, "pre-training peak learning rate");
+  demo->add_option("--pretrain-frames", dm.pretrain_frames, "unlabelled simulated frames")->capture_default_str();
+  demo->add_option("--probe-frames", dm.probe_frames, "labelled simulated frames (probe training)")->capture_default_str();
+  demo->add_option("--probe-windows", dm.probe_windows, "labelled training windows")->capture_default_str();
+  demo->add_option("--probe-epochs", dm.probe.epochs, "probe epochs (also the end-to-end budget)")->capture_default_str();
+  demo->add_option("--probe-lr", dm.probe.lr, "probe learning rate")->capture_default_str();
+  demo->add_option("--end-to-end-epochs", dm.end_to_end_epochs, "epochs of (c) (0: as the probes)")->capture_default_str();
+  demo->add_option("--checkpoint", dm.checkpoint, "skip pre-training and probe this demo checkpoint");
+  demo->add_flag("--no-end-to-end", [&dm](std::int64_t) { dm.end_to_end = false; }, "skip (c)");
+  demo->add_flag("--quiet", dm.quiet, "no progress line");
+
   try {
-    if (*demo_cmd) return demo();
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::fprintf(stderr, "tjepa: error: %s (see tjepa --help)\n", e.what());
+    return 2;
+  }
+#ifdef _OPENMP
+  if (threads > 0) omp_set_num_threads(threads);
+#endif
+  try {
+    if (*layout) return run_layout(lo, std::cout);
+    if (*pretrain) return run_pretrain(po, std::cout);
+    if (*probe) return run_probe(pb, std::cout);
+    if (*embed) return run_embed(eo, std::cout);
+    if (*demo) {
+      dm.run.update(demo_overrides, "command line");
+      return run_demo(dm, std::cout);
+    }
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "tjepa: error: %s\n", e.what());
+    std::fflush(stdout);
+    std::fprintf(stderr, "%stjepa: error: %s\n", ::isatty(::fileno(stderr)) ? "\r\033[K" : "", e.what());
     return 1;
   }
   return 0;

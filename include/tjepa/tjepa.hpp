@@ -83,3 +83,8 @@
 #include "tjepa/train/jepa_step.hpp"
 #include "tjepa/train/loss.hpp"
 #include "tjepa/train/trainer.hpp"
+
+#include "tjepa/downstream/cross_entropy.hpp"
+#include "tjepa/downstream/embed.hpp"
+#include "tjepa/downstream/metrics.hpp"
+#include "tjepa/downstream/probe_training.hpp"

@@ -1,0 +1,500 @@
+#pragma once
+// The subcommands of `tjepa`, as functions of an options struct, so tests run them in-process
+// (tests/cli/cli.cpp) and examples/tjepa.cpp only parses the command line.
+//
+//   layout    draw a built-in or CSV layout, its graph, groups or sampled masks to SVG; summary
+//   pretrain  pre-train Tactile-JEPA on simulated data or recordings: checkpoint, CSV log, SVG
+//   probe     train and evaluate an attentive probe (force, indenter) on a frozen checkpoint
+//   embed     the frozen target encoder over a recording's windows → embeddings .npy
+//   demo      pre-train on simulated Allegro data, then probes on (a) the pre-trained encoder,
+//             (b) the same architecture with random weights, (c) an encoder trained end to end
+//
+// Every command writes its files through OutputFiles: on an error nothing it wrote is left.
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <tjepa/downstream/embed.hpp>
+#include <tjepa/downstream/probe_training.hpp>
+#include <tjepa/tjepa.hpp>
+
+#include "output.hpp"
+#include "pretrain.hpp"
+#include "setup.hpp"
+
+namespace tjepa::cli {
+
+// ---------------------------------------------------------------------------------------------
+// tjepa layout
+
+struct LayoutOptions {
+  std::string layout = "allegro";  // built-in name or CSV path
+  std::string svg;                 // output SVG ("" = none)
+  std::string draw = "graph";      // graph | groups | parts | masks
+  std::uint64_t seed = 0;          // masks: which batch to draw
+  bool json = false;               // machine-readable summary
+  bool force = false;
+};
+
+inline int run_layout(const LayoutOptions& o, std::ostream& out) {
+  const Skin skin = load_skin(o.layout);
+  const TaxelGraph& g = skin.graph;
+  int bridges = 0;
+  for (const Edge& e : g.edges()) bridges += skin.layout.group[e.src] != skin.layout.group[e.dst];
+  nlohmann::json j = {{"layout", o.layout},         {"taxels", g.num_nodes()},          {"edges", g.num_edges()},
+                      {"bridges", bridges},         {"parts", skin.layout.num_parts()}, {"groups", skin.layout.num_groups()},
+                      {"components", g.num_components()}};
+  SvgOptions svg;
+  svg.title = o.layout + ": " + std::to_string(g.num_nodes()) + " taxels";
+  if (o.draw == "groups") {
+    svg.color_by = SvgColorBy::group;
+    svg.group_labels = true;
+  } else if (o.draw == "parts") {
+    svg.color_by = SvgColorBy::part;
+  } else if (o.draw == "masks") {
+    const MaskCollator collator(g);
+    const MaskBatch m = collator.sample(1, o.seed, 0);
+    svg.fill.assign(static_cast<std::size_t>(g.num_nodes()), "#dddddd");
+    for (int i : m.context_row(0)) svg.fill[static_cast<std::size_t>(i)] = "#1f77b4";
+    static const char* colors[] = {"#d62728", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2"};
+    nlohmann::json targets = nlohmann::json::array();
+    for (int k = 0; k < m.num_targets(); ++k) {
+      const TargetSet& t = m.targets[static_cast<std::size_t>(k)];
+      const auto row = t.row(0);
+      svg.highlights.push_back({std::vector<int>(row.begin(), row.end()), colors[k % 6],
+                                std::string(to_string(t.kind)) + " target " + std::to_string(k)});
+      targets.push_back({{"kind", to_string(t.kind)}, {"size", t.size}});
+    }
+    svg.title += ", context (blue) and targets";
+    j["masks"] = {{"context", m.K}, {"targets", targets}};
+  } else {
+    require<ConfigError>(o.draw == "graph", "--draw '", o.draw, "', expected graph, groups, parts or masks");
+  }
+  if (!o.svg.empty()) {
+    OutputFiles files;
+    OutputFiles::check_new(o.svg, o.force);
+    write_file_atomic(files.add(o.svg), svg_string(skin, svg));
+    files.commit();
+    j["svg"] = o.svg;
+  }
+  if (o.json) {
+    out << j.dump(2) << '\n';
+    return 0;
+  }
+  out << "layout " << o.layout << ": " << g.num_nodes() << " taxels, " << g.num_edges() << " edges (" << bridges
+      << " between groups), " << skin.layout.num_parts() << " part(s), " << skin.layout.num_groups()
+      << " group(s), " << g.num_components() << " component(s)\n";
+  if (j.contains("masks")) {
+    out << "masks (seed " << o.seed << "): context " << j["masks"]["context"].get<int>() << " tokens; targets";
+    for (const auto& t : j["masks"]["targets"]) out << ' ' << t["kind"].get<std::string>() << ':' << t["size"].get<int>();
+    out << '\n';
+  }
+  if (!o.svg.empty()) out << "wrote " << o.svg << '\n';
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// tjepa pretrain
+
+struct PretrainOptions {
+  std::string config;                 // JSON file with RunConfig keys ("" = defaults)
+  nlohmann::json overrides = nlohmann::json::object();  // command-line overrides of RunConfig keys
+  std::vector<std::string> data;      // recordings (.npy [T, N, m] or text); empty: simulated
+  std::string baseline;               // no-contact recording (preprocessing "magnetic")
+  std::string preprocess = "";        // magnetic | standardize | none ("" = magnetic if a baseline, else standardize)
+  int axes = 3;
+  int simulate_frames = 20000;        // simulated data: frames of the pre-training recording
+  std::string out = "runs/pretrain";
+  bool force = false;
+  bool quiet = false;
+};
+
+inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
+  RunConfig run = o.config.empty() ? RunConfig{} : RunConfig::from_file(o.config);
+  run.update(o.overrides, "command line");
+  run.validate();
+  const Skin skin = load_skin(run.layout);
+  std::vector<Recording> recs;
+  std::optional<Recording> baseline;
+  std::string mode = o.preprocess;
+  if (o.data.empty()) {
+    require<ConfigError>(o.simulate_frames >= run.tau, "--simulate ", o.simulate_frames, " frames, expected >= tau");
+    SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, run.seed);
+    baseline = sim.record_baseline(300);
+    recs.push_back(sim.record(o.simulate_frames).recording);
+    if (mode.empty()) mode = "magnetic";
+  } else {
+    for (const auto& p : o.data) recs.push_back(read_recording(p, o.axes));
+    if (!o.baseline.empty()) baseline = read_recording(o.baseline, o.axes);
+    if (mode.empty()) mode = baseline ? "magnetic" : "standardize";
+  }
+  for (std::size_t r = 0; r < recs.size(); ++r)
+    require<ShapeError>(recs[r].taxels() == skin.size(), o.data.empty() ? "simulated" : o.data[r], ": ",
+                        recs[r].taxels(), " taxels, the layout '", run.layout, "' has ", skin.size());
+  const Preprocessor pre = fit_preprocessor(mode, baseline ? &*baseline : nullptr, recs);
+  const int axes = recs[0].axes();
+  const WindowSource src(recs, WindowSpec{run.tau}, {}, pre);
+
+  OutputFiles files;
+  const std::filesystem::path dir = o.out;
+  OutputFiles::check_new(dir / "checkpoint.safetensors", o.force);
+  files.make_dir(dir);
+  JepaModel<float> model(run.model(skin.size(), axes), run.seed);
+  AdamW<float> opt(model.trainable());
+  out << "pre-training on " << src.size() << " windows (" << skin.size() << " taxels, tau " << run.tau << "), "
+      << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
+      << run.steps << " steps of " << run.batch << "\n";
+  const PretrainOutcome r = pretrain(model, opt, run, src, skin.graph, o.quiet);
+  write_pretrain_outputs(dir, model, opt, run, pre, r, files);
+  files.commit();
+  out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "
+      << r.final_target_std << ", " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
+      << "\nwrote " << (dir / "checkpoint.safetensors").string() << ", log.csv, loss.svg\n";
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Probes (shared by `probe` and `demo`)
+
+struct ProbeRow {
+  std::string name;
+  ProbeMetrics metrics;
+  double seconds = 0;
+};
+
+inline void print_probe_table(std::ostream& out, const std::vector<ProbeRow>& rows) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "%-34s %9s %9s %9s %9s %10s\n", "encoder", "RMSE u/N", "RMSE v/N", "RMSE n/N",
+                "RMSE avg", "indenter");
+  out << buf;
+  for (const auto& r : rows) {
+    const auto& m = r.metrics;
+    std::snprintf(buf, sizeof buf, "%-34s %9.4f %9.4f %9.4f %9.4f %9.1f%%\n", r.name.c_str(), m.force_rmse[0],
+                  m.force_rmse[1], m.force_rmse[2], (m.force_rmse[0] + m.force_rmse[1] + m.force_rmse[2]) / 3,
+                  100 * m.indenter_accuracy);
+    out << buf;
+  }
+}
+
+inline nlohmann::json probe_rows_json(const std::vector<ProbeRow>& rows) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& r : rows)
+    a.push_back({{"encoder", r.name},
+                 {"force_rmse", r.metrics.force_rmse},
+                 {"indenter_accuracy", r.metrics.indenter_accuracy},
+                 {"majority_accuracy", r.metrics.majority_accuracy},
+                 {"windows", r.metrics.windows},
+                 {"seconds", r.seconds}});
+  return a;
+}
+
+// The mean-force / majority-class row: what a probe must beat to have learned anything.
+inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& test, int classes) {
+  const ForceScaler s = ForceScaler::fit(train);
+  std::vector<float> y(static_cast<std::size_t>(test.size()) * (force_axes + classes), 0.0f);
+  std::vector<int> count(static_cast<std::size_t>(classes), 0);
+  for (int c : train.indenter) ++count[static_cast<std::size_t>(c)];
+  const int major = static_cast<int>(std::max_element(count.begin(), count.end()) - count.begin());
+  for (int i = 0; i < test.size(); ++i) {
+    float* r = y.data() + static_cast<std::size_t>(i) * (force_axes + classes);
+    for (int a = 0; a < force_axes; ++a) r[a] = s.mean[static_cast<std::size_t>(a)];
+    r[force_axes + major] = 1.0f;
+  }
+  ProbeRow row{"constant (train mean / majority)", {}, 0};
+  const auto rm = rmse_per_column(y.data(), static_cast<std::size_t>(force_axes + classes), test.force.data(),
+                                  test.size(), force_axes);
+  std::copy(rm.begin(), rm.end(), row.metrics.force_rmse.begin());
+  row.metrics.indenter_accuracy = accuracy(y.data() + force_axes, static_cast<std::size_t>(force_axes + classes),
+                                           test.indenter.data(), test.size(), classes);
+  row.metrics.majority_accuracy = majority_accuracy(test.indenter.data(), test.size(), classes);
+  row.metrics.windows = test.size();
+  return row;
+}
+
+// train_probe with a progress line (step, loss, windows/s, ETA).
+template <class Features>
+void train_with_progress(ForceIndenterProbe<float>& probe, Features& features, const ProbeLabels& labels,
+                         const ProbeTrainConfig& cfg, const std::string& label, bool quiet) {
+  ProgressLine bar(label, 1, quiet);
+  train_probe(probe, features, labels, cfg, [&](const ProbeStepInfo& s) {
+    char extra[64];
+    std::snprintf(extra, sizeof extra, "loss %.4f", s.loss);
+    if (s.step == 0) bar = ProgressLine(label, s.total_steps, quiet);
+    bar.update(s.step + 1, (s.step + 1) * cfg.batch, extra);
+  });
+}
+
+// A probe on the frozen encoder (tokenizer + encoder reading `params`).
+inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& params, const Tokenizer& tok,
+                             const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
+                             const WindowSource& test_src, const ProbeLabels& test, const ProbeTrainConfig& cfg,
+                             int heads, bool quiet) {
+  ProgressLine embed_progress("  embed " + name, train.size() + test.size(), quiet);
+  const auto t0 = std::chrono::steady_clock::now();
+  auto emb_train = embed_windows(params, tok, enc, train_src, train.window, 32, [&](std::int64_t d, std::int64_t) {
+    embed_progress.update(d, d, "");
+  });
+  auto emb_test = embed_windows(params, tok, enc, test_src, test.window, 32, [&](std::int64_t d, std::int64_t) {
+    embed_progress.update(train.size() + d, train.size() + d, "");
+  });
+  FrozenFeatures<float> ftrain(std::move(emb_train), enc.num_tokens(), enc.dim());
+  FrozenFeatures<float> ftest(std::move(emb_test), enc.num_tokens(), enc.dim());
+  ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
+  train_with_progress(probe, ftrain, train, cfg, "  probe " + name, quiet);
+  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0};
+  row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return row;
+}
+
+// An encoder (fresh, `params` as initialized) trained end to end with the probe.
+inline ProbeRow end_to_end_probe(const std::string& name, ParamSet<float>& params, const Tokenizer& tok,
+                                 const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
+                                 const WindowSource& test_src, const ProbeLabels& test, const ProbeTrainConfig& cfg,
+                                 int heads, bool quiet) {
+  const auto t0 = std::chrono::steady_clock::now();
+  EncoderFeatures<float> ftrain(params, tok, enc, train_src, train.window);
+  ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
+  train_with_progress(probe, ftrain, train, cfg, "  train " + name, quiet);
+  EncoderFeatures<float> ftest(params, tok, enc, test_src, test.window);
+  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0};
+  row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return row;
+}
+
+// ---------------------------------------------------------------------------------------------
+// tjepa probe
+
+struct ProbeOptions {
+  std::string checkpoint;
+  std::string encoder = "target";          // target | context
+  // Labelled data: files, or simulated (the layout's simulated skin) when empty.
+  std::string train_data, train_labels, test_data, test_labels;
+  int axes = 3;
+  std::uint64_t simulate_seed = 1;
+  int simulate_train_frames = 8000, simulate_test_frames = 4000;
+  int min_contact = 5;                     // frames in contact for a window to count
+  int max_windows = 0;                     // per split, 0 = all
+  ProbeTrainConfig probe;
+  std::string out;                         // results JSON ("" = none)
+  bool force = false;
+  bool quiet = false;
+};
+
+inline int run_probe(const ProbeOptions& o, std::ostream& out) {
+  require<ConfigError>(!o.checkpoint.empty(), "--checkpoint is required");
+  require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
+                       "', expected target or context");
+  if (!o.out.empty()) OutputFiles::check_new(o.out, o.force);
+  LoadedModel m = load_model(o.checkpoint);
+  JepaModel<float>& model = *m.model;
+  Recording train_rec, test_rec;
+  std::vector<FrameLabel> train_lab, test_lab;
+  if (o.train_data.empty()) {
+    require<ConfigError>(o.test_data.empty(), "--test-data needs --train-data too");
+    const Skin skin = load_skin(m.run.layout);
+    SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, o.simulate_seed);
+    auto a = sim.record(o.simulate_train_frames);
+    auto b = sim.record(o.simulate_test_frames);
+    train_rec = std::move(a.recording);
+    train_lab = std::move(a.labels);
+    test_rec = std::move(b.recording);
+    test_lab = std::move(b.labels);
+  } else {
+    require<ConfigError>(!o.train_labels.empty() && !o.test_data.empty() && !o.test_labels.empty(),
+                         "--train-data needs --train-labels, --test-data and --test-labels");
+    train_rec = read_recording(o.train_data, o.axes);
+    train_lab = read_frame_labels(o.train_labels, train_rec.frames());
+    test_rec = read_recording(o.test_data, o.axes);
+    test_lab = read_frame_labels(o.test_labels, test_rec.frames());
+  }
+  for (const Recording* r : {&train_rec, &test_rec})
+    require<ShapeError>(r->taxels() == model.num_tokens() && r->axes() * m.run.tau == model.config.in_dim,
+                        r->source(), ": ", r->taxels(), " taxels x ", r->axes(), " axes; the checkpoint expects ",
+                        model.num_tokens(), " taxels x ", model.config.in_dim / m.run.tau, " axes");
+  const WindowSource train_src(train_rec, WindowSpec{m.run.tau}, train_lab, m.pre);
+  const WindowSource test_src(test_rec, WindowSpec{m.run.tau}, test_lab, m.pre);
+  const ProbeLabels train = ProbeLabels::from_source(
+      train_src, labelled_windows(train_src, o.min_contact, o.max_windows, o.probe.seed));
+  const ProbeLabels test = ProbeLabels::from_source(
+      test_src, labelled_windows(test_src, o.min_contact, o.max_windows, o.probe.seed + 1));
+  for (int c : train.indenter)
+    require<DataError>(c < num_indenter_shapes, "indenter class ", c, " in the training labels, expected < ",
+                       num_indenter_shapes);
+  out << "probe on the frozen " << o.encoder << " encoder of " << o.checkpoint << ": " << train.size()
+      << " training windows, " << test.size() << " held-out windows\n";
+  const ParamSet<float>& ps = o.encoder == "target" ? model.target : model.context;
+  std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes),
+                             frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
+                                          train_src, train, test_src, test, o.probe, m.run.heads, o.quiet)};
+  print_probe_table(out, rows);
+  if (!o.out.empty()) {
+    OutputFiles files;
+    write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint}, {"results", probe_rows_json(rows)}}.dump(2));
+    files.commit();
+  }
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// tjepa embed
+
+struct EmbedOptions {
+  std::string checkpoint, data, out;
+  std::string encoder = "target";
+  int axes = 3;
+  int stride = 0;  // frames between windows (0 = tau)
+  bool force = false;
+  bool quiet = false;
+};
+
+inline int run_embed(const EmbedOptions& o, std::ostream& out) {
+  require<ConfigError>(!o.checkpoint.empty() && !o.data.empty() && !o.out.empty(),
+                       "--checkpoint, --data and --out are required");
+  require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
+                       "', expected target or context");
+  OutputFiles::check_new(o.out, o.force);
+  LoadedModel m = load_model(o.checkpoint);
+  JepaModel<float>& model = *m.model;
+  const Recording rec = read_recording(o.data, o.axes);
+  require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.run.tau == model.config.in_dim, o.data,
+                      ": ", rec.taxels(), " taxels x ", rec.axes(), " axes; the checkpoint expects ", model.num_tokens(),
+                      " taxels x ", model.config.in_dim / m.run.tau, " axes");
+  const WindowSource src(rec, WindowSpec{m.run.tau, o.stride}, {}, m.pre);
+  std::vector<std::int64_t> ids(static_cast<std::size_t>(src.size()));
+  for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = static_cast<std::int64_t>(i);
+  ProgressLine bar("embed", src.size(), o.quiet);
+  const auto emb = embed_windows(o.encoder == "target" ? model.target : model.context, model.tokenizer,
+                                 model.encoder, src, ids, 32, [&](std::int64_t d, std::int64_t) { bar.update(d, d, ""); });
+  OutputFiles files;
+  write_npy(files.add(o.out), std::span<const float>(emb.data(), emb.size()),
+            {src.size(), model.num_tokens(), model.dim()});
+  files.commit();
+  out << "wrote " << o.out << ": [" << src.size() << ", " << model.num_tokens() << ", " << model.dim()
+      << "] embeddings of windows of " << m.run.tau << " frames\n";
+  return 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// tjepa demo
+
+struct DemoOptions {
+  std::uint64_t seed = 0;
+  std::string out = "runs/demo";
+  RunConfig run;                   // model and pre-training (run.seed is set from seed)
+  int pretrain_frames = 60000;     // unlabelled
+  int probe_frames = 20000;        // labelled, probe training
+  int test_frames = 10000;         // labelled, held out
+  int min_contact = 5;
+  int probe_windows = 600;         // labelled training windows (a label-scarce regime)
+  int test_windows = 1000;
+  ProbeTrainConfig probe{.epochs = 60, .batch = 32, .lr = 3e-3};
+  bool end_to_end = true;
+  // (c)'s epochs; 0: the probes' (the same budget). Each end-to-end step runs the encoder forward
+  // and backward (about 30x a frozen probe step), so the default caps it to fit the 10 minutes.
+  int end_to_end_epochs = 6;
+  std::string checkpoint;          // skip pre-training: probe this checkpoint of an earlier demo
+  bool force = true;               // the demo overwrites its own output directory
+  bool quiet = false;
+};
+
+inline int run_demo(DemoOptions o, std::ostream& out) {
+  o.run.seed = o.seed;
+  o.run.layout = "allegro";
+  o.run.validate();
+  o.probe.seed = o.seed;
+  const auto t_start = std::chrono::steady_clock::now();
+  const std::filesystem::path dir = o.out;
+  OutputFiles::check_new(dir / "checkpoint.safetensors", o.force);
+  const Skin skin = layouts::allegro_xela();
+  out << "tjepa " << version_string << " demo, seed " << o.seed << ": Allegro hand, " << skin.size() << " taxels in "
+      << skin.layout.num_groups() << " pads, " << skin.graph.num_edges() << " edges; " << detail::max_threads()
+      << " thread(s)\n";
+  out << "simulating " << o.pretrain_frames << " unlabelled + " << o.probe_frames << " labelled + " << o.test_frames
+      << " held-out frames at 100 Hz ...\n" << std::flush;
+  SimulatedData d = simulate(skin, o.seed, o.pretrain_frames, o.probe_frames, o.test_frames);
+  const Preprocessor pre = fit_preprocessor("magnetic", &d.baseline, std::span<const Recording>(&d.pretrain, 1));
+  const WindowSpec spec{o.run.tau};
+  const WindowSource pre_src(d.pretrain, spec, {}, pre);
+  const WindowSource probe_src(d.probe_train.recording, spec, d.probe_train.labels, pre);
+  const WindowSource test_src(d.test.recording, spec, d.test.labels, pre);
+  const ProbeLabels train = ProbeLabels::from_source(
+      probe_src, labelled_windows(probe_src, o.min_contact, o.probe_windows, o.seed));
+  const ProbeLabels test =
+      ProbeLabels::from_source(test_src, labelled_windows(test_src, o.min_contact, o.test_windows, o.seed + 1));
+
+  OutputFiles files;
+  files.make_dir(dir);
+  std::optional<LoadedModel> loaded;
+  if (!o.checkpoint.empty()) {
+    loaded = load_model(o.checkpoint);
+    const int steps = o.run.steps;
+    o.run = loaded->run;
+    o.run.steps = steps;
+  }
+  const JepaConfig mc = o.run.model(skin.size(), SimulatedSkin::axes);
+  JepaModel<float> fresh(mc, o.seed);
+  JepaModel<float>& model = loaded ? *loaded->model : fresh;
+  AdamW<float> opt(model.trainable());
+  out << "model: encoder d=" << o.run.dim << ", " << o.run.depth << " blocks, " << o.run.heads << " heads ("
+      << model.context.numel() << " parameters); predictor " << o.run.predictor_depth << " blocks ("
+      << model.predictor_params.numel() << ")\n";
+  out << "pre-training: " << pre_src.size() << " unlabelled windows, " << o.run.steps << " steps of " << o.run.batch
+      << ", lr " << o.run.lr << ", reference masks (2 local + 2 global targets over the taxel graph)\n"
+      << std::flush;
+  PretrainOutcome pr;
+  if (loaded) {
+    out << "(skipped: using the pre-trained encoder of " << o.checkpoint << ")\n";
+    pr.log.rows.push_back(std::vector<double>(pretrain_log_columns().size(), NAN));
+  } else {
+    pr = pretrain(model, opt, o.run, pre_src, skin.graph, o.quiet);
+    write_pretrain_outputs(dir, model, opt, o.run, pre, pr, files);
+  }
+  out << "pre-training: loss " << pr.log.rows.front()[1] << " -> " << pr.log.rows.back()[1]
+      << ", target-embedding std " << pr.log.rows.front()[6] << " -> " << pr.final_target_std << ", "
+      << pr.windows_per_second << " windows/s, " << format_duration(pr.seconds) << "\n";
+
+  out << "probes: " << train.size() << " labelled training windows, " << test.size()
+      << " held-out windows (>= " << o.min_contact << " of " << o.run.tau << " frames in contact); "
+      << o.probe.epochs << " epochs of batch " << o.probe.batch << ", lr " << o.probe.lr << "\n" << std::flush;
+  std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes)};
+  rows.push_back(frozen_probe("(a) pre-trained, frozen", model.target, model.tokenizer, model.encoder, probe_src,
+                              train, test_src, test, o.probe, o.run.heads, o.quiet));
+  // (b) and (c) start from the same random initialization (another seed than the pre-trained one).
+  JepaModel<float> random_model(mc, o.seed + 1000);
+  rows.push_back(frozen_probe("(b) random init, frozen", random_model.target, random_model.tokenizer,
+                              random_model.encoder, probe_src, train, test_src, test, o.probe, o.run.heads, o.quiet));
+  if (o.end_to_end) {
+    ProbeTrainConfig e2e = o.probe;
+    if (o.end_to_end_epochs > 0) e2e.epochs = o.end_to_end_epochs;
+    const std::string name = e2e.epochs == o.probe.epochs
+                                 ? "(c) end to end, same labels"
+                                 : "(c) end to end, " + std::to_string(e2e.epochs) + " epochs";
+    rows.push_back(end_to_end_probe(name, random_model.context, random_model.tokenizer, random_model.encoder,
+                                    probe_src, train, test_src, test, e2e, o.run.heads, o.quiet));
+  }
+  const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  out << "\nheld-out results (seed " << o.seed << ", " << test.size() << " windows; force RMSE in N, indenter "
+      << "accuracy over " << num_indenter_shapes << " classes):\n";
+  print_probe_table(out, rows);
+  nlohmann::json results = {{"seed", o.seed},
+                            {"run", o.run.to_json()},
+                            {"probe", {{"epochs", o.probe.epochs}, {"batch", o.probe.batch}, {"lr", o.probe.lr},
+                                       {"train_windows", train.size()}, {"test_windows", test.size()}}},
+                            {"pretrain_seconds", pr.seconds},
+                            {"pretrain_windows_per_s", pr.windows_per_second},
+                            {"total_seconds", total},
+                            {"results", probe_rows_json(rows)}};
+  write_file_atomic(files.add(dir / "results.json"), results.dump(2));
+  files.commit();
+  out << "total " << format_duration(total) << "; wrote " << dir.string()
+      << "/{checkpoint.safetensors, log.csv, loss.svg, results.json}\n";
+  return 0;
+}
+
+}  // namespace tjepa::cli

@@ -1,0 +1,370 @@
+#pragma once
+// Downstream probes (REFERENCE §6): an AttentiveProbe trained on token embeddings to regress the
+// window's force (3 axes) and classify its indenter, evaluated on held-out windows.
+//
+// One probe, one head of 3 + C outputs:  y [B, 3 + C] = probe(x [B, L, d])
+//   force    y[:, 0:3] regresses the standardized force (f − mean) / std (ForceScaler, fitted on
+//            the training labels), loss = mean over B·3 of the squared error
+//   indenter y[:, 3:]   are logits, loss = softmax cross-entropy
+//   L = L_force + class_weight · L_indenter
+//
+// The embeddings come from a Features object (the loop is a template over it):
+//   FrozenFeatures   precomputed embeddings [S, L, d] of a frozen encoder (embed_windows): only
+//                    the probe trains
+//   EncoderFeatures  a tokenizer + encoder run on the windows at every step and trained with the
+//                    probe (end to end), same data, same steps, same optimizer
+// A Features object serves sample ids s ∈ [0, S): rows of ProbeLabels.
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <type_traits>
+#include <vector>
+
+#include "tjepa/core/error.hpp"
+#include "tjepa/core/random.hpp"
+#include "tjepa/data/window_source.hpp"
+#include "tjepa/downstream/cross_entropy.hpp"
+#include "tjepa/downstream/metrics.hpp"
+#include "tjepa/model/attentive_probe.hpp"
+#include "tjepa/model/encoder.hpp"
+#include "tjepa/model/init.hpp"
+#include "tjepa/model/tokenizer.hpp"
+#include "tjepa/optim/adamw.hpp"
+#include "tjepa/optim/clip.hpp"
+#include "tjepa/optim/schedule.hpp"
+
+namespace tjepa {
+
+inline constexpr int force_axes = 3;
+
+// The labels of S windows.
+struct ProbeLabels {
+  std::vector<std::int64_t> window;  // [S] window ids in their WindowSource
+  std::vector<float> force;          // [S, 3] N (shear u, shear v, normal)
+  std::vector<int> indenter;         // [S] class in [0, num_classes)
+
+  int size() const { return static_cast<int>(indenter.size()); }
+
+  // The labels of windows `ids` of a labelled source; every window must have a contact.
+  static ProbeLabels from_source(const WindowSource& src, std::span<const std::int64_t> ids) {
+    require<ConfigError>(src.has_labels(), "ProbeLabels::from_source: the windows have no labels");
+    ProbeLabels l;
+    for (std::int64_t id : ids) {
+      const WindowLabel w = src.label(id);
+      require<DataError>(w.indenter >= 0, "ProbeLabels::from_source: window ", id,
+                         " has no contact, expected windows with an indenter class");
+      l.window.push_back(id);
+      l.force.insert(l.force.end(), w.force.begin(), w.force.end());
+      l.indenter.push_back(w.indenter);
+    }
+    return l;
+  }
+};
+
+// Per-axis standardization of the force targets, from the training labels only.
+struct ForceScaler {
+  std::array<float, force_axes> mean{}, std{1.0f, 1.0f, 1.0f};
+
+  static ForceScaler fit(const ProbeLabels& l) {
+    require<DataError>(l.size() > 1, "ForceScaler::fit: ", l.size(), " labelled windows, expected at least 2");
+    ForceScaler s;
+    for (int a = 0; a < force_axes; ++a) {
+      double m = 0, q = 0;
+      for (int i = 0; i < l.size(); ++i) m += l.force[static_cast<std::size_t>(i) * force_axes + a];
+      m /= l.size();
+      for (int i = 0; i < l.size(); ++i) {
+        const double e = l.force[static_cast<std::size_t>(i) * force_axes + a] - m;
+        q += e * e;
+      }
+      s.mean[a] = static_cast<float>(m);
+      s.std[a] = static_cast<float>(std::max(std::sqrt(q / l.size()), 1e-6));
+    }
+    return s;
+  }
+};
+
+struct ProbeTrainConfig {
+  int epochs = 10;
+  int batch = 32;
+  double lr = 1e-3;          // peak learning rate (warm-up from lr/10, cosine to lr/100)
+  double warmup_fraction = 0.1;
+  double weight_decay = 0.05;
+  double class_weight = 1.0; // weight of the indenter cross-entropy against the force MSE
+  double clip_grad_norm = 10.0;
+  std::uint64_t seed = 0;    // probe init and data order
+
+  void validate() const {
+    require<ConfigError>(epochs > 0, "ProbeTrainConfig: epochs = ", epochs, ", expected > 0");
+    require<ConfigError>(batch > 0, "ProbeTrainConfig: batch = ", batch, ", expected > 0");
+    require<ConfigError>(lr > 0 && std::isfinite(lr), "ProbeTrainConfig: lr = ", lr, ", expected > 0");
+    require<ConfigError>(warmup_fraction >= 0 && warmup_fraction <= 1, "ProbeTrainConfig: warmup_fraction = ",
+                         warmup_fraction, ", expected in [0, 1]");
+    require<ConfigError>(weight_decay >= 0, "ProbeTrainConfig: weight_decay = ", weight_decay, ", expected >= 0");
+    require<ConfigError>(class_weight >= 0, "ProbeTrainConfig: class_weight = ", class_weight, ", expected >= 0");
+  }
+};
+
+// A probe with its parameters and the force standardization it was trained with.
+template <class T>
+struct ForceIndenterProbe {
+  ParamSet<T> params;
+  AttentiveProbe probe;
+  ForceScaler scaler;
+  int num_classes = 4;
+
+  ForceIndenterProbe(int dim, int heads, int num_classes_, std::uint64_t seed) : num_classes(num_classes_) {
+    require<ConfigError>(num_classes_ > 1, "ForceIndenterProbe: num_classes = ", num_classes_, ", expected > 1");
+    ProbeConfig c;
+    c.dim = dim;
+    c.heads = heads;
+    c.head_hidden = dim;
+    c.out_dim = outputs();
+    probe = AttentiveProbe(params, c);
+    params.allocate();
+    init_params(params, seed);
+  }
+  int outputs() const { return force_axes + num_classes; }
+};
+
+// Precomputed embeddings of a frozen encoder: [S, L, d].
+template <class T>
+class FrozenFeatures {
+ public:
+  FrozenFeatures(AlignedVector<T> embeddings, int tokens, int dim)
+      : x_(std::move(embeddings)), L_(tokens), d_(dim) {
+    require<ShapeError>(tokens > 0 && dim > 0 && x_.size() % (static_cast<std::size_t>(tokens) * dim) == 0,
+                        "FrozenFeatures: ", x_.size(), " values, expected a multiple of tokens*dim = ", tokens, "*",
+                        dim);
+  }
+  int tokens() const { return L_; }
+  int dim() const { return d_; }
+  int size() const { return static_cast<int>(x_.size() / (static_cast<std::size_t>(L_) * d_)); }
+  ParamSet<T>* trainable() { return nullptr; }
+
+  // x [B, L, d] of samples ids.
+  const T* forward(std::span<const std::int64_t> ids, bool /*train*/) {
+    const std::size_t per = static_cast<std::size_t>(L_) * d_;
+    T* out = detail::grow(batch_, ids.size() * per);
+    for (std::size_t b = 0; b < ids.size(); ++b)
+      std::copy_n(x_.data() + static_cast<std::size_t>(ids[b]) * per, per, out + b * per);
+    return out;
+  }
+  void backward(const T* /*dx*/) {}
+
+ private:
+  AlignedVector<T> x_, batch_;
+  int L_, d_;
+};
+
+// A tokenizer + encoder over the windows of a source, trained with the probe (end to end).
+// Sample s is window windows[s] of the source. Windows are float, so T is float.
+template <class T>
+class EncoderFeatures {
+  static_assert(std::is_same_v<T, float>, "EncoderFeatures: windows are float");
+
+ public:
+  EncoderFeatures(ParamSet<T>& params, const Tokenizer& tokenizer, const Encoder& encoder, const WindowSource& src,
+                  std::vector<std::int64_t> windows, double drop_path = 0.0)
+      : ps_(params), tok_(tokenizer), enc_(encoder), src_(src), windows_(std::move(windows)), drop_path_(drop_path) {
+    require<ShapeError>(tokenizer.num_tokens == encoder.num_tokens() &&
+                            static_cast<std::size_t>(tokenizer.width) == static_cast<std::size_t>(src.length()) * src.axes(),
+                        "EncoderFeatures: tokenizer of ", tokenizer.num_tokens, " tokens × ", tokenizer.width,
+                        " values, encoder of ", encoder.num_tokens(), " tokens, windows of ", src.taxels(), " taxels × ",
+                        src.length() * src.axes(), " values");
+  }
+  int tokens() const { return enc_.num_tokens(); }
+  int dim() const { return enc_.dim(); }
+  int size() const { return static_cast<int>(windows_.size()); }
+  ParamSet<T>* trainable() { return &ps_; }
+
+  const T* forward(std::span<const std::int64_t> ids, bool train) {
+    ids_.clear();
+    for (std::int64_t s : ids) ids_.push_back(windows_.at(static_cast<std::size_t>(s)));
+    src_.gather(ids_, batch_);
+    const int B = static_cast<int>(ids.size()), N = tokens(), d = dim();
+    const std::size_t M = static_cast<std::size_t>(B) * N * d;
+    const T* x = batch_.x.data();
+    T* tokens_buf = detail::grow(tokens_, M);
+    T* out = detail::grow(out_, M);
+    tok_.forward(ps_, x, B, tokens_buf, train ? &tok_cache_ : nullptr, ws_);
+    EncoderOptions opt;
+    if (train) opt.drop_path = DropPath{drop_path_, noise_()};
+    enc_.forward(ps_, tokens_buf, B, nullptr, N, out, train ? &enc_cache_ : nullptr, ws_, opt);
+    return out;
+  }
+  // dx [B, L, d]: the probe's gradient at the embeddings of the last training forward.
+  void backward(const T* dx) {
+    const std::size_t M = static_cast<std::size_t>(enc_cache_.B) * tokens() * dim();
+    T* dtok = detail::grow(dtokens_, M);
+    std::fill(dtok, dtok + M, T(0));
+    enc_.backward(ps_, dx, dtok, enc_cache_, ws_);
+    tok_.backward(ps_, dtok, static_cast<T*>(nullptr), tok_cache_, ws_);
+  }
+
+ private:
+  ParamSet<T>& ps_;
+  const Tokenizer& tok_;
+  const Encoder& enc_;
+  const WindowSource& src_;
+  std::vector<std::int64_t> windows_, ids_;
+  double drop_path_;
+  Rng noise_{0x656e64326564ull};  // "end2end": drop-path seeds
+  WindowBatch batch_;
+  Workspace<T> ws_;
+  TokenizerCache<T> tok_cache_;
+  EncoderCache<T> enc_cache_;
+  AlignedVector<T> tokens_, out_, dtokens_;
+};
+
+// What a training step reports to the progress callback.
+struct ProbeStepInfo {
+  std::int64_t step = 0, total_steps = 0;
+  double loss = 0, force_loss = 0, indenter_loss = 0;
+  double windows_per_second = 0;
+};
+
+// Held-out metrics of a probe.
+struct ProbeMetrics {
+  std::array<double, force_axes> force_rmse{};  // N, per axis (shear u, shear v, normal)
+  double indenter_accuracy = 0;
+  double majority_accuracy = 0;                 // chance level: the most frequent class
+  int windows = 0;
+};
+
+namespace detail {
+// y [B, 3 + C] → dy (overwritten) and the two losses. force_std [B, 3] are standardized targets.
+template <class T>
+std::array<double, 2> probe_loss(const T* y, const float* force_std, const int* labels, int B, int C,
+                                 double class_weight, T* dy) {
+  const int out = force_axes + C;
+  double f = 0;
+  for (int b = 0; b < B; ++b)
+    for (int a = 0; a < force_axes; ++a) {
+      const std::size_t i = static_cast<std::size_t>(b) * out + a;
+      const double e = static_cast<double>(y[i]) - force_std[static_cast<std::size_t>(b) * force_axes + a];
+      f += e * e;
+      if (dy) dy[i] = static_cast<T>(2.0 * e / (B * force_axes));
+    }
+  f /= B * force_axes;
+  const double ce = softmax_cross_entropy(y + force_axes, static_cast<std::size_t>(out), labels, B, C,
+                                          dy ? dy + force_axes : nullptr, static_cast<std::size_t>(out), class_weight);
+  return {f, ce};
+}
+}  // namespace detail
+
+// Trains probe (and the features' encoder, if it has one) on samples 0..S−1 of labels. Returns
+// the mean loss of the last epoch.
+template <class T, class Features>
+double train_probe(ForceIndenterProbe<T>& probe, Features& features, const ProbeLabels& labels,
+                   const ProbeTrainConfig& cfg, const std::function<void(const ProbeStepInfo&)>& progress = {}) {
+  cfg.validate();
+  const int S = labels.size(), C = probe.num_classes, out = probe.outputs();
+  require<ShapeError>(features.size() == S, "train_probe: ", features.size(), " feature rows for ", S, " labels");
+  require<ShapeError>(features.dim() == probe.probe.config.dim, "train_probe: features of width ", features.dim(),
+                      ", the probe expects ", probe.probe.config.dim);
+  const int B = std::min(cfg.batch, S);
+  for (int c : labels.indenter)
+    require<DataError>(c >= 0 && c < C, "train_probe: indenter label ", c, ", expected in [0, ", C, ")");
+  probe.scaler = ForceScaler::fit(labels);
+  std::vector<float> fstd(labels.force.size());
+  for (std::size_t i = 0; i < fstd.size(); ++i)
+    fstd[i] = (labels.force[i] - probe.scaler.mean[i % force_axes]) / probe.scaler.std[i % force_axes];
+
+  std::vector<PrefixedParams<T>> parts{{"probe.", &probe.params}};
+  if (ParamSet<T>* enc = features.trainable()) parts.push_back({"encoder.", enc});
+  AdamW<T> opt(parts);
+  const std::int64_t per_epoch = S / B, total = per_epoch * cfg.epochs;
+  WarmupCosineLr lr{cfg.lr * 0.1, cfg.lr, cfg.lr * 0.01, static_cast<std::int64_t>(cfg.warmup_fraction * total), total};
+
+  const int L = features.tokens(), d = features.dim();
+  Workspace<T> ws;
+  ProbeCache<T> cache;
+  AlignedVector<T> y(static_cast<std::size_t>(B) * out), dy(y.size()), dx;
+  std::vector<float> fb(static_cast<std::size_t>(B) * force_axes);
+  std::vector<int> cb(static_cast<std::size_t>(B));
+  std::vector<std::int64_t> order(static_cast<std::size_t>(S));
+  double epoch_loss = 0;
+  std::int64_t step = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int e = 0; e < cfg.epochs; ++e) {
+    for (int i = 0; i < S; ++i) order[static_cast<std::size_t>(i)] = i;
+    Rng(cfg.seed, static_cast<std::uint64_t>(e)).shuffle(std::span<std::int64_t>(order));
+    epoch_loss = 0;
+    for (std::int64_t k = 0; k < per_epoch; ++k, ++step) {
+      const std::span<const std::int64_t> ids(order.data() + k * B, static_cast<std::size_t>(B));
+      for (int b = 0; b < B; ++b) {
+        const auto s = static_cast<std::size_t>(ids[static_cast<std::size_t>(b)]);
+        std::copy_n(fstd.data() + s * force_axes, force_axes, fb.data() + static_cast<std::size_t>(b) * force_axes);
+        cb[static_cast<std::size_t>(b)] = labels.indenter[s];
+      }
+      for (auto& p : parts) p.params->zero_grad();
+      const T* x = features.forward(ids, true);
+      probe.probe.forward(probe.params, x, B, L, nullptr, y.data(), &cache, ws);
+      const auto [fl, cl] = detail::probe_loss(y.data(), fb.data(), cb.data(), B, C, cfg.class_weight, dy.data());
+      const double loss = fl + cfg.class_weight * cl;
+      require<NumericError>(std::isfinite(loss), "train_probe: step ", step, ": the loss is ", loss);
+      T* dxp = nullptr;
+      if (features.trainable()) {
+        dxp = detail::grow(dx, static_cast<std::size_t>(B) * L * d);
+        std::fill(dxp, dxp + static_cast<std::size_t>(B) * L * d, T(0));
+      }
+      probe.probe.backward(probe.params, dy.data(), dxp, cache, ws);
+      if (dxp) features.backward(dxp);
+      clip_grad_norm<T>(parts, cfg.clip_grad_norm);
+      opt.step(lr(step + 1), cfg.weight_decay);
+      epoch_loss += loss / per_epoch;
+      if (progress) {
+        const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        progress({step, total, loss, fl, cl, sec > 0 ? static_cast<double>((step + 1) * B) / sec : 0.0});
+      }
+    }
+  }
+  return epoch_loss;
+}
+
+// Predictions y [S, 3 + C] for samples 0..S−1 (force de-standardized, in N), batch by batch.
+template <class T, class Features>
+std::vector<T> predict_probe(const ForceIndenterProbe<T>& probe, Features& features, int S, int batch = 64) {
+  require<ConfigError>(batch > 0, "predict_probe: batch = ", batch, ", expected > 0");
+  const int out = probe.outputs(), L = features.tokens();
+  std::vector<T> y(static_cast<std::size_t>(S) * out);
+  Workspace<T> ws;
+  std::vector<std::int64_t> ids;
+  for (int s0 = 0; s0 < S; s0 += batch) {
+    const int B = std::min(batch, S - s0);
+    ids.resize(static_cast<std::size_t>(B));
+    for (int b = 0; b < B; ++b) ids[static_cast<std::size_t>(b)] = s0 + b;
+    const T* x = features.forward(ids, false);
+    probe.probe.forward(probe.params, x, B, L, nullptr, y.data() + static_cast<std::size_t>(s0) * out, nullptr, ws);
+  }
+  for (int s = 0; s < S; ++s)
+    for (int a = 0; a < force_axes; ++a) {
+      T& v = y[static_cast<std::size_t>(s) * out + a];
+      v = static_cast<T>(v * probe.scaler.std[a] + probe.scaler.mean[a]);
+    }
+  return y;
+}
+
+// Held-out metrics of a trained probe on samples 0..S−1 of labels.
+template <class T, class Features>
+ProbeMetrics evaluate_probe(const ForceIndenterProbe<T>& probe, Features& features, const ProbeLabels& labels,
+                            int batch = 64) {
+  const int S = labels.size();
+  require<ShapeError>(S > 0 && features.size() == S, "evaluate_probe: ", features.size(), " feature rows for ", S,
+                      " labels, expected equal and > 0");
+  const std::vector<T> y = predict_probe(probe, features, S, batch);
+  const auto out = static_cast<std::size_t>(probe.outputs());
+  ProbeMetrics m;
+  const auto r = rmse_per_column(y.data(), out, labels.force.data(), S, force_axes);
+  std::copy(r.begin(), r.end(), m.force_rmse.begin());
+  m.indenter_accuracy = accuracy(y.data() + force_axes, out, labels.indenter.data(), S, probe.num_classes);
+  m.majority_accuracy = majority_accuracy(labels.indenter.data(), S, probe.num_classes);
+  m.windows = S;
+  return m;
+}
+
+}  // namespace tjepa

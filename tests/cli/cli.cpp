@@ -1,0 +1,305 @@
+// The `tjepa` command's subcommands, run in-process on tiny inputs: layout, pretrain, probe,
+// embed, demo. Each checks what the command promises: the files it writes (and that a failing
+// command leaves none behind), the numbers it reports, and one-line errors for bad input.
+// GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
+// false positive in a system header that -Werror would otherwise turn into an error.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
+#include <doctest/doctest.h>
+
+#include "../../examples/cli/commands.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+using namespace tjepa;
+using namespace tjepa::cli;
+
+namespace {
+
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    static int counter = 0;
+    path = fs::temp_directory_path() / ("tjepa_cli_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
+std::string read_text(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Files under dir, recursively (to check that nothing, not even a temporary, is left).
+int count_files(const fs::path& dir) {
+  if (!fs::exists(dir)) return 0;
+  int n = 0;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) n += e.is_regular_file();
+  return n;
+}
+
+// The smallest model that exercises every piece.
+nlohmann::json tiny_run(const std::string& layout) {
+  return {{"layout", layout}, {"dim", 8}, {"depth", 1}, {"heads", 2}, {"predictor_depth", 1},
+          {"steps", 3},       {"batch", 4}, {"warmup_steps", 1}, {"seed", 3}};
+}
+
+}  // namespace
+
+TEST_SUITE("cli") {
+
+TEST_CASE("layout: summary of the built-in Allegro hand, as text and JSON, and an SVG") {
+  TempDir t;
+  std::ostringstream out;
+  LayoutOptions o;
+  o.json = true;
+  o.svg = (t.path / "hand.svg").string();
+  CHECK(run_layout(o, out) == 0);
+  const auto j = nlohmann::json::parse(out.str());
+  CHECK(j["taxels"] == 368);
+  CHECK(j["edges"] == 638);
+  CHECK(j["bridges"] == 68);  // 17 adjacent pad pairs x 4
+  CHECK(j["groups"] == 18);
+  CHECK(j["parts"] == 1);
+  CHECK(j["components"] == 1);
+  const std::string svg = read_text(o.svg);
+  CHECK(svg.starts_with("<svg"));
+  CHECK(svg.find("</svg>") != std::string::npos);
+  // Without --force an existing SVG is not overwritten, and the command says so.
+  CHECK_THROWS_AS(run_layout(o, out), FileError);
+
+  std::ostringstream text;
+  LayoutOptions plain;
+  CHECK(run_layout(plain, text) == 0);
+  CHECK(text.str().find("368 taxels, 638 edges") != std::string::npos);
+}
+
+TEST_CASE("layout: sampled masks follow the reference counts") {
+  std::ostringstream out;
+  LayoutOptions o;
+  o.layout = "grid";
+  o.draw = "masks";
+  o.json = true;
+  o.seed = 5;
+  CHECK(run_layout(o, out) == 0);
+  const auto j = nlohmann::json::parse(out.str());
+  const int n = j["taxels"];
+  REQUIRE(j.contains("masks"));
+  const auto& targets = j["masks"]["targets"];
+  REQUIRE(targets.size() == 4);
+  CHECK(targets[0]["kind"] == "local");
+  CHECK(targets[2]["kind"] == "global");
+  for (const auto& tg : targets) {
+    CHECK(tg["size"].get<int>() >= static_cast<int>(n * 0.10));
+    CHECK(tg["size"].get<int>() < static_cast<int>(n * 0.18) + 1);
+  }
+  const int k = j["masks"]["context"];
+  CHECK(k >= std::max(32, static_cast<int>(std::ceil(0.15 * n))));
+  CHECK(k < n);
+}
+
+TEST_CASE("layout: a CSV layout gets grid edges inside groups and bridges between them") {
+  TempDir t;
+  const fs::path csv = t.path / "two_pads.csv";
+  {
+    std::ofstream f(csv);
+    f << "# two 2x3 pads side by side, 4 mm pitch\nid,group,x,y\n";
+    int id = 0;
+    for (int g = 0; g < 2; ++g)
+      for (int r = 0; r < 2; ++r)
+        for (int c = 0; c < 3; ++c) f << id++ << ",pad" << g << ',' << (g * 14 + c * 4) << ',' << r * 4 << '\n';
+  }
+  std::ostringstream out;
+  LayoutOptions o;
+  o.layout = csv.string();
+  o.json = true;
+  CHECK(run_layout(o, out) == 0);
+  const auto j = nlohmann::json::parse(out.str());
+  CHECK(j["taxels"] == 12);
+  CHECK(j["groups"] == 2);
+  CHECK(j["bridges"] == 4);               // the 4 closest cross-pad pairs
+  CHECK(j["edges"] == 2 * 7 + 4);         // a 2x3 grid has 7 four-neighbour edges
+  CHECK(j["components"] == 1);
+
+  // A malformed CSV is one clear error naming the file and line.
+  {
+    std::ofstream f(t.path / "bad.csv");
+    f << "x,y\n1,2\n3,oops\n";
+  }
+  o.layout = (t.path / "bad.csv").string();
+  try {
+    run_layout(o, out);
+    FAIL("expected an error");
+  } catch (const FileError& e) {
+    const std::string msg = e.what();
+    CHECK(msg.find("bad.csv:3") != std::string::npos);
+    CHECK(msg.find('\n') == std::string::npos);
+  }
+  o.layout = "no-such-layout";
+  CHECK_THROWS_AS(run_layout(o, out), ConfigError);
+}
+
+TEST_CASE("pretrain, probe and embed on a tiny simulated skin") {
+  TempDir t;
+  std::ostringstream out;
+  PretrainOptions po;
+  po.overrides = tiny_run("grid");
+  po.simulate_frames = 300;
+  po.out = (t.path / "run").string();
+  po.quiet = true;
+  REQUIRE(run_pretrain(po, out) == 0);
+  const fs::path ck = t.path / "run" / "checkpoint.safetensors";
+  REQUIRE(fs::exists(ck));
+  const std::string log = read_text(t.path / "run" / "log.csv");
+  CHECK(log.starts_with("step,loss,"));
+  CHECK(std::count(log.begin(), log.end(), '\n') == 1 + 3);  // header + one row per step
+  CHECK(read_text(t.path / "run" / "loss.svg").starts_with("<svg"));
+  CHECK(count_files(t.path / "run") == 3);  // no temporaries left
+
+  // The checkpoint restores the run's config, the model and the fitted preprocessing.
+  const LoadedModel m = load_model(ck);
+  CHECK(m.run.dim == 8);
+  CHECK(m.step == 3);
+  CHECK(m.model->num_tokens() == 192);
+  CHECK(m.pre.ready());
+
+  // Running again into the same directory needs --force.
+  CHECK_THROWS_AS(run_pretrain(po, out), FileError);
+
+  SUBCASE("probe on simulated labelled data, results as JSON") {
+    ProbeOptions pb;
+    pb.checkpoint = ck.string();
+    pb.simulate_train_frames = 600;
+    pb.simulate_test_frames = 400;
+    pb.probe.epochs = 1;
+    pb.probe.batch = 8;
+    pb.out = (t.path / "probe.json").string();
+    pb.quiet = true;
+    std::ostringstream pout;
+    REQUIRE(run_probe(pb, pout) == 0);
+    const auto j = nlohmann::json::parse(read_text(pb.out));
+    REQUIRE(j["results"].size() == 2);
+    for (const auto& r : j["results"]) {
+      CHECK(r["indenter_accuracy"].get<double>() >= 0.0);
+      CHECK(r["indenter_accuracy"].get<double>() <= 1.0);
+      for (double v : r["force_rmse"]) CHECK(std::isfinite(v));
+      CHECK(r["windows"].get<int>() > 0);
+    }
+    CHECK(pout.str().find("RMSE u/N") != std::string::npos);
+  }
+
+  SUBCASE("probe on labelled files") {
+    SimulatedSkin sim(SkinGeometry::from_layout(layouts::grid_skin().layout), SimConfig{}, 9);
+    const SimRecording a = sim.record(500), b = sim.record(300);
+    write_npy(t.path / "train.npy", a.recording);
+    write_npy(t.path / "test.npy", b.recording);
+    const auto la = frame_label_array(a.labels), lb = frame_label_array(b.labels);
+    write_npy(t.path / "train_labels.npy", std::span<const float>(la), {a.recording.frames(), 4});
+    write_npy(t.path / "test_labels.npy", std::span<const float>(lb), {b.recording.frames(), 4});
+    ProbeOptions pb;
+    pb.checkpoint = ck.string();
+    pb.train_data = (t.path / "train.npy").string();
+    pb.train_labels = (t.path / "train_labels.npy").string();
+    pb.test_data = (t.path / "test.npy").string();
+    pb.test_labels = (t.path / "test_labels.npy").string();
+    pb.probe.epochs = 1;
+    pb.probe.batch = 8;
+    pb.quiet = true;
+    std::ostringstream pout;
+    CHECK(run_probe(pb, pout) == 0);
+    // Labels of the wrong length: one clear error.
+    pb.test_labels = pb.train_labels;
+    CHECK_THROWS_AS(run_probe(pb, pout), FileError);
+  }
+
+  SUBCASE("embed writes [windows, N, d]") {
+    SimulatedSkin sim(SkinGeometry::from_layout(layouts::grid_skin().layout), SimConfig{}, 4);
+    write_npy(t.path / "rec.npy", sim.record(65).recording);
+    EmbedOptions eo;
+    eo.checkpoint = ck.string();
+    eo.data = (t.path / "rec.npy").string();
+    eo.out = (t.path / "emb.npy").string();
+    eo.quiet = true;
+    std::ostringstream eout;
+    REQUIRE(run_embed(eo, eout) == 0);
+    const NpyArray e = read_npy(eo.out);
+    CHECK(e.shape == std::vector<std::int64_t>{6, 192, 8});  // 65 frames → 6 windows of 10
+    // Finite embeddings that depend on the window.
+    bool finite = true;
+    for (std::size_t i = 0; i < e.numel(); ++i) finite = finite && std::isfinite(e.data()[i]);
+    CHECK(finite);
+    CHECK(e.data()[0] != e.data()[192 * 8]);
+    // A recording of another sensor size is rejected, and no output appears.
+    write_npy(t.path / "wrong.npy", Recording(20, 10, 3));
+    eo.data = (t.path / "wrong.npy").string();
+    eo.out = (t.path / "emb2.npy").string();
+    CHECK_THROWS_AS(run_embed(eo, eout), ShapeError);
+    CHECK_FALSE(fs::exists(eo.out));
+  }
+}
+
+TEST_CASE("pretrain: a failing run leaves no files behind") {
+  TempDir t;
+  std::ostringstream out;
+  PretrainOptions po;
+  po.overrides = tiny_run("grid");
+  po.overrides["batch"] = 64;  // more than the 20 windows of 200 frames
+  po.simulate_frames = 200;
+  po.out = (t.path / "a" / "b").string();
+  po.quiet = true;
+  CHECK_THROWS_AS(run_pretrain(po, out), DataError);
+  CHECK_FALSE(fs::exists(t.path / "a"));
+  // Config errors name the key.
+  po.overrides = {{"dimm", 8}};
+  try {
+    run_pretrain(po, out);
+    FAIL("expected an error");
+  } catch (const ConfigError& e) {
+    CHECK(std::string(e.what()).find("unknown key 'dimm'") != std::string::npos);
+  }
+}
+
+TEST_CASE("demo: the whole pipeline at toy size prints the table and writes its outputs") {
+  TempDir t;
+  DemoOptions o;
+  o.out = (t.path / "demo").string();
+  o.run.update(tiny_run("allegro"), "test");
+  o.pretrain_frames = 400;
+  o.probe_frames = 600;
+  o.test_frames = 400;
+  o.probe_windows = 16;
+  o.test_windows = 16;
+  o.probe.epochs = 1;
+  o.probe.batch = 8;
+  o.quiet = true;
+  std::ostringstream out;
+  REQUIRE(run_demo(o, out) == 0);
+  const std::string s = out.str();
+  for (const char* row : {"constant", "(a) pre-trained, frozen", "(b) random init, frozen", "(c) end to end"})
+    CHECK(s.find(row) != std::string::npos);
+  const auto j = nlohmann::json::parse(read_text(t.path / "demo" / "results.json"));
+  CHECK(j["results"].size() == 4);
+  CHECK(j["seed"] == 0);
+  for (const char* f : {"checkpoint.safetensors", "log.csv", "loss.svg", "results.json"})
+    CHECK(fs::exists(t.path / "demo" / f));
+  CHECK(count_files(t.path / "demo") == 4);
+}
+
+}  // TEST_SUITE
