@@ -219,7 +219,7 @@ struct RunConfig {
   }
 
   JepaConfig model(int num_tokens, int axes) const {
-    JepaConfig c = JepaConfig::reference(num_tokens, tau * axes);
+    JepaConfig c = JepaConfig::reference(num_tokens, tau * axes, axes);
     c.encoder.dim = dim;
     c.encoder.depth = depth;
     c.encoder.heads = heads;
