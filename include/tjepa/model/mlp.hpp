@@ -1,7 +1,7 @@
 #pragma once
 // Mlp (timm's): fc1 [hidden, d] → exact GELU → fc2 [out, hidden] (out = d inside a block; the
 // probe's output head has its own out). PyTorch names: <name>.fc1.*, <name>.fc2.*.
-// The fc1 bias is fused into the GELU pass, fc2's output into the residual add.
+// fc1's bias and GELU are fused into its GEMM, fc2's output into the residual add.
 #include <algorithm>
 #include <string>
 
@@ -28,8 +28,7 @@ struct Mlp {
   // fc1's output + bias (kept for backward), h [M, hidden] the activation; h may equal h_pre.
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, bool accumulate) const {
-    linear_forward(h_pre, x, ps.value(fc1.weight), static_cast<const T*>(nullptr), M, fc1.in, fc1.out);
-    bias_gelu_forward(h, h_pre, fc1.b(ps), M, fc1.out);
+    linear_bias_gelu_forward(h, h_pre, x, ps.value(fc1.weight), fc1.b(ps), M, fc1.in, fc1.out);
     if (accumulate)
       fc2.forward_accumulate(ps, h, y, M);
     else

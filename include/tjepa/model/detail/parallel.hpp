@@ -26,6 +26,14 @@ inline int max_threads() {
   return 1;
 #endif
 }
+// Threads of the enclosing parallel region (1 outside one).
+inline int team_size() {
+#ifdef _OPENMP
+  return omp_get_num_threads();
+#else
+  return 1;
+#endif
+}
 inline int thread_id() {
 #ifdef _OPENMP
   return omp_get_thread_num();
