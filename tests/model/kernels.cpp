@@ -205,6 +205,11 @@ TEST_SUITE("nn") {
       detail::sgemm::gemm(N, K, M, g.data(), N, Order::col_major, x.data(), K, Order::row_major, dW2.data(), K, {true});
       CHECK(max_rel_diff(dx2, expect(dx, [](std::size_t, double v) { return v + 0.5; })) < 3e-5);
       CHECK(max_rel_diff(dW2, expect(dW, [](std::size_t, double v) { return v - 0.25; })) < 3e-5);
+      // dpre = (g·W) ⊙ gelu'(pre), overwritten: the MLP's backward through GELU (pre = x here)
+      std::vector<float> dpre(x.size(), 7.0f);
+      linear_backward_input_gelu(dpre.data(), g.data(), W.data(), x.data(), M, K, N);
+      CHECK(max_rel_diff(dpre, expect(dx, [&](std::size_t i, double v) { return v * detail::gelu_grad(double(x[i])); })) <
+            3e-5);
     }
   }
 

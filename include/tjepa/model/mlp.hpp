@@ -39,13 +39,11 @@ struct Mlp {
   // h_pre rather than kept: the largest activation of a block).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M) const {
-    const std::size_t n = std::size_t(M) * std::size_t(fc1.out);
-    gelu_forward(h, h_pre, n);
-    std::fill(dh, dh + n, T(0));
-    fc2.backward(ps, dy, h, dh, M);  // y = h · W2ᵀ + b2
-    std::fill(h, h + n, T(0));       // h now holds ∂L/∂h_pre
-    gelu_backward(h, dh, h_pre, n);  // h = gelu(h_pre)
-    fc1.backward(ps, h, x, dx, M);   // h_pre = x · W1ᵀ + b1
+    gelu_forward(h, h_pre, std::size_t(M) * std::size_t(fc1.out));
+    fc2.backward(ps, dy, h, static_cast<T*>(nullptr), M);  // y = h · W2ᵀ + b2: dW2, db2
+    // dh = ∂L/∂h_pre = (dy · W2) ⊙ gelu'(h_pre), one fused product.
+    linear_backward_input_gelu(dh, dy, ps.value(fc2.weight), h_pre, M, fc2.in, fc2.out);
+    fc1.backward(ps, dh, x, dx, M);  // h_pre = x · W1ᵀ + b1
   }
 };
 

@@ -36,13 +36,18 @@ enum class Order { row_major, col_major };
 
 // What happens to a finished tile. bias [cols] is added once; gelu [rows, ldc]: C keeps the
 // pre-activation and gelu receives gelu(C) (the MLP's fc1). accumulate: C += A·B, else C = A·B.
+// gelu_grad [rows, ldc] (with accumulate = false): C = (A·B) ⊙ gelu'(gelu_grad), the MLP's
+// backward through its GELU fused into the product that yields ∂L/∂h.
 struct Epilogue {
   bool accumulate = false;
   const float* bias = nullptr;
   float* gelu = nullptr;
+  const float* gelu_grad = nullptr;
 };
 
 inline V gelu(V x) { return detail::gelu<float>(x); }
+inline V gelu_grad(V x) { return detail::gelu_grad<float>(x); }
+inline float gelu_grad(float x) { return detail::gelu_grad(x); }
 inline float gelu(float x) {
   float y;
   ref::gelu_forward(&y, &x, 1);
@@ -50,11 +55,11 @@ inline float gelu(float x) {
 }
 
 // C[R, cols ≤ NR] over one depth block of kc: a(i, k) = a[i·ars + k·acs], b packed [kc][NR].
-// load_c: C already holds a partial sum (or the value accumulated into); bias / g only on the
-// first / last depth block.
+// load_c: C already holds a partial sum (or the value accumulated into); bias on the first depth
+// block, g (gelu output) and gg (gelu_grad input) on the last.
 template <int R>
 void micro_kernel(int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs, const float* b, float* c,
-                  std::ptrdiff_t ldc, int cols, bool load_c, const float* bias, float* g) {
+                  std::ptrdiff_t ldc, int cols, bool load_c, const float* bias, float* g, const float* gg) {
   V acc[R][NV];
 #pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
@@ -81,6 +86,7 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs
         V v = acc[i][j];
         if (load_c) v += V::load_unaligned(ci + j * W);
         if (bias) v += V::load_unaligned(bias + j * W);
+        if (gg) v *= gelu_grad(V::load_unaligned(gg + i * ldc + j * W));
         v.store_unaligned(ci + j * W);
         if (g) gelu(v).store_unaligned(g + i * ldc + j * W);
       }
@@ -95,6 +101,7 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs
       float v = tile[j];
       if (load_c) v += ci[j];
       if (bias) v += bias[j];
+      if (gg) v *= gelu_grad(gg[i * ldc + j]);
       ci[j] = v;
       if (g) g[i * ldc + j] = gelu(v);
     }
@@ -102,7 +109,7 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs
 }
 
 using Kernel = void (*)(int, const float*, std::ptrdiff_t, std::ptrdiff_t, const float*, float*, std::ptrdiff_t, int,
-                        bool, const float*, float*);
+                        bool, const float*, float*, const float*);
 template <int... R>
 constexpr auto kernel_table(std::integer_sequence<int, R...>) {
   return std::array<Kernel, sizeof...(R)>{&micro_kernel<R + 1>...};
@@ -148,7 +155,8 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
         const int n0 = p * NR;
         kern(kc, a, ars, acs, packed + (std::ptrdiff_t(p) * depth + k0) * NR, C + i0 * ldc + n0, ldc,
              std::min(NR, cols - n0), load_c, first && e.bias ? e.bias + n0 : nullptr,
-             last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr);
+             last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
+             last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr);
       }
     }
   }
@@ -165,6 +173,7 @@ inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t l
       for (int j = 0; j < cols; ++j) {
         float& c = C[std::ptrdiff_t(i) * ldc + j];
         c = (e.accumulate ? c : 0.0f) + (e.bias ? e.bias[j] : 0.0f);
+        if (e.gelu_grad) c = 0.0f;
         if (e.gelu) e.gelu[std::ptrdiff_t(i) * ldc + j] = gelu(c);
       }
     return;

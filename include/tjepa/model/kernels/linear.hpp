@@ -6,6 +6,7 @@
 // (bias, residual add and GELU fused into its epilogue), double (gradient checks) through Eigen's
 // packed kernels (detail/gemm.hpp). Neither allocates after warm-up; rows are split over the
 // OpenMP threads. Backward ADDS into its gradients (llm.c style): one zero_grad serves a whole step.
+#include <algorithm>
 #include <cstddef>
 #include <type_traits>
 
@@ -101,5 +102,21 @@ void linear_bias_gelu_forward(T* out, T* pre, const T* in, const T* w, const T* 
   }
 }
 
+
+// The MLP's backward through fc2 and its GELU in one product: dpre[M, K] = (dout · w) ⊙ gelu'(pre)
+// for out = gelu(pre) · wᵀ + b (dout [M, N], w [N, K]). dpre is overwritten, not added to.
+template <class T>
+void linear_backward_input_gelu(T* dpre, const T* dout, const T* w, const T* pre, int M, int K, int N) {
+  if constexpr (std::is_same_v<T, float>) {
+    using detail::sgemm::Order;
+    detail::sgemm::gemm(M, K, N, dout, N, Order::row_major, w, K, Order::row_major, dpre, K,
+                        {false, nullptr, nullptr, pre});
+  } else {
+    const std::size_t n = std::size_t(M) * std::size_t(K);
+    std::fill(dpre, dpre + n, T(0));
+    detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, dpre, K);
+    for (std::size_t i = 0; i < n; ++i) dpre[i] *= detail::gelu_grad(pre[i]);
+  }
+}
 
 }  // namespace tjepa
