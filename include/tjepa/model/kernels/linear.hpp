@@ -86,7 +86,7 @@ void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* 
     if (din) detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, din, K);
     if (dw) detail::gemm_accumulate<Eigen::ColMajor, Eigen::RowMajor>(N, K, M, dout, N, in, K, dw, K);
   }
-  if (db) RowVectorMap<T>(db, N) += ConstMatrixMap<T>(dout, M, N).colwise().sum();
+  if (db) detail::add_column_sums(db, dout, M, N);
 }
 
 // fc1's forward with its epilogue fused: pre[M, N] = in · wᵀ + b, out[M, N] = gelu(pre) (out may
