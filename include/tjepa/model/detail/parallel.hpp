@@ -84,7 +84,8 @@ template <class T>
 void add_column_sums(T* db, const T* x, int M, int N) {
   constexpr int C = 16;
   const int blocks = (N + C - 1) / C;
-  const int threads = std::size_t(M) * std::size_t(N) > parallel_grain ? std::min(max_threads(), blocks) : 1;
+  [[maybe_unused]] const int threads =
+      std::size_t(M) * std::size_t(N) > parallel_grain ? std::min(max_threads(), blocks) : 1;
   TJEPA_OMP(omp parallel for schedule(static) num_threads(threads) if (threads > 1))
   for (int blk = 0; blk < blocks; ++blk) {
     const int n0 = blk * C, nc = std::min(C, N - n0);
