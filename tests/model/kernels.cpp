@@ -151,6 +151,68 @@ TEST_SUITE("nn") {
     CHECK(max_rel_diff(dW2, dW1) < 1e-12);
   }
 
+  TEST_CASE("the packed float GEMM and its epilogues match a double reference on awkward sizes") {
+    // Depths past one KC block, column counts with a partial panel, row counts with a short row
+    // block, and products large enough to be split over threads; all three transpositions.
+    using detail::sgemm::Order;
+    Rng rng(24);
+    const int shapes[][3] = {{1, 1, 1}, {7, 3, 17}, {13, 67, 131}, {301, 300, 70}, {97, 513, 64}, {5, 19, 200}};
+    for (const auto& sh : shapes) {
+      const int M = sh[0], K = sh[1], N = sh[2];
+      CAPTURE(M);
+      CAPTURE(K);
+      CAPTURE(N);
+      auto x = random_vector<float>(std::size_t(M) * K, rng), W = random_vector<float>(std::size_t(N) * K, rng);
+      auto b = random_vector<float>(std::size_t(N), rng), g = random_vector<float>(std::size_t(M) * N, rng);
+      auto c0 = random_vector<float>(std::size_t(M) * N, rng);
+      // References in double: y = x·Wᵀ, dx = g·W, dW = gᵀ·x.
+      std::vector<double> y(std::size_t(M) * N, 0.0), dx(x.size(), 0.0), dW(W.size(), 0.0);
+      for (int m = 0; m < M; ++m)
+        for (int n = 0; n < N; ++n)
+          for (int k = 0; k < K; ++k) {
+            const std::size_t mk = std::size_t(m) * K + k, nk = std::size_t(n) * K + k, mn = std::size_t(m) * N + n;
+            y[mn] += double(x[mk]) * W[nk];
+            dx[mk] += double(g[mn]) * W[nk];
+            dW[nk] += double(g[mn]) * x[mk];
+          }
+      auto expect = [](const std::vector<double>& ref, auto&& f) {
+        std::vector<float> r(ref.size());
+        for (std::size_t i = 0; i < r.size(); ++i) r[i] = float(f(i, ref[i]));
+        return r;
+      };
+      // C = x·Wᵀ + b, with and without GELU (in place and into a second buffer)
+      std::vector<float> c(y.size()), h(y.size());
+      detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N,
+                          {false, b.data(), nullptr});
+      const auto yb = expect(y, [&](std::size_t i, double v) { return v + b[i % std::size_t(N)]; });
+      CHECK(max_rel_diff(c, yb) < 3e-5);
+      detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N,
+                          {false, b.data(), h.data()});
+      std::vector<float> hr(y.size());
+      ref::gelu_forward(hr.data(), yb.data(), hr.size());
+      CHECK(max_rel_diff(c, yb) < 3e-5);
+      CHECK(max_rel_diff(h, hr) < 3e-5);
+      detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N,
+                          {false, b.data(), c.data()});
+      CHECK(max_rel_diff(c, hr) < 3e-5);
+      // C += x·Wᵀ (the residual add)
+      c = c0;
+      detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N, {true});
+      CHECK(max_rel_diff(c, expect(y, [&](std::size_t i, double v) { return v + c0[i]; })) < 3e-5);
+      // dx += g·W (B row-major), dW += gᵀ·x (A column-major), onto nonzero starting values
+      std::vector<float> dx2(x.size(), 0.5f), dW2(W.size(), -0.25f);
+      detail::sgemm::gemm(M, K, N, g.data(), N, Order::row_major, W.data(), K, Order::row_major, dx2.data(), K, {true});
+      detail::sgemm::gemm(N, K, M, g.data(), N, Order::col_major, x.data(), K, Order::row_major, dW2.data(), K, {true});
+      CHECK(max_rel_diff(dx2, expect(dx, [](std::size_t, double v) { return v + 0.5; })) < 3e-5);
+      CHECK(max_rel_diff(dW2, expect(dW, [](std::size_t, double v) { return v - 0.25; })) < 3e-5);
+      // dpre = (g·W) ⊙ gelu'(pre), overwritten: the MLP's backward through GELU (pre = x here)
+      std::vector<float> dpre(x.size(), 7.0f);
+      linear_backward_input_gelu(dpre.data(), g.data(), W.data(), x.data(), M, K, N);
+      CHECK(max_rel_diff(dpre, expect(dx, [&](std::size_t i, double v) { return v * detail::gelu_grad(double(x[i])); })) <
+            3e-5);
+    }
+  }
+
   TEST_CASE("kernel gradients match central differences (double)") {
     Rng rng(23);
     const int M = 4, C = 9, N = 6;

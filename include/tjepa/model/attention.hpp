@@ -84,9 +84,9 @@ struct SelfAttention {
                 int q_from = 0) const {
     const int d = dim(), Dh = d / heads, Lq = L - q_from;
     const std::size_t Mq = std::size_t(B) * Lq;
-    std::fill(datt, datt + Mq * d, T(0));
+    detail::parallel_fill(datt, datt + Mq * d, T(0));
     proj.backward(ps, dy, att, datt, int(Mq));  // y = att · Wprojᵀ + b
-    std::fill(dqkv, dqkv + std::size_t(B) * L * 3 * d, T(0));
+    detail::parallel_fill(dqkv, dqkv + std::size_t(B) * L * 3 * d, T(0));
     const AttentionShape s = head_shape(L, q_from);
     AttentionWorkspace<T>* aws = ws.attention_per_thread();
     TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))

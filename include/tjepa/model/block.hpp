@@ -122,7 +122,7 @@ struct BlockStack {
       // The residual stream runs in place: in x_out when every row is kept, else in scratch
       // until the last block writes the kept rows to x_out.
       T* x = keep_from == 0 ? x_out : detail::grow(ws.stream, Md);
-      if (x != x_in) std::copy(x_in, x_in + Md, x);
+      if (x != x_in) detail::parallel_copy(x_in, x_in + Md, x);
       T* hidden = detail::grow(ws.hidden, M * hid);
       for (int i = 0; i < D; ++i) {
         const bool last = i == D - 1;
@@ -143,7 +143,7 @@ struct BlockStack {
     else
       c.key_valid.clear();
     T* xs = detail::grow(c.xs, (D + 1) * Md);
-    std::copy(x_in, x_in + Md, xs);
+    detail::parallel_copy(x_in, x_in + Md, xs);
     T *ln1 = detail::grow(c.ln1, D * Md), *att = detail::grow(c.att, D * Md);
     T *xm = detail::grow(c.x_mid, D * Md), *ln2 = detail::grow(c.ln2, D * Md);
     T *qkv = detail::grow(c.qkv, D * 3 * Md), *hp = detail::grow(c.h_pre, D * M * hid);
@@ -160,7 +160,7 @@ struct BlockStack {
                     branch, ws);
     }
     const T* y = xs + D * Md;
-    if (x_out != y) std::copy(y, y + Mk * d, x_out);
+    if (x_out != y) detail::parallel_copy(y, y + Mk * d, x_out);
   }
 
   // dx: on entry ∂L/∂x_out ([B, Lk, d] in its first B·Lk·d values), on return ∂L/∂x_in
@@ -182,9 +182,9 @@ struct BlockStack {
     T* g = dx;
     if (kf > 0) {
       g = detail::grow(ws.dkept, Mk * d);
-      std::copy(dx, dx + Mk * d, g);
+      detail::parallel_copy(dx, dx + Mk * d, g);
       if (D == 0) {
-        std::fill(dx, dx + Md, T(0));
+        detail::parallel_fill(dx, dx + Md, T(0));
         scatter_kept_rows(dx, g, B, L, kf, d);
         return;
       }
@@ -204,11 +204,11 @@ struct BlockStack {
         const std::size_t q = std::size_t(b0) * Lq;
         const T* g2 = gq + q * d;
         if (s2) {
-          std::fill(dbranch + q * d, dbranch + (q + rows) * d, T(0));
+          detail::parallel_fill(dbranch + q * d, dbranch + (q + rows) * d, T(0));
           drop_path_backward(dbranch + q * d, gq + q * d, s2 + b0, n, per_sample);
           g2 = dbranch + q * d;
         }
-        std::fill(dln + q * d, dln + (q + rows) * d, T(0));
+        detail::parallel_fill(dln + q * d, dln + (q + rows) * d, T(0));
         blk.mlp.backward(ps, g2, c.ln2.data() + o + q * d, c.h_pre.data() + std::size_t(i) * M * hid + q * hid,
                          h + q * hid, dh + q * hid, dln + q * d, rows);
         blk.norm2.backward(ps, dln + q * d, c.x_mid.data() + o + q * d, c.mean2.data() + r + q,
@@ -216,7 +216,7 @@ struct BlockStack {
       });
       // x_mid = x_in[query rows] + s1 · attn(ln1), ln1 = norm1(x_in)
       if (q_from > 0) {
-        std::fill(dx, dx + Md, T(0));
+        detail::parallel_fill(dx, dx + Md, T(0));
         scatter_kept_rows(dx, gq, B, L, q_from, d);
       }
       for_each_kept_run(s1, B, [&](int b0, int b1) {
@@ -224,11 +224,11 @@ struct BlockStack {
         const std::size_t f = std::size_t(b0) * L, q = std::size_t(b0) * Lq;
         const T* g1 = gq + q * d;
         if (s1) {
-          std::fill(dbranch + q * d, dbranch + (q + std::size_t(n) * Lq) * d, T(0));
+          detail::parallel_fill(dbranch + q * d, dbranch + (q + std::size_t(n) * Lq) * d, T(0));
           drop_path_backward(dbranch + q * d, gq + q * d, s1 + b0, n, per_sample);
           g1 = dbranch + q * d;
         }
-        std::fill(dln + f * d, dln + (f + std::size_t(n) * L) * d, T(0));
+        detail::parallel_fill(dln + f * d, dln + (f + std::size_t(n) * L) * d, T(0));
         blk.attn.backward(ps, g1, c.ln1.data() + o + f * d, n, L, kv ? kv + f : nullptr, c.qkv.data() + 3 * o + f * 3 * d,
                           c.att.data() + o + q * d, c.lse.data() + std::size_t(i) * B * H * L + std::size_t(b0) * H * L,
                           dqkv + f * 3 * d, datt + q * d, dln + f * d, ws, q_from);
@@ -301,7 +301,7 @@ struct BlockStack {
                        q_from);
       if (buf.scale1) drop_path_forward(buf.x_mid + q * d, branch + q * d, buf.scale1 + b0, n, per_sample);
     });
-    if (x_out != buf.x_mid) std::copy(buf.x_mid, buf.x_mid + std::size_t(B) * per_sample, x_out);
+    if (x_out != buf.x_mid) detail::parallel_copy(buf.x_mid, buf.x_mid + std::size_t(B) * per_sample, x_out);
     for_each_kept_run(buf.scale2, B, [&](int b0, int b1) {
       const int n = b1 - b0, rows = n * Lq;
       const std::size_t q = std::size_t(b0) * Lq;

@@ -83,7 +83,7 @@ struct Encoder {
     if (context)
       gather_rows(x, tokens, std::size_t(N) * d, context, B, K, d);
     else
-      std::copy(tokens, tokens + M * d, x);
+      detail::parallel_copy(tokens, tokens + M * d, x);
     pos.forward(ps, x, context, B, K);
     if (cache) {
       cache->B = B;
@@ -107,7 +107,7 @@ struct Encoder {
     const int N = config.num_tokens, d = config.dim, B = cache.B, K = cache.K;
     const std::size_t M = std::size_t(B) * K;
     T* g = detail::grow(ws.dx, M * d);
-    std::fill(g, g + M * d, T(0));
+    detail::parallel_fill(g, g + M * d, T(0));
     norm.backward(ps, dout, cache.stack.xs.data() + std::size_t(stack.depth()) * M * d, cache.mean.data(),
                   cache.rstd.data(), g, int(M));
     stack.backward(ps, g, cache.stack, ws);

@@ -1,7 +1,7 @@
 #pragma once
 // Mlp (timm's): fc1 [hidden, d] → exact GELU → fc2 [out, hidden] (out = d inside a block; the
 // probe's output head has its own out). PyTorch names: <name>.fc1.*, <name>.fc2.*.
-// The fc1 bias is fused into the GELU pass, fc2's output into the residual add.
+// fc1's bias and GELU are fused into its GEMM, fc2's output into the residual add.
 #include <algorithm>
 #include <string>
 
@@ -28,8 +28,7 @@ struct Mlp {
   // fc1's output + bias (kept for backward), h [M, hidden] the activation; h may equal h_pre.
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, bool accumulate) const {
-    linear_forward(h_pre, x, ps.value(fc1.weight), static_cast<const T*>(nullptr), M, fc1.in, fc1.out);
-    bias_gelu_forward(h, h_pre, fc1.b(ps), M, fc1.out);
+    linear_bias_gelu_forward(h, h_pre, x, ps.value(fc1.weight), fc1.b(ps), M, fc1.in, fc1.out);
     if (accumulate)
       fc2.forward_accumulate(ps, h, y, M);
     else
@@ -40,13 +39,11 @@ struct Mlp {
   // h_pre rather than kept: the largest activation of a block).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M) const {
-    const std::size_t n = std::size_t(M) * std::size_t(fc1.out);
-    gelu_forward(h, h_pre, n);
-    std::fill(dh, dh + n, T(0));
-    fc2.backward(ps, dy, h, dh, M);  // y = h · W2ᵀ + b2
-    std::fill(h, h + n, T(0));       // h now holds ∂L/∂h_pre
-    gelu_backward(h, dh, h_pre, n);  // h = gelu(h_pre)
-    fc1.backward(ps, h, x, dx, M);   // h_pre = x · W1ᵀ + b1
+    gelu_forward(h, h_pre, std::size_t(M) * std::size_t(fc1.out));
+    fc2.backward(ps, dy, h, static_cast<T*>(nullptr), M);  // y = h · W2ᵀ + b2: dW2, db2
+    // dh = ∂L/∂h_pre = (dy · W2) ⊙ gelu'(h_pre), one fused product.
+    linear_backward_input_gelu(dh, dy, ps.value(fc2.weight), h_pre, M, fc2.in, fc2.out);
+    fc1.backward(ps, dh, x, dx, M);  // h_pre = x · W1ᵀ + b1
   }
 };
 

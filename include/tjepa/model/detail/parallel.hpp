@@ -1,5 +1,6 @@
 #pragma once
 // OpenMP helpers: the library builds and runs the same without OpenMP (pragmas vanish, one thread).
+#include <algorithm>
 #include <cstddef>
 #include <vector>
 
@@ -26,6 +27,14 @@ inline int max_threads() {
   return 1;
 #endif
 }
+// Threads of the enclosing parallel region (1 outside one).
+inline int team_size() {
+#ifdef _OPENMP
+  return omp_get_num_threads();
+#else
+  return 1;
+#endif
+}
 inline int thread_id() {
 #ifdef _OPENMP
   return omp_get_thread_num();
@@ -40,6 +49,53 @@ template <class T, class A>
 T* grow(std::vector<T, A>& v, std::size_t n) {
   if (v.size() < n) v.resize(n);
   return v.data();
+}
+
+// Calls f(begin, end) on [0, n) split evenly over the threads, or once within the grain.
+template <class F>
+void parallel_split(std::size_t n, F&& f) {
+  if (n <= parallel_grain) {
+    f(std::size_t(0), n);
+    return;
+  }
+  TJEPA_OMP(omp parallel)
+  {
+    const std::size_t t = std::size_t(thread_id()), k = std::size_t(team_size());
+    f(n * t / k, n * (t + 1) / k);
+  }
+}
+
+// std::fill and std::copy over the threads: the zeroed gradient buffers and residual-stream copies
+// of a training step are tens of MB, too much to leave to one thread.
+template <class T>
+void parallel_fill(T* first, T* last, T value) {
+  parallel_split(std::size_t(last - first),
+                 [&](std::size_t b, std::size_t e) { std::fill(first + b, first + e, value); });
+}
+template <class T>
+void parallel_copy(const T* first, const T* last, T* out) {
+  parallel_split(std::size_t(last - first),
+                 [&](std::size_t b, std::size_t e) { std::copy(first + b, first + e, out + b); });
+}
+
+// db[N] += Σ_m x[m, :] for x [M, N]: columns split over the threads above the grain, each column
+// summed on its own first so that adding twice gives exactly twice.
+template <class T>
+void add_column_sums(T* db, const T* x, int M, int N) {
+  constexpr int C = 16;
+  const int blocks = (N + C - 1) / C;
+  [[maybe_unused]] const int threads =
+      std::size_t(M) * std::size_t(N) > parallel_grain ? std::min(max_threads(), blocks) : 1;
+  TJEPA_OMP(omp parallel for schedule(static) num_threads(threads) if (threads > 1))
+  for (int blk = 0; blk < blocks; ++blk) {
+    const int n0 = blk * C, nc = std::min(C, N - n0);
+    T acc[C] = {};
+    for (int m = 0; m < M; ++m) {
+      const T* r = x + std::size_t(m) * std::size_t(N) + n0;
+      for (int j = 0; j < nc; ++j) acc[j] += r[j];
+    }
+    for (int j = 0; j < nc; ++j) db[n0 + j] += acc[j];
+  }
 }
 
 }  // namespace tjepa::detail

@@ -2,13 +2,18 @@
 // Linear layer on a batch of rows: out[M, N] = in[M, K] · w[N, K]ᵀ + b[N].
 //
 // w is stored PyTorch-style [out, in]. A [B, L, C] activation is a [B·L, C] matrix, so every
-// token-wise layer is one large GEMM (Eigen's packed kernels through detail/gemm.hpp: no
-// allocation after warm-up, rows split over the OpenMP threads). Backward ADDS into its gradients
-// (llm.c style): one zero_grad serves a whole step.
+// token-wise layer is one large GEMM: float through the packed xsimd GEMM of detail/sgemm.hpp
+// (bias, residual add and GELU fused into its epilogue), double (gradient checks) through Eigen's
+// packed kernels (detail/gemm.hpp). Neither allocates after warm-up; rows are split over the
+// OpenMP threads. Backward ADDS into its gradients (llm.c style): one zero_grad serves a whole step.
+#include <algorithm>
 #include <cstddef>
+#include <type_traits>
 
 #include "tjepa/core/eigen.hpp"
 #include "tjepa/model/detail/gemm.hpp"
+#include "tjepa/model/detail/sgemm.hpp"
+#include "tjepa/model/kernels/gelu.hpp"
 
 namespace tjepa {
 
@@ -41,6 +46,11 @@ void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* 
 // out[M, N] = in[M, K] · wᵀ (+ b); b may be nullptr.
 template <class T>
 void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
+  if constexpr (std::is_same_v<T, float>) {
+    using detail::sgemm::Order;
+    detail::sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, {false, b, nullptr});
+    return;
+  }
   // The bias is the GEMM's starting value, so bias and product are one pass over out.
   MatrixMap<T> o(out, M, N);
   if (b)
@@ -53,6 +63,11 @@ void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, i
 // out[M, N] += in[M, K] · wᵀ (+ b): the residual add fused into the GEMM's accumulation.
 template <class T>
 void linear_forward_accumulate(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
+  if constexpr (std::is_same_v<T, float>) {
+    using detail::sgemm::Order;
+    detail::sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, {true, b, nullptr});
+    return;
+  }
   if (b) MatrixMap<T>(out, M, N).rowwise() += ConstRowVectorMap<T>(b, N);
   detail::gemm_accumulate<Eigen::RowMajor, Eigen::ColMajor>(M, N, K, in, K, w, K, out, N);
 }
@@ -63,9 +78,45 @@ void linear_forward_accumulate(T* out, const T* in, const T* w, const T* b, int 
 template <class T>
 void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* w, int M, int K,
                      int N) {
-  if (din) detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, din, K);
-  if (dw) detail::gemm_accumulate<Eigen::ColMajor, Eigen::RowMajor>(N, K, M, dout, N, in, K, dw, K);
-  if (db) RowVectorMap<T>(db, N) += ConstMatrixMap<T>(dout, M, N).colwise().sum();
+  if constexpr (std::is_same_v<T, float>) {
+    using detail::sgemm::Order;
+    if (din) detail::sgemm::gemm(M, K, N, dout, N, Order::row_major, w, K, Order::row_major, din, K, {true});
+    if (dw) detail::sgemm::gemm(N, K, M, dout, N, Order::col_major, in, K, Order::row_major, dw, K, {true});
+  } else {
+    if (din) detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, din, K);
+    if (dw) detail::gemm_accumulate<Eigen::ColMajor, Eigen::RowMajor>(N, K, M, dout, N, in, K, dw, K);
+  }
+  if (db) detail::add_column_sums(db, dout, M, N);
+}
+
+// fc1's forward with its epilogue fused: pre[M, N] = in · wᵀ + b, out[M, N] = gelu(pre) (out may
+// alias pre: inference keeps only the activation).
+template <class T>
+void linear_bias_gelu_forward(T* out, T* pre, const T* in, const T* w, const T* b, int M, int K, int N) {
+  if constexpr (std::is_same_v<T, float>) {
+    using detail::sgemm::Order;
+    detail::sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, pre, N, {false, b, out});
+  } else {
+    linear_forward(pre, in, w, static_cast<const T*>(nullptr), M, K, N);
+    bias_gelu_forward(out, pre, b, M, N);
+  }
+}
+
+
+// The MLP's backward through fc2 and its GELU in one product: dpre[M, K] = (dout · w) ⊙ gelu'(pre)
+// for out = gelu(pre) · wᵀ + b (dout [M, N], w [N, K]). dpre is overwritten, not added to.
+template <class T>
+void linear_backward_input_gelu(T* dpre, const T* dout, const T* w, const T* pre, int M, int K, int N) {
+  if constexpr (std::is_same_v<T, float>) {
+    using detail::sgemm::Order;
+    detail::sgemm::gemm(M, K, N, dout, N, Order::row_major, w, K, Order::row_major, dpre, K,
+                        {false, nullptr, nullptr, pre});
+  } else {
+    const std::size_t n = std::size_t(M) * std::size_t(K);
+    std::fill(dpre, dpre + n, T(0));
+    detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, dpre, K);
+    for (std::size_t i = 0; i < n; ++i) dpre[i] *= detail::gelu_grad(pre[i]);
+  }
 }
 
 }  // namespace tjepa

@@ -1,0 +1,212 @@
+#pragma once
+// Packed float GEMM with a register-blocked xsimd micro-kernel and fused epilogues, for the
+// linear layers' three products (forward X·Wᵀ, dX = dY·W, dW = dYᵀ·X):
+//
+//   C[rows, cols] (+)= A[rows, depth] · B[depth, cols] (+ bias[cols]) (then G = gelu(C))
+//
+// A is read in place (row- or column-major, any stride); B is packed once per call into panels of
+// NR columns, [depth][NR] each, zero-padded on the right, shared by the threads. The rows of C are
+// split over the OpenMP threads in whole MR-row blocks. Depth runs in KC blocks: the A
+// micro-panel (MR × KC) stays in L1 while the B panels of one depth block (KC × cols) stream from
+// L2. xsimd's default architecture picks AVX-512, AVX2 or SSE2 at compile time.
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <utility>
+
+#include <xsimd/xsimd.hpp>
+
+#include "tjepa/core/aligned.hpp"
+#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/model/kernels/gelu.hpp"
+
+namespace tjepa::detail::sgemm {
+
+using V = xsimd::batch<float>;
+inline constexpr int W = static_cast<int>(V::size);
+// An MR × NV·W block of C in MR·NV registers: 24 of AVX-512's 32 (+ NV B vectors + a broadcast),
+// 8 of AVX2's / SSE's 16.
+inline constexpr int MR = W >= 16 ? 6 : 4;
+inline constexpr int NV = W >= 16 ? 4 : 2;
+inline constexpr int NR = NV * W;
+inline constexpr int KC = 256;
+
+enum class Order { row_major, col_major };
+
+// What happens to a finished tile. bias [cols] is added once; gelu [rows, ldc]: C keeps the
+// pre-activation and gelu receives gelu(C) (the MLP's fc1). accumulate: C += A·B, else C = A·B.
+// gelu_grad [rows, ldc] (with accumulate = false): C = (A·B) ⊙ gelu'(gelu_grad), the MLP's
+// backward through its GELU fused into the product that yields ∂L/∂h.
+struct Epilogue {
+  bool accumulate = false;
+  const float* bias = nullptr;
+  float* gelu = nullptr;
+  const float* gelu_grad = nullptr;
+};
+
+inline V gelu(V x) { return detail::gelu<float>(x); }
+inline V gelu_grad(V x) { return detail::gelu_grad<float>(x); }
+inline float gelu_grad(float x) { return detail::gelu_grad(x); }
+inline float gelu(float x) {
+  float y;
+  ref::gelu_forward(&y, &x, 1);
+  return y;
+}
+
+// C[R, cols ≤ NR] over one depth block of kc: a(i, k) = a[i·ars + k·acs], b packed [kc][NR].
+// load_c: C already holds a partial sum (or the value accumulated into); bias on the first depth
+// block, g (gelu output) and gg (gelu_grad input) on the last.
+template <int R>
+void micro_kernel(int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs, const float* b, float* c,
+                  std::ptrdiff_t ldc, int cols, bool load_c, const float* bias, float* g, const float* gg) {
+  V acc[R][NV];
+#pragma GCC unroll 8
+  for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
+    for (int j = 0; j < NV; ++j) acc[i][j] = V(0.0f);
+  for (int k = 0; k < kc; ++k) {
+    V bv[NV];
+#pragma GCC unroll 4
+    for (int j = 0; j < NV; ++j) bv[j] = V::load_aligned(b + std::ptrdiff_t(k) * NR + j * W);
+    const float* ak = a + k * acs;
+#pragma GCC unroll 8
+    for (int i = 0; i < R; ++i) {
+      const V ai(ak[i * ars]);
+#pragma GCC unroll 4
+      for (int j = 0; j < NV; ++j) acc[i][j] = xsimd::fma(ai, bv[j], acc[i][j]);
+    }
+  }
+  if (cols == NR) {
+#pragma GCC unroll 8
+    for (int i = 0; i < R; ++i) {
+      float* ci = c + i * ldc;
+#pragma GCC unroll 4
+      for (int j = 0; j < NV; ++j) {
+        V v = acc[i][j];
+        if (load_c) v += V::load_unaligned(ci + j * W);
+        if (bias) v += V::load_unaligned(bias + j * W);
+        if (gg) v *= gelu_grad(V::load_unaligned(gg + i * ldc + j * W));
+        v.store_unaligned(ci + j * W);
+        if (g) gelu(v).store_unaligned(g + i * ldc + j * W);
+      }
+    }
+    return;
+  }
+  alignas(64) float tile[NR];
+  for (int i = 0; i < R; ++i) {
+    for (int j = 0; j < NV; ++j) acc[i][j].store_aligned(tile + j * W);
+    float* ci = c + i * ldc;
+    for (int j = 0; j < cols; ++j) {
+      float v = tile[j];
+      if (load_c) v += ci[j];
+      if (bias) v += bias[j];
+      if (gg) v *= gelu_grad(gg[i * ldc + j]);
+      ci[j] = v;
+      if (g) g[i * ldc + j] = gelu(v);
+    }
+  }
+}
+
+using Kernel = void (*)(int, const float*, std::ptrdiff_t, std::ptrdiff_t, const float*, float*, std::ptrdiff_t, int,
+                        bool, const float*, float*, const float*);
+template <int... R>
+constexpr auto kernel_table(std::integer_sequence<int, R...>) {
+  return std::array<Kernel, sizeof...(R)>{&micro_kernel<R + 1>...};
+}
+// kernels[R - 1] handles R rows: the last row block of a split may be short.
+inline constexpr auto kernels = kernel_table(std::make_integer_sequence<int, MR>{});
+
+// B(k, n) = b[k·ldb + n] (row-major) or b[n·ldb + k] (column-major, a PyTorch weight [cols, depth]
+// read as its transpose) → panel p of dst: [depth][NR], columns p·NR + j.
+inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p) {
+  const int n0 = p * NR, nc = std::min(NR, cols - n0);
+  float* d = dst + std::ptrdiff_t(p) * depth * NR;
+  if (order == Order::row_major) {
+    for (int k = 0; k < depth; ++k) {
+      const float* s = b + std::ptrdiff_t(k) * ldb + n0;
+      float* o = d + std::ptrdiff_t(k) * NR;
+      std::copy(s, s + nc, o);
+      std::fill(o + nc, o + NR, 0.0f);
+    }
+    return;
+  }
+  // A transpose in 16 × nc tiles: each source row's cache line is read once, each packed row
+  // written whole.
+  constexpr int T = 16;
+  for (int k0 = 0; k0 < depth; k0 += T) {
+    const int kt = std::min(T, depth - k0);
+    for (int j = 0; j < nc; ++j) {
+      const float* s = b + std::ptrdiff_t(n0 + j) * ldb + k0;
+      for (int k = 0; k < kt; ++k) d[std::ptrdiff_t(k0 + k) * NR + j] = s[k];
+    }
+    for (int k = 0; k < kt; ++k) {
+      float* o = d + std::ptrdiff_t(k0 + k) * NR;
+      std::fill(o + nc, o + NR, 0.0f);
+    }
+  }
+}
+
+// Rows [r0, r1) of C from the packed B.
+inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t ars, std::ptrdiff_t acs,
+                         const float* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
+  const int panels = (cols + NR - 1) / NR;
+  for (int k0 = 0; k0 < depth; k0 += KC) {
+    const int kc = std::min(KC, depth - k0);
+    const bool first = k0 == 0, last = k0 + kc == depth;
+    const bool load_c = !first || e.accumulate;
+    for (int i0 = r0; i0 < r1; i0 += MR) {
+      const int R = std::min(MR, r1 - i0);
+      const Kernel kern = kernels[std::size_t(R - 1)];
+      const float* a = A + i0 * ars + k0 * acs;
+      for (int p = 0; p < panels; ++p) {
+        const int n0 = p * NR;
+        kern(kc, a, ars, acs, packed + (std::ptrdiff_t(p) * depth + k0) * NR, C + i0 * ldc + n0, ldc,
+             std::min(NR, cols - n0), load_c, first && e.bias ? e.bias + n0 : nullptr,
+             last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
+             last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr);
+      }
+    }
+  }
+}
+
+// C[rows, cols] (ldc) (+)= A · B per the epilogue; A(i, k) = A[i·lda + k] (row-major) or
+// A[k·lda + i] (column-major), B likewise with ldb. rows, cols ≥ 0; depth 0 leaves the epilogue
+// applied to an empty product.
+inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order, const float* B,
+                 std::ptrdiff_t ldb, Order b_order, float* C, std::ptrdiff_t ldc, const Epilogue& e = {}) {
+  if (rows <= 0 || cols <= 0) return;
+  if (depth <= 0) {
+    for (int i = 0; i < rows; ++i)
+      for (int j = 0; j < cols; ++j) {
+        float& c = C[std::ptrdiff_t(i) * ldc + j];
+        c = (e.accumulate ? c : 0.0f) + (e.bias ? e.bias[j] : 0.0f);
+        if (e.gelu_grad) c = 0.0f;
+        if (e.gelu) e.gelu[std::ptrdiff_t(i) * ldc + j] = gelu(c);
+      }
+    return;
+  }
+  const std::ptrdiff_t ars = a_order == Order::row_major ? lda : 1, acs = a_order == Order::row_major ? 1 : lda;
+  const int panels = (cols + NR - 1) / NR;
+  thread_local AlignedVector<float> pack;
+  float* packed = grow(pack, std::size_t(panels) * std::size_t(depth) * NR);
+  const double flops = 2.0 * double(rows) * double(cols) * double(depth);
+  const int blocks = (rows + MR - 1) / MR;
+  const int threads = flops > parallel_min_flops ? std::min(max_threads(), blocks) : 1;
+  if (threads <= 1) {
+    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p);
+    compute_rows(0, rows, cols, depth, A, ars, acs, packed, C, ldc, e);
+    return;
+  }
+  TJEPA_OMP(omp parallel num_threads(threads))
+  {
+    TJEPA_OMP(omp for schedule(static))
+    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p);
+    // Whole MR-row blocks, as even as possible.
+    const int t = thread_id(), n = team_size();
+    const int b0 = blocks * t / n, b1 = blocks * (t + 1) / n;
+    compute_rows(std::min(rows, b0 * MR), std::min(rows, b1 * MR), cols, depth, A, ars, acs, packed, C, ldc, e);
+  }
+}
+
+}  // namespace tjepa::detail::sgemm
