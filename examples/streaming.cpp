@@ -96,9 +96,9 @@ int main(int argc, char** argv) {
   try {
     require<ConfigError>(ticks > 0 && warmup >= 1, "--ticks ", ticks, ", --warmup ", warmup, ", expected > 0");
     const Skin skin = layouts::allegro_xela();
-    const int N = skin.size(), m = SimulatedSkin::axes;
     // The sensor: a simulated recording played back frame by frame.
     SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, 7);
+    const int N = skin.size(), m = sim.axes();
     const Recording baseline = sim.record_baseline(300);
     const SimRecording stream = sim.record(std::max(ticks + warmup, 1000));
     std::unique_ptr<JepaModel<float>> model;

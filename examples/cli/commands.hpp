@@ -437,7 +437,7 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
     o.run = loaded->run;
     o.run.steps = steps;
   }
-  const JepaConfig mc = o.run.model(skin.size(), SimulatedSkin::axes);
+  const JepaConfig mc = o.run.model(skin.size(), d.pretrain.axes());
   JepaModel<float> fresh(mc, o.seed);
   JepaModel<float>& model = loaded ? *loaded->model : fresh;
   AdamW<float> opt(model.trainable());

@@ -160,7 +160,7 @@ TEST_CASE("end to end: the encoder trains with the probe; embeddings match the i
   REQUIRE(lab.size() >= 16);
 
   ParamSet<float> ps;
-  const Tokenizer tok = Tokenizer::per_taxel(ps, 16, 15, 8);
+  const Tokenizer tok = Tokenizer::per_taxel(ps, 16, 3, 5, 8);  // 3 axes x 5 frames
   const Encoder enc(ps, EncoderConfig{.num_tokens = 16, .dim = 8, .depth = 1, .heads = 2});
   ps.allocate();
   init_params(ps, 1);
