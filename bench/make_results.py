@@ -50,11 +50,13 @@ for t in (1, 2):
 
 print("# Benchmark results\n")
 print(f"- date: {datetime.date.today().isoformat()}")
-print(f"- machine: {sh(\"lscpu | sed -n 's/^Model name: *//p'\")}, {sh('nproc')} vCPU, "
+cpu = sh("lscpu | sed -n 's/^Model name: *//p'")
+torch_version = sh("/usr/bin/python3 -c 'import torch; print(torch.__version__)'")
+print(f"- machine: {cpu}, {sh('nproc')} vCPU, "
       f"{platform.system()} {platform.release()}")
 print(f"- tjepa: git {sh('git rev-parse --short HEAD')}, {sh('c++ --version | head -1')}, "
       "preset `release` (-O3 -march=native), OpenMP threads = column 'threads'")
-print(f"- PyTorch: {sh('/usr/bin/python3 -c \"import torch; print(torch.__version__)\"')} "
+print(f"- PyTorch: {torch_version} "
       "(Debian python3-torch), plain nn modules with manual attention (bench/compare_torch.py), "
       "torch.set_num_threads(threads), OMP_WAIT_POLICY=PASSIVE, OPENBLAS_NUM_THREADS=threads")
 print("- command: `bench/compare.sh` (medians of 3 repetitions for tjepa; median of >= 2 s of runs for PyTorch)")
