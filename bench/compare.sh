@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source tools/deps.sh
 tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" python3-torch
-cmake --preset release -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=OFF >/dev/null
+cmake --preset release -DTJEPA_BUILD_BENCHMARKS=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=OFF >/dev/null
 cmake --build --preset release --target tjepa_bench -j "$(nproc)"
 
 out=build/compare
