@@ -41,6 +41,7 @@ inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, cons
   step_cfg.drop_path = run.drop_path;
   JepaWorkspace<float> w;
   WindowBatch batch;
+  AlignedVector<float> rows;  // tokenizer input [B, N, m·τ]
   MaskBatch masks;
   std::vector<std::int64_t> order;
   const std::int64_t per_epoch = src.batches_per_epoch(B);
@@ -53,8 +54,9 @@ inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, cons
     src.gather(std::span<const std::int64_t>(order).subspan(static_cast<std::size_t>(s % per_epoch * B),
                                                            static_cast<std::size_t>(B)),
                batch);
+    windows_to_tokens(batch, rows);
     collator.sample_into(masks, B, mask_seed, static_cast<std::uint64_t>(s));
-    const JepaStepStats st = jepa_train_step(model, opt, schedule, s, batch.x.data(), B, masks, w, step_cfg,
+    const JepaStepStats st = jepa_train_step(model, opt, schedule, s, rows.data(), B, masks, w, step_cfg,
                                              Rng(run.seed, static_cast<std::uint64_t>(s))());
     const double t = progress.elapsed();
     const double rate = t > 0 ? static_cast<double>((s + 1) * B) / t : 0.0;
