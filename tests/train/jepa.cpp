@@ -242,6 +242,23 @@ TEST_SUITE("train") {
       stdsum += std::sqrt(v / (B * N - 1));
     }
     CHECK(r.target_std == doctest::Approx(stdsum / d).epsilon(1e-12));
+    // The sample std is the std over the B samples at each token and dimension, averaged.
+    double sample = 0;
+    for (int i = 0; i < N * d; ++i) {
+      double mu = 0, v = 0;
+      for (int b = 0; b < B; ++b) mu += h[b * N * d + i];
+      mu /= B;
+      for (int b = 0; b < B; ++b) v += (h[b * N * d + i] - mu) * (h[b * N * d + i] - mu);
+      sample += std::sqrt(v / (B - 1));
+    }
+    CHECK(r.target_sample_std == doctest::Approx(sample / (N * d)).epsilon(1e-12));
+    CHECK(r.target_sample_std > 0);
+    // Embeddings that ignore the input (position only) have no sample spread but a token spread.
+    std::vector<double> positional(static_cast<std::size_t>(B) * N * d);
+    for (int b = 0; b < B; ++b)
+      for (int i = 0; i < N * d; ++i) positional[static_cast<std::size_t>(b) * N * d + i] = std::sin(0.7 * i);
+    CHECK(embedding_std(positional.data(), static_cast<std::size_t>(B), N * d) == doctest::Approx(0.0));
+    CHECK(embedding_std(positional.data(), static_cast<std::size_t>(B) * N, d) > 0.1);
   }
 
   TEST_CASE("a training step: scheduled AdamW on the trainable sets then the EMA of the target encoder") {
