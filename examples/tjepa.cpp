@@ -90,7 +90,10 @@ int main(int argc, char** argv) {
   probe->add_option("--max-windows", pb.max_windows, "labelled windows per split (0: all)")->capture_default_str();
   probe->add_option("--epochs", pb.probe.epochs, "probe epochs")->capture_default_str();
   probe->add_option("--batch", pb.probe.batch, "probe batch")->capture_default_str();
-  probe->add_option("--lr", pb.probe.lr, "probe learning rate")->capture_default_str();
+  probe->add_option_function<double>("--lr", [&pb](const double& v) { pb.probe.lr = v; pb.probe_lrs = {v}; },
+                                     "one probe learning rate (no sweep)");
+  probe->add_option("--lrs", pb.probe_lrs, "probe learning rates, chosen among on a validation split")
+      ->capture_default_str();
   probe->add_option("--out", pb.out, "write the results as JSON here");
   probe->add_flag("--force", pb.force, "overwrite --out");
   probe->add_flag("--quiet", pb.quiet, "no progress line");
@@ -126,7 +129,10 @@ int main(int argc, char** argv) {
   demo->add_option("--probe-frames", dm.probe_frames, "labelled simulated frames (probe training)")->capture_default_str();
   demo->add_option("--probe-windows", dm.probe_windows, "labelled training windows")->capture_default_str();
   demo->add_option("--probe-epochs", dm.probe.epochs, "probe epochs (also the end-to-end budget)")->capture_default_str();
-  demo->add_option("--probe-lr", dm.probe.lr, "probe learning rate")->capture_default_str();
+  demo->add_option_function<double>("--probe-lr", [&dm](const double& v) { dm.probe.lr = v; dm.probe_lrs = {v}; },
+                                    "one probe learning rate (no sweep; also the end-to-end rate)");
+  demo->add_option("--probe-lrs", dm.probe_lrs, "frozen probes' learning rates, chosen among on a validation split")
+      ->capture_default_str();
   demo->add_option("--end-to-end-epochs", dm.end_to_end_epochs, "epochs of (c) (0: as the probes)")->capture_default_str();
   demo->add_option("--checkpoint", dm.checkpoint, "skip pre-training and probe this demo checkpoint");
   demo->add_flag("--no-end-to-end", [&dm](std::int64_t) { dm.end_to_end = false; }, "skip (c)");

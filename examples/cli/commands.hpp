@@ -166,18 +166,22 @@ struct ProbeRow {
   std::string name;
   ProbeMetrics metrics;
   double seconds = 0;
+  double lr = 0;                      // the probe's learning rate (chosen by validation when swept)
+  std::vector<double> lr_objective;   // validation objective per swept rate
 };
 
 inline void print_probe_table(std::ostream& out, const std::vector<ProbeRow>& rows) {
   char buf[256];
-  std::snprintf(buf, sizeof buf, "%-34s %9s %9s %9s %9s %10s\n", "encoder", "RMSE u/N", "RMSE v/N", "RMSE n/N",
-                "RMSE avg", "indenter");
+  std::snprintf(buf, sizeof buf, "%-34s %9s %9s %9s %9s %10s %9s\n", "encoder", "RMSE u/N", "RMSE v/N", "RMSE n/N",
+                "RMSE avg", "indenter", "probe lr");
   out << buf;
   for (const auto& r : rows) {
     const auto& m = r.metrics;
-    std::snprintf(buf, sizeof buf, "%-34s %9.4f %9.4f %9.4f %9.4f %9.1f%%\n", r.name.c_str(), m.force_rmse[0],
+    char lr[16] = "-";
+    if (r.lr > 0) std::snprintf(lr, sizeof lr, "%.0e", r.lr);
+    std::snprintf(buf, sizeof buf, "%-34s %9.4f %9.4f %9.4f %9.4f %9.1f%% %9s\n", r.name.c_str(), m.force_rmse[0],
                   m.force_rmse[1], m.force_rmse[2], (m.force_rmse[0] + m.force_rmse[1] + m.force_rmse[2]) / 3,
-                  100 * m.indenter_accuracy);
+                  100 * m.indenter_accuracy, lr);
     out << buf;
   }
 }
@@ -190,6 +194,8 @@ inline nlohmann::json probe_rows_json(const std::vector<ProbeRow>& rows) {
                  {"indenter_accuracy", r.metrics.indenter_accuracy},
                  {"majority_accuracy", r.metrics.majority_accuracy},
                  {"windows", r.metrics.windows},
+                 {"probe_lr", r.lr},
+                 {"probe_lr_validation_objective", r.lr_objective},
                  {"seconds", r.seconds}});
   return a;
 }
@@ -206,7 +212,7 @@ inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& t
     for (int a = 0; a < force_axes; ++a) r[a] = s.mean[static_cast<std::size_t>(a)];
     r[force_axes + major] = 1.0f;
   }
-  ProbeRow row{"constant (train mean / majority)", {}, 0};
+  ProbeRow row{"constant (train mean / majority)", {}, 0, 0, {}};
   const auto rm = rmse_per_column(y.data(), static_cast<std::size_t>(force_axes + classes), test.force.data(),
                                   test.size(), force_axes);
   std::copy(rm.begin(), rm.end(), row.metrics.force_rmse.begin());
@@ -230,11 +236,13 @@ void train_with_progress(ForceIndenterProbe<float>& probe, Features& features, c
   });
 }
 
-// A probe on the frozen encoder (tokenizer + encoder reading `params`).
+// A probe on the frozen encoder (tokenizer + encoder reading `params`). With more than one rate in
+// `lrs`, the probe's learning rate is chosen among them on a validation split of the training
+// windows (select_probe_lr), then the probe trains on all of them; otherwise cfg.lr.
 inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& params, const Tokenizer& tok,
                              const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
-                             const WindowSource& test_src, const ProbeLabels& test, const ProbeTrainConfig& cfg,
-                             int heads, bool quiet) {
+                             const WindowSource& test_src, const ProbeLabels& test, ProbeTrainConfig cfg,
+                             int heads, bool quiet, const std::vector<double>& lrs = {}) {
   ProgressLine embed_progress("  embed " + name, train.size() + test.size(), quiet);
   const auto t0 = std::chrono::steady_clock::now();
   auto emb_train = embed_windows(params, tok, enc, train_src, train.window, 32, [&](std::int64_t d, std::int64_t) {
@@ -243,11 +251,19 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
   auto emb_test = embed_windows(params, tok, enc, test_src, test.window, 32, [&](std::int64_t d, std::int64_t) {
     embed_progress.update(train.size() + d, train.size() + d, "");
   });
+  ProbeLrChoice choice{cfg.lr, {}};
+  if (lrs.size() > 1) {
+    ProgressLine sweep("  probe lr sweep " + name, static_cast<std::int64_t>(lrs.size()), quiet);
+    choice = select_probe_lr(std::span<const float>(emb_train), enc.num_tokens(), enc.dim(), train, lrs, cfg, heads,
+                             num_indenter_shapes);
+    sweep.update(static_cast<std::int64_t>(lrs.size()), 0, "");
+    cfg.lr = choice.lr;
+  }
   FrozenFeatures<float> ftrain(std::move(emb_train), enc.num_tokens(), enc.dim());
   FrozenFeatures<float> ftest(std::move(emb_test), enc.num_tokens(), enc.dim());
   ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
   train_with_progress(probe, ftrain, train, cfg, "  probe " + name, quiet);
-  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0};
+  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0, cfg.lr, choice.objective};
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return row;
 }
@@ -262,7 +278,7 @@ inline ProbeRow end_to_end_probe(const std::string& name, ParamSet<float>& param
   ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
   train_with_progress(probe, ftrain, train, cfg, "  train " + name, quiet);
   EncoderFeatures<float> ftest(params, tok, enc, test_src, test.window);
-  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0};
+  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0, cfg.lr, {}};
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return row;
 }
@@ -281,6 +297,7 @@ struct ProbeOptions {
   int min_contact = 5;                     // frames in contact for a window to count
   int max_windows = 0;                     // per split, 0 = all
   ProbeTrainConfig probe;
+  std::vector<double> probe_lrs{3e-4, 1e-3, 3e-3};  // swept on a validation split (one rate: no sweep)
   std::string out;                         // results JSON ("" = none)
   bool force = false;
   bool quiet = false;
@@ -331,7 +348,8 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   const ParamSet<float>& ps = o.encoder == "target" ? model.target : model.context;
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes),
                              frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
-                                          train_src, train, test_src, test, o.probe, m.run.heads, o.quiet)};
+                                          train_src, train, test_src, test, o.probe, m.run.heads, o.quiet,
+                                          o.probe_lrs)};
   print_probe_table(out, rows);
   if (!o.out.empty()) {
     OutputFiles files;
@@ -393,7 +411,10 @@ struct DemoOptions {
   int min_contact = 5;
   int probe_windows = 600;         // labelled training windows (a label-scarce regime)
   int test_windows = 1000;
-  ProbeTrainConfig probe{.epochs = 60, .batch = 32, .lr = 3e-3};
+  ProbeTrainConfig probe{.epochs = 60, .batch = 32, .lr = 1e-3};
+  // The frozen probes' rate is chosen among these on a validation split of the labelled windows:
+  // one fixed rate leaves some probes stuck at the training mean (their head's units die).
+  std::vector<double> probe_lrs{3e-4, 1e-3, 3e-3};
   bool end_to_end = true;
   // (c)'s epochs; 0: the probes' (the same budget). Each end-to-end step runs the encoder forward
   // and backward (about 30x a frozen probe step), so the default caps it to fit the 10 minutes.
@@ -462,14 +483,17 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
 
   out << "probes: " << train.size() << " labelled training windows, " << test.size()
       << " held-out windows (>= " << o.min_contact << " of " << o.run.tau << " frames in contact); "
-      << o.probe.epochs << " epochs of batch " << o.probe.batch << ", lr " << o.probe.lr << "\n" << std::flush;
+      << o.probe.epochs << " epochs of batch " << o.probe.batch << "; frozen probes' lr chosen among "
+      << nlohmann::json(o.probe_lrs).dump() << " on a validation split, end to end lr " << o.probe.lr << "\n"
+      << std::flush;
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes)};
   rows.push_back(frozen_probe("(a) pre-trained, frozen", model.target, model.tokenizer, model.encoder, probe_src,
-                              train, test_src, test, o.probe, o.run.heads, o.quiet));
+                              train, test_src, test, o.probe, o.run.heads, o.quiet, o.probe_lrs));
   // (b) and (c) start from the same random initialization (another seed than the pre-trained one).
   JepaModel<float> random_model(mc, o.seed + 1000);
   rows.push_back(frozen_probe("(b) random init, frozen", random_model.target, random_model.tokenizer,
-                              random_model.encoder, probe_src, train, test_src, test, o.probe, o.run.heads, o.quiet));
+                              random_model.encoder, probe_src, train, test_src, test, o.probe, o.run.heads, o.quiet,
+                              o.probe_lrs));
   if (o.end_to_end) {
     ProbeTrainConfig e2e = o.probe;
     if (o.end_to_end_epochs > 0) e2e.epochs = o.end_to_end_epochs;

@@ -106,22 +106,30 @@ TEST_CASE("probe loss: gradient through the AttentiveProbe matches central diffe
 // S windows of tokens whose direction encodes the force and the class (a LayerNorm comes first in
 // the probe, so the information must be in the direction, not the scale): a probe must get far
 // below the constant predictor on its own training data.
-TEST_CASE("train_probe: learns an encoded force and class (frozen features)") {
-  const int S = 128, L = 1, d = 12;
-  Rng rng(5);
-  AlignedVector<float> v(static_cast<std::size_t>(S) * L * d, 0.0f);
-  ProbeLabels lab;
+struct EncodedFeatures {
+  AlignedVector<float> v;  // [S, 1, d]
+  ProbeLabels labels;      // windows first_window + i, force (shear_u·F, 0, F)
+};
+EncodedFeatures encoded_features(int S, int d, std::uint64_t seed, float shear_u, std::int64_t first_window) {
+  Rng rng(seed);
+  EncodedFeatures e{AlignedVector<float>(static_cast<std::size_t>(S) * d, 0.0f), {}};
   for (int i = 0; i < S; ++i) {
     const float F = static_cast<float>(rng.uniform(0, 10));
     const int cls = static_cast<int>(rng.below(4));
-    lab.window.push_back(i);
-    lab.force.insert(lab.force.end(), {0.0f, 0.0f, F});
-    lab.indenter.push_back(cls);
-    float* t = v.data() + static_cast<std::size_t>(i) * L * d;
+    e.labels.window.push_back(first_window + i);
+    e.labels.force.insert(e.labels.force.end(), {shear_u * F, 0.0f, F});
+    e.labels.indenter.push_back(cls);
+    float* t = e.v.data() + static_cast<std::size_t>(i) * d;
     t[0] = F;
     t[1] = 10.0f - F;
     t[2 + cls] = 5.0f;
   }
+  return e;
+}
+
+TEST_CASE("train_probe: learns an encoded force and class (frozen features)") {
+  const int S = 128, L = 1, d = 12;
+  const auto [v, lab] = encoded_features(S, d, 5, 0.0f, 0);
   FrozenFeatures<float> f(v, L, d);
   ForceIndenterProbe<float> p(d, 3, 4, 0);
   ProbeTrainConfig cfg;
@@ -145,6 +153,44 @@ TEST_CASE("train_probe: learns an encoded force and class (frozen features)") {
   ForceIndenterProbe<float> q(d, 3, 4, 0);
   train_probe(q, f, lab, cfg);
   CHECK(std::equal(p.params.values().begin(), p.params.values().end(), q.params.values().begin()));
+}
+
+TEST_CASE("select_probe_lr: the rate whose probe does best on a held-out split wins") {
+  const int S = 160, L = 1, d = 12;
+  const auto [v, lab] = encoded_features(S, d, 9, 0.5f, 100);
+  // A subset keeps the labels of the ids asked for, in order.
+  const std::vector<std::int64_t> ids{3, 0, 7};
+  const ProbeLabels sub = subset(lab, ids);
+  CHECK(sub.window == std::vector<std::int64_t>{103, 100, 107});
+  CHECK(sub.indenter == std::vector<int>{lab.indenter[3], lab.indenter[0], lab.indenter[7]});
+  CHECK(sub.force[3] == lab.force[0]);
+
+  ProbeTrainConfig cfg;
+  cfg.epochs = 40;
+  cfg.batch = 16;
+  const std::vector<double> lrs{1e-7, 3e-3};  // the first barely moves the probe
+  const ProbeLrChoice c = select_probe_lr(std::span<const float>(v), L, d, lab, lrs, cfg, 3, 4);
+  REQUIRE(c.objective.size() == 2);
+  CHECK(c.lr == 3e-3);
+  CHECK(c.objective[1] < 0.8 * c.objective[0]);
+  // Seeded: the same choice and the same validation objectives again.
+  const ProbeLrChoice again = select_probe_lr(std::span<const float>(v), L, d, lab, lrs, cfg, 3, 4);
+  CHECK(again.objective == c.objective);
+
+  // probe_objective is the training objective: force MSE in the probe's standardized units plus
+  // the cross-entropy. An untrained probe predicts about the training mean: force term about 1
+  // per axis that varies, ln 4 for the classes.
+  ForceIndenterProbe<float> p(d, 3, 4, 0);
+  p.scaler = ForceScaler::fit(lab);
+  FrozenFeatures<float> f(v, L, d);
+  const double o = probe_objective(p, f, lab, 1.0);
+  CHECK(o > 0.5);
+  CHECK(o < 3.5);
+  CHECK(probe_objective(p, f, lab, 0.0) < o);
+
+  CHECK_THROWS_AS(select_probe_lr(std::span<const float>(v), L, d, lab, std::vector<double>{}, cfg, 3, 4), ConfigError);
+  CHECK_THROWS_AS(select_probe_lr(std::span<const float>(v), L, d, lab, lrs, cfg, 3, 4, 1.0), ConfigError);
+  CHECK_THROWS_AS(select_probe_lr(std::span<const float>(v).first(10), L, d, lab, lrs, cfg, 3, 4), ShapeError);
 }
 
 TEST_CASE("end to end: the encoder trains with the probe; embeddings match the inference path") {

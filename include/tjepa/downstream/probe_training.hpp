@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <span>
 #include <type_traits>
 #include <vector>
@@ -366,6 +367,95 @@ ProbeMetrics evaluate_probe(const ForceIndenterProbe<T>& probe, Features& featur
   m.majority_accuracy = majority_accuracy(labels.indenter.data(), S, probe.num_classes);
   m.windows = S;
   return m;
+}
+
+// The probe's objective on labelled samples 0..S−1: the force MSE standardized by the probe's own
+// scaler plus class_weight × the indenter cross-entropy (what train_probe minimizes).
+template <class T, class Features>
+double probe_objective(const ForceIndenterProbe<T>& probe, Features& features, const ProbeLabels& labels,
+                       double class_weight, int batch = 64) {
+  const int S = labels.size();
+  require<ShapeError>(S > 0 && features.size() == S, "probe_objective: ", features.size(), " feature rows for ", S,
+                      " labels, expected equal and > 0");
+  const std::vector<T> y = predict_probe(probe, features, S, batch);
+  const auto out = static_cast<std::size_t>(probe.outputs());
+  double f = 0;
+  for (int s = 0; s < S; ++s)
+    for (int a = 0; a < force_axes; ++a) {
+      const double e = (static_cast<double>(y[s * out + a]) - labels.force[static_cast<std::size_t>(s) * force_axes + a]) /
+                       probe.scaler.std[a];
+      f += e * e;
+    }
+  const double ce = softmax_cross_entropy(y.data() + force_axes, out, labels.indenter.data(), S, probe.num_classes,
+                                          static_cast<T*>(nullptr), out);
+  return f / (static_cast<double>(S) * force_axes) + class_weight * ce;
+}
+
+// Samples `ids` of labels, in that order.
+inline ProbeLabels subset(const ProbeLabels& l, std::span<const std::int64_t> ids) {
+  ProbeLabels r;
+  for (std::int64_t i : ids) {
+    const auto k = static_cast<std::size_t>(i);
+    r.window.push_back(l.window.at(k));
+    r.force.insert(r.force.end(), l.force.begin() + static_cast<std::ptrdiff_t>(k * force_axes),
+                   l.force.begin() + static_cast<std::ptrdiff_t>((k + 1) * force_axes));
+    r.indenter.push_back(l.indenter[k]);
+  }
+  return r;
+}
+
+// The probe's learning rate, chosen by validation as probe evaluations sweep it (V-JEPA's do): a
+// seeded split holds out val_fraction of the training samples; one probe per rate trains on the
+// rest with cfg otherwise unchanged; the rate with the lowest held-out objective wins. A rate at
+// which the probe fails to train (its head's GELU units all die, so it predicts the training mean)
+// loses to one that trains. Frozen embeddings [S, L, d] only: an end-to-end sweep costs too much.
+struct ProbeLrChoice {
+  double lr = 0;
+  std::vector<double> objective;  // [lrs] validation objective per rate
+};
+
+template <class T>
+ProbeLrChoice select_probe_lr(std::span<const T> embeddings, int L, int d, const ProbeLabels& labels,
+                              std::span<const double> lrs, const ProbeTrainConfig& cfg, int heads, int num_classes,
+                              double val_fraction = 0.2) {
+  const int S = labels.size();
+  const std::size_t per = static_cast<std::size_t>(L) * d;
+  require<ConfigError>(!lrs.empty(), "select_probe_lr: no learning rates to choose from");
+  require<ConfigError>(val_fraction > 0 && val_fraction < 1, "select_probe_lr: val_fraction = ", val_fraction,
+                       ", expected in (0, 1)");
+  require<ShapeError>(embeddings.size() == static_cast<std::size_t>(S) * per, "select_probe_lr: ", embeddings.size(),
+                      " values for ", S, " samples of ", L, "x", d);
+  const int n_val = static_cast<int>(std::lround(val_fraction * S));
+  require<DataError>(n_val >= 1 && S - n_val >= 2, "select_probe_lr: ", S, " samples cannot be split ", 1 - val_fraction,
+                     " / ", val_fraction, " into training and validation");
+  std::vector<std::int64_t> order(static_cast<std::size_t>(S));
+  for (int i = 0; i < S; ++i) order[static_cast<std::size_t>(i)] = i;
+  Rng(cfg.seed, 0x76616c6964ull /* "valid" */).shuffle(std::span<std::int64_t>(order));
+  const std::span<const std::int64_t> fit_ids(order.data(), static_cast<std::size_t>(S - n_val));
+  const std::span<const std::int64_t> val_ids(order.data() + (S - n_val), static_cast<std::size_t>(n_val));
+  auto rows = [&](std::span<const std::int64_t> ids) {
+    AlignedVector<T> x(ids.size() * per);
+    for (std::size_t i = 0; i < ids.size(); ++i)
+      std::copy_n(embeddings.data() + static_cast<std::size_t>(ids[i]) * per, per, x.data() + i * per);
+    return x;
+  };
+  FrozenFeatures<T> fit(rows(fit_ids), L, d), val(rows(val_ids), L, d);
+  const ProbeLabels fit_labels = subset(labels, fit_ids), val_labels = subset(labels, val_ids);
+  ProbeLrChoice choice;
+  double best = std::numeric_limits<double>::infinity();
+  for (double lr : lrs) {
+    ProbeTrainConfig c = cfg;
+    c.lr = lr;
+    ForceIndenterProbe<T> probe(d, heads, num_classes, cfg.seed);
+    train_probe(probe, fit, fit_labels, c);
+    const double v = probe_objective(probe, val, val_labels, cfg.class_weight);
+    choice.objective.push_back(v);
+    if (v < best) {
+      best = v;
+      choice.lr = lr;
+    }
+  }
+  return choice;
 }
 
 }  // namespace tjepa
