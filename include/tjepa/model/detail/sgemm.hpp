@@ -37,12 +37,14 @@ enum class Order { row_major, col_major };
 // What happens to a finished tile. bias [cols] is added once; gelu [rows, ldc]: C keeps the
 // pre-activation and gelu receives gelu(C) (the MLP's fc1). accumulate: C += A·B, else C = A·B.
 // gelu_grad [rows, ldc] (with accumulate = false): C = (A·B) ⊙ gelu'(gelu_grad), the MLP's
-// backward through its GELU fused into the product that yields ∂L/∂h.
+// backward through its GELU fused into the product that yields ∂L/∂h. residual [rows, ldc] (with
+// accumulate = false; may equal C): C = residual + A·B, a residual add without a copy of the stream.
 struct Epilogue {
   bool accumulate = false;
   const float* bias = nullptr;
   float* gelu = nullptr;
   const float* gelu_grad = nullptr;
+  const float* residual = nullptr;
 };
 
 inline V gelu(V x) { return detail::gelu<float>(x); }
@@ -97,16 +99,17 @@ template <Order AO, int R>
     for (int j = 0; j < NV; ++j) acc[i][j].store_aligned(acc_out + i * NR + j * W);
 }
 
-// C[R, cols ≤ NR] from one depth block (see depth_loop). load_c: C already holds a partial sum
-// (or the value accumulated into); bias on the first depth block, g (gelu output) and gg
-// (gelu_grad input) on the last.
+// C[R, cols ≤ NR] from one depth block (see depth_loop). c_in [R, ldc]: what the product is added
+// to (C itself holding a partial sum or the value accumulated into, or the residual) or nullptr;
+// bias on the first depth block, g (gelu output) and gg (gelu_grad input) on the last.
 template <Order AO, int R>
 void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, float* c, std::ptrdiff_t ldc, int cols,
-                  bool load_c, const float* bias, float* g, const float* gg, const float* pf) {
+                  const float* c_in, const float* bias, float* g, const float* gg, const float* pf) {
   // The tile's C (and GELU input) lines arrive while the depth loop runs.
   for (int i = 0; i < R; ++i)
     for (int j = 0; j < NV; ++j) {
       __builtin_prefetch(c + i * ldc + j * W, 1);
+      if (c_in && c_in != c) __builtin_prefetch(c_in + i * ldc + j * W);
       if (gg) __builtin_prefetch(gg + i * ldc + j * W);
     }
   alignas(64) float tile[R * NR];
@@ -118,7 +121,7 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, fl
 #pragma GCC unroll 4
       for (int j = 0; j < NV; ++j) {
         V v = V::load_aligned(tile + i * NR + j * W);
-        if (load_c) v += V::load_unaligned(ci + j * W);
+        if (c_in) v += V::load_unaligned(c_in + i * ldc + j * W);
         if (bias) v += V::load_unaligned(bias + j * W);
         if (gg) v *= gelu_grad(V::load_unaligned(gg + i * ldc + j * W));
         v.store_unaligned(ci + j * W);
@@ -131,7 +134,7 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, fl
     float* ci = c + i * ldc;
     for (int j = 0; j < cols; ++j) {
       float v = tile[i * NR + j];
-      if (load_c) v += ci[j];
+      if (c_in) v += c_in[i * ldc + j];
       if (bias) v += bias[j];
       if (gg) v *= gelu_grad(gg[i * ldc + j]);
       ci[j] = v;
@@ -140,7 +143,7 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, fl
   }
 }
 
-using Kernel = void (*)(int, const float*, std::ptrdiff_t, const float*, float*, std::ptrdiff_t, int, bool,
+using Kernel = void (*)(int, const float*, std::ptrdiff_t, const float*, float*, std::ptrdiff_t, int, const float*,
                         const float*, float*, const float*, const float*);
 template <Order AO, int... R>
 constexpr auto kernel_table(std::integer_sequence<int, R...>) {
@@ -190,7 +193,7 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
   for (int k0 = 0; k0 < depth; k0 += KC) {
     const int kc = std::min(KC, depth - k0);
     const bool first = k0 == 0, last = k0 + kc == depth;
-    const bool load_c = !first || e.accumulate;
+    const float* c_in = !first || e.accumulate ? C : e.residual;
     for (int i0 = r0; i0 < r1; i0 += MR) {
       const int R = std::min(MR, r1 - i0);
       const Kernel kern = table[std::size_t(R - 1)];
@@ -201,7 +204,7 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
       for (int p = 0; p < panels; ++p) {
         const int n0 = p * NR;
         kern(kc, a, lda, packed + (std::ptrdiff_t(p) * depth + k0) * NR, C + i0 * ldc + n0, ldc,
-             std::min(NR, cols - n0), load_c, first && e.bias ? e.bias + n0 : nullptr,
+             std::min(NR, cols - n0), c_in ? c_in + i0 * ldc + n0 : nullptr, first && e.bias ? e.bias + n0 : nullptr,
              last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
              last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr, p == 0 ? next : nullptr);
       }
@@ -219,7 +222,8 @@ inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t l
     for (int i = 0; i < rows; ++i)
       for (int j = 0; j < cols; ++j) {
         float& c = C[std::ptrdiff_t(i) * ldc + j];
-        c = (e.accumulate ? c : 0.0f) + (e.bias ? e.bias[j] : 0.0f);
+        c = (e.accumulate ? c : e.residual ? e.residual[std::ptrdiff_t(i) * ldc + j] : 0.0f) +
+            (e.bias ? e.bias[j] : 0.0f);
         if (e.gelu_grad) c = 0.0f;
         if (e.gelu) e.gelu[std::ptrdiff_t(i) * ldc + j] = gelu(c);
       }
