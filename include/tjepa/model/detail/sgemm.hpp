@@ -155,12 +155,14 @@ inline constexpr std::array<std::array<Kernel, MR>, 2> kernels = {
     kernel_table<Order::col_major>(std::make_integer_sequence<int, MR>{})};
 
 // B(k, n) = b[k·ldb + n] (row-major) or b[n·ldb + k] (column-major, a PyTorch weight [cols, depth]
-// read as its transpose) → panel p of dst: [depth][NR], columns p·NR + j.
-inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p) {
+// read as its transpose) → depths [k0, k1) of panel p of dst: [depth][NR], columns p·NR + j.
+// k0 is a multiple of 16.
+inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p, int k0,
+                       int k1) {
   const int n0 = p * NR, nc = std::min(NR, cols - n0);
   float* d = dst + std::ptrdiff_t(p) * depth * NR;
   if (order == Order::row_major) {
-    for (int k = 0; k < depth; ++k) {
+    for (int k = k0; k < k1; ++k) {
       const float* s = b + std::ptrdiff_t(k) * ldb + n0;
       float* o = d + std::ptrdiff_t(k) * NR;
       std::copy(s, s + nc, o);
@@ -171,14 +173,14 @@ inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order ord
   // A transpose in 16 × nc tiles: each source row's cache line is read once, each packed row
   // written whole.
   constexpr int T = 16;
-  for (int k0 = 0; k0 < depth; k0 += T) {
-    const int kt = std::min(T, depth - k0);
+  for (int t0 = k0; t0 < k1; t0 += T) {
+    const int kt = std::min(T, k1 - t0);
     for (int j = 0; j < nc; ++j) {
-      const float* s = b + std::ptrdiff_t(n0 + j) * ldb + k0;
-      for (int k = 0; k < kt; ++k) d[std::ptrdiff_t(k0 + k) * NR + j] = s[k];
+      const float* s = b + std::ptrdiff_t(n0 + j) * ldb + t0;
+      for (int k = 0; k < kt; ++k) d[std::ptrdiff_t(t0 + k) * NR + j] = s[k];
     }
     for (int k = 0; k < kt; ++k) {
-      float* o = d + std::ptrdiff_t(k0 + k) * NR;
+      float* o = d + std::ptrdiff_t(t0 + k) * NR;
       std::fill(o + nc, o + NR, 0.0f);
     }
   }
@@ -236,14 +238,20 @@ inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t l
   const int blocks = (rows + MR - 1) / MR;
   const int threads = flops > parallel_min_flops ? std::min(max_threads(), blocks) : 1;
   if (threads <= 1) {
-    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p);
+    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth);
     compute_rows(0, rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
     return;
   }
   TJEPA_OMP(omp parallel num_threads(threads))
   {
+    // Packing tasks of one panel × one depth block: a long depth (dW) with few panels still
+    // splits evenly.
+    const int kblocks = (depth + KC - 1) / KC;
     TJEPA_OMP(omp for schedule(static))
-    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p);
+    for (int task = 0; task < panels * kblocks; ++task) {
+      const int kb = task % kblocks;
+      pack_panel(packed, B, ldb, b_order, depth, cols, task / kblocks, kb * KC, std::min(depth, (kb + 1) * KC));
+    }
     // Whole MR-row blocks, as even as possible.
     const int t = thread_id(), n = team_size();
     const int b0 = blocks * t / n, b1 = blocks * (t + 1) / n;
