@@ -122,7 +122,7 @@ int main(int argc, char** argv) {
 
     // Everything the loop touches, made once.
     std::vector<float> ring(static_cast<std::size_t>(tau) * N * m, 0.0f);  // [τ, N, m]
-    std::vector<float> window(ring.size());                                // [N, τ, m]
+    std::vector<float> window(ring.size());                                // [N, m·τ] tokenizer rows
     std::vector<float> tokens(static_cast<std::size_t>(N) * d), emb(tokens.size());
     std::vector<float> y(static_cast<std::size_t>(probe.outputs()));
     Workspace<float> ws;
@@ -140,12 +140,13 @@ int main(int argc, char** argv) {
       std::copy_n(stream.recording.frame(k % stream.recording.frames()), static_cast<std::size_t>(N) * m, slot);
       pre.apply(slot, 1, N, 1, m);
       head = (head + 1) % tau;
-      // window[n, j, :] = ring[(head + j) mod τ, n, :]: oldest frame first.
+      // window[n, a·τ + j] = ring[(head + j) mod τ, n, a]: oldest frame first, each taxel's
+      // window axis-major as the tokenizer reads it (data/window_source.hpp's windows_to_tokens).
       for (int j = 0; j < tau; ++j) {
         const float* f = ring.data() + static_cast<std::size_t>((head + j) % tau) * N * m;
         for (int n = 0; n < N; ++n)
-          std::copy_n(f + static_cast<std::size_t>(n) * m, m,
-                      window.data() + (static_cast<std::size_t>(n) * tau + j) * m);
+          for (int a = 0; a < m; ++a)
+            window[(static_cast<std::size_t>(n) * m + a) * tau + j] = f[static_cast<std::size_t>(n) * m + a];
       }
       model->tokenizer.forward(model->target, window.data(), 1, tokens.data(), nullptr, ws);
       model->encoder.forward(model->target, tokens.data(), 1, nullptr, N, emb.data(), nullptr, ws);

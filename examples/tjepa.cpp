@@ -41,6 +41,8 @@ void add_run_overrides(CLI::App* app, nlohmann::json& j) {
   run_override<int>(app, "--warmup", "warmup_steps", j, "learning-rate warm-up steps");
   run_override<double>(app, "--lr", "lr", j, "peak learning rate");
   run_override<double>(app, "--drop-path", "drop_path", j, "stochastic depth rate");
+  run_override<double>(app, "--ema-start", "ema_start", j, "initial EMA momentum of the target encoder");
+  run_override<double>(app, "--tokenizer-bias", "tokenizer_bias_std", j, "std of the tokenizer's initial bias (reference: 0)");
   run_override<std::uint64_t>(app, "--seed", "seed", j, "random seed (init, masks, data order, simulation)");
 }
 
@@ -117,6 +119,9 @@ int main(int argc, char** argv) {
   run_override<int>(demo, "--heads", "heads", demo_overrides, "attention heads");
   run_override<int>(demo, "--predictor-depth", "predictor_depth", demo_overrides, "predictor blocks");
   run_override<double>(demo, "--lr", "lr", demo_overrides, "pre-training peak learning rate");
+  run_override<double>(demo, "--ema-start", "ema_start", demo_overrides, "initial EMA momentum of the target encoder");
+  run_override<double>(demo, "--tokenizer-bias", "tokenizer_bias_std", demo_overrides,
+                       "std of the tokenizer's initial bias (reference: 0)");
   demo->add_option("--pretrain-frames", dm.pretrain_frames, "unlabelled simulated frames")->capture_default_str();
   demo->add_option("--probe-frames", dm.probe_frames, "labelled simulated frames (probe training)")->capture_default_str();
   demo->add_option("--probe-windows", dm.probe_windows, "labelled training windows")->capture_default_str();

@@ -154,7 +154,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
   write_pretrain_outputs(dir, model, opt, run, pre, r, files);
   files.commit();
   out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "
-      << r.final_target_std << ", " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
+      << r.final_target_std << " (over samples " << r.final_target_sample_std << "), " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
       << "\nwrote " << (dir / "checkpoint.safetensors").string() << ", log.csv, loss.svg\n";
   return 0;
 }
@@ -456,7 +456,8 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
     write_pretrain_outputs(dir, model, opt, o.run, pre, pr, files);
   }
   out << "pre-training: loss " << pr.log.rows.front()[1] << " -> " << pr.log.rows.back()[1]
-      << ", target-embedding std " << pr.log.rows.front()[6] << " -> " << pr.final_target_std << ", "
+      << ", target-embedding std " << pr.log.rows.front()[6] << " -> " << pr.final_target_std
+      << " (over samples " << pr.log.rows.front()[9] << " -> " << pr.final_target_sample_std << "), "
       << pr.windows_per_second << " windows/s, " << format_duration(pr.seconds) << "\n";
 
   out << "probes: " << train.size() << " labelled training windows, " << test.size()

@@ -20,11 +20,12 @@ struct PretrainOutcome {
   double seconds = 0;
   double windows_per_second = 0;
   double final_target_std = 0;
+  double final_target_sample_std = 0;
 };
 
 inline const std::vector<std::string>& pretrain_log_columns() {
   static const std::vector<std::string> c{"step", "loss", "lr", "weight_decay", "momentum", "grad_norm",
-                                          "target_std", "windows_per_s", "seconds"};
+                                          "target_std", "windows_per_s", "seconds", "target_sample_std"};
   return c;
 }
 
@@ -41,6 +42,7 @@ inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, cons
   step_cfg.drop_path = run.drop_path;
   JepaWorkspace<float> w;
   WindowBatch batch;
+  AlignedVector<float> rows;  // tokenizer input [B, N, m·τ]
   MaskBatch masks;
   std::vector<std::int64_t> order;
   const std::int64_t per_epoch = src.batches_per_epoch(B);
@@ -53,17 +55,20 @@ inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, cons
     src.gather(std::span<const std::int64_t>(order).subspan(static_cast<std::size_t>(s % per_epoch * B),
                                                            static_cast<std::size_t>(B)),
                batch);
+    windows_to_tokens(batch, rows);
     collator.sample_into(masks, B, mask_seed, static_cast<std::uint64_t>(s));
-    const JepaStepStats st = jepa_train_step(model, opt, schedule, s, batch.x.data(), B, masks, w, step_cfg,
+    const JepaStepStats st = jepa_train_step(model, opt, schedule, s, rows.data(), B, masks, w, step_cfg,
                                              Rng(run.seed, static_cast<std::uint64_t>(s))());
     const double t = progress.elapsed();
     const double rate = t > 0 ? static_cast<double>((s + 1) * B) / t : 0.0;
     out.log.rows.push_back({static_cast<double>(s), st.loss, st.lr, st.weight_decay, st.momentum, st.grad_norm,
-                            st.target_std, rate, t});
+                            st.target_std, rate, t, st.target_sample_std});
     char extra[96];
-    std::snprintf(extra, sizeof extra, "loss %.4f  target std %.3f", st.loss, st.target_std);
+    std::snprintf(extra, sizeof extra, "loss %.4f  target std %.3f (over samples %.3f)", st.loss, st.target_std,
+                  st.target_sample_std);
     progress.update(s + 1, (s + 1) * B, extra);
     out.final_target_std = st.target_std;
+    out.final_target_sample_std = st.target_sample_std;
   }
   out.seconds = progress.elapsed();
   out.windows_per_second = out.seconds > 0 ? static_cast<double>(run.steps) * B / out.seconds : 0.0;

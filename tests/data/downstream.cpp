@@ -173,6 +173,23 @@ TEST_CASE("end to end: the encoder trains with the probe; embeddings match the i
   std::iota(all.begin(), all.end(), 0);
   const float* x = feats.forward(all, false);
   for (std::size_t i = 0; i < emb.size(); ++i) REQUIRE(x[i] == doctest::Approx(emb[i]).epsilon(1e-5));
+  {
+    // Both feed the tokenizer each taxel's window axis-major (windows_to_tokens), as training
+    // does; the raw [N, τ, m] order would give other embeddings.
+    WindowBatch wb;
+    src.gather(std::span<const std::int64_t>(lab.window.data(), 1), wb);
+    AlignedVector<float> rows, tk(16 * 8), e(16 * 8), raw(16 * 8);
+    windows_to_tokens(wb, rows);
+    Workspace<float> ws;
+    tok.forward(ps, rows.data(), 1, tk.data(), nullptr, ws);
+    enc.forward(ps, tk.data(), 1, nullptr, 16, e.data(), nullptr, ws);
+    for (std::size_t i = 0; i < e.size(); ++i) REQUIRE(e[i] == doctest::Approx(emb[i]).epsilon(1e-5));
+    tok.forward(ps, wb.x.data(), 1, tk.data(), nullptr, ws);
+    enc.forward(ps, tk.data(), 1, nullptr, 16, raw.data(), nullptr, ws);
+    double diff = 0;
+    for (std::size_t i = 0; i < raw.size(); ++i) diff += std::abs(raw[i] - emb[i]);
+    CHECK(diff > 1e-2);
+  }
 
   ForceIndenterProbe<float> p(8, 2, 4, 0);
   ProbeTrainConfig cfg;

@@ -242,6 +242,23 @@ TEST_SUITE("train") {
       stdsum += std::sqrt(v / (B * N - 1));
     }
     CHECK(r.target_std == doctest::Approx(stdsum / d).epsilon(1e-12));
+    // The sample std is the std over the B samples at each token and dimension, averaged.
+    double sample = 0;
+    for (int i = 0; i < N * d; ++i) {
+      double mu = 0, v = 0;
+      for (int b = 0; b < B; ++b) mu += h[b * N * d + i];
+      mu /= B;
+      for (int b = 0; b < B; ++b) v += (h[b * N * d + i] - mu) * (h[b * N * d + i] - mu);
+      sample += std::sqrt(v / (B - 1));
+    }
+    CHECK(r.target_sample_std == doctest::Approx(sample / (N * d)).epsilon(1e-12));
+    CHECK(r.target_sample_std > 0);
+    // Embeddings that ignore the input (position only) have no sample spread but a token spread.
+    std::vector<double> positional(static_cast<std::size_t>(B) * N * d);
+    for (int b = 0; b < B; ++b)
+      for (int i = 0; i < N * d; ++i) positional[static_cast<std::size_t>(b) * N * d + i] = std::sin(0.7 * i);
+    CHECK(embedding_std(positional.data(), static_cast<std::size_t>(B), N * d) == doctest::Approx(0.0));
+    CHECK(embedding_std(positional.data(), static_cast<std::size_t>(B) * N, d) > 0.1);
   }
 
   TEST_CASE("a training step: scheduled AdamW on the trainable sets then the EMA of the target encoder") {
@@ -303,6 +320,32 @@ TEST_SUITE("train") {
     AlignedVector<double> out;
     windows_to_tokens(b, out);
     CHECK(std::vector<double>(out.begin(), out.end()) == std::vector<double>{0, 2, 4, 1, 3, 5, 10, 12, 14, 11, 13, 15});
+  }
+
+  TEST_CASE("the tokenizer's initial bias: zero as the reference or drawn with the configured std") {
+    JepaConfig c = tiny_config();
+    const JepaModel<float> reference(c, 5);
+    const auto bias = [](const JepaModel<float>& m, const ParamSet<float>& ps) {
+      const auto& p = m.tokenizer.maps.front().proj;
+      return std::vector<float>(ps.value(p.bias), ps.value(p.bias) + p.out);
+    };
+    for (float v : bias(reference, reference.context)) CHECK(v == 0.0f);
+    c.tokenizer_bias_std = 2.0;
+    const JepaModel<float> a(c, 5), b(c, 5), other(c, 6);
+    const std::vector<float> ba = bias(a, a.context);
+    CHECK(ba == bias(b, b.context));            // same seed, same bias
+    CHECK(ba != bias(other, other.context));    // another seed, another bias
+    CHECK(ba == bias(a, a.target));             // the target encoder starts as a copy
+    double s2 = 0;
+    for (float v : ba) s2 += double(v) * v;
+    const double rms = std::sqrt(s2 / ba.size());
+    CHECK(rms > 1.0);                           // std 2 over d values
+    CHECK(rms < 3.0);
+    // Nothing else moved: the weights are those of the reference init.
+    const auto& w = a.tokenizer.maps.front().proj.weight;
+    CHECK(std::ranges::equal(a.context.value_span(w), reference.context.value_span(w)));
+    c.tokenizer_bias_std = -1.0;
+    CHECK_THROWS_AS(JepaModel<float>(c, 5), ConfigError);
   }
 
   TEST_CASE("save then load then continue: the loss curve is bitwise that of an uninterrupted run") {

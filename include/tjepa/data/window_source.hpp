@@ -191,4 +191,21 @@ class WindowSource {
   std::vector<Window> windows_;
 };
 
+// Window batch [B, N, τ, m] → per-taxel tokenizer input [B, N, m·τ], each taxel's window
+// axis-major (the reference's Conv1d patch embedding flattens its weight [d, m, τ] that way).
+// Everything that feeds a per-taxel tokenizer from windows goes through here (training, embedding,
+// probes), so a checkpoint means the same thing in every path and in PyTorch.
+template <class T>
+void windows_to_tokens(const WindowBatch& batch, AlignedVector<T>& out) {
+  const int tau = batch.length, m = batch.axes;
+  const std::size_t per = static_cast<std::size_t>(tau) * m;
+  out.resize(static_cast<std::size_t>(batch.batch) * batch.taxels * per);
+  for (std::size_t row = 0; row < static_cast<std::size_t>(batch.batch) * batch.taxels; ++row) {
+    const float* src = batch.x.data() + row * per;
+    T* dst = out.data() + row * per;
+    for (int f = 0; f < tau; ++f)
+      for (int a = 0; a < m; ++a) dst[static_cast<std::size_t>(a) * tau + f] = static_cast<T>(src[f * m + a]);
+  }
+}
+
 }  // namespace tjepa

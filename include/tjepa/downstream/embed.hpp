@@ -29,7 +29,7 @@ inline AlignedVector<float> embed_windows(const ParamSet<float>& ps, const Token
   const int N = encoder.num_tokens(), d = encoder.dim();
   const std::size_t per = static_cast<std::size_t>(N) * d;
   AlignedVector<float> out(ids.size() * per);
-  AlignedVector<float> tokens;
+  AlignedVector<float> rows, tokens;
   Workspace<float> ws;
   WindowBatch wb;
   const auto S = static_cast<std::int64_t>(ids.size());
@@ -37,7 +37,8 @@ inline AlignedVector<float> embed_windows(const ParamSet<float>& ps, const Token
     const int B = static_cast<int>(std::min<std::int64_t>(batch, S - s0));
     src.gather(ids.subspan(static_cast<std::size_t>(s0), static_cast<std::size_t>(B)), wb);
     float* tok = detail::grow(tokens, static_cast<std::size_t>(B) * per);
-    tokenizer.forward(ps, wb.x.data(), B, tok, nullptr, ws);
+    windows_to_tokens(wb, rows);
+    tokenizer.forward(ps, rows.data(), B, tok, nullptr, ws);
     encoder.forward(ps, tok, B, nullptr, N, out.data() + static_cast<std::size_t>(s0) * per, nullptr, ws);
     if (progress) progress(s0 + B, S);
   }

@@ -187,7 +187,8 @@ class EncoderFeatures {
     src_.gather(ids_, batch_);
     const int B = static_cast<int>(ids.size()), N = tokens(), d = dim();
     const std::size_t M = static_cast<std::size_t>(B) * N * d;
-    const T* x = batch_.x.data();
+    windows_to_tokens(batch_, rows_);
+    const T* x = rows_.data();
     T* tokens_buf = detail::grow(tokens_, M);
     T* out = detail::grow(out_, M);
     tok_.forward(ps_, x, B, tokens_buf, train ? &tok_cache_ : nullptr, ws_);
@@ -217,7 +218,7 @@ class EncoderFeatures {
   Workspace<T> ws_;
   TokenizerCache<T> tok_cache_;
   EncoderCache<T> enc_cache_;
-  AlignedVector<T> tokens_, out_, dtokens_;
+  AlignedVector<T> rows_, tokens_, out_, dtokens_;
 };
 
 // What a training step reports to the progress callback.

@@ -17,6 +17,11 @@ struct JepaStepStats {
   double lr = 0, weight_decay = 0, momentum = 0;  // the schedule values this step used
   double grad_norm = 0;         // joint gradient norm before clipping
   double target_std = 0;        // std of the target encoder's embeddings over tokens, mean over dims
+  // Std over the batch's samples at each token and dim, averaged: how much the target embeddings
+  // depend on the input. An encoder that ignores its input and embeds each taxel by its position
+  // alone (a collapse target_std cannot see: positions differ) drives it to 0. On sparse contact
+  // data it is small (most taxels are idle in every window) and grows as pre-training learns.
+  double target_sample_std = 0;
   std::vector<double> target_losses;  // [num targets]
 };
 

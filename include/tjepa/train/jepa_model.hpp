@@ -6,6 +6,7 @@
 //   predictor  the predictor: trained
 // Checkpoint prefixes are the reference module's attribute names: "context_encoder.",
 // "target_encoder.", "predictor." (tensor names inside follow the reference PyTorch model).
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -13,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/random.hpp"
 #include "tjepa/model/encoder.hpp"
 #include "tjepa/model/init.hpp"
 #include "tjepa/model/predictor.hpp"
@@ -30,6 +32,13 @@ struct JepaConfig {
   std::vector<int> group_size;  // [N tokens] taxels per token; empty: one token per taxel
   EncoderConfig encoder;        // encoder.num_tokens = N
   PredictorConfig predictor;    // in_dim = encoder.dim; dim = encoder.dim (position rows are shared)
+  // Std of the tokenizer's initial bias (the reference: 0). With a zero bias, LayerNorm(W·x) does
+  // not see the scale of x, so an idle taxel's noise becomes a token as loud as a contact, and on
+  // sparse contact data no gradient breaks that symmetry (measured: the bias stays ~1e-3 after 1200
+  // steps). A bias well above W·noise (W ~ N(0, 0.02²)) maps idle taxels to one "no contact"
+  // token and lets the token's direction carry the contact's amplitude. Init only: checkpoints
+  // are unaffected.
+  double tokenizer_bias_std = 0.0;
 
   // The reference (REFERENCE §4): ViT-Tiny encoder, 4-block predictor of width 192.
   static JepaConfig reference(int num_tokens, int in_dim, int axes = 1) {
@@ -42,6 +51,8 @@ struct JepaConfig {
 
   void validate() const {
     require<ConfigError>(in_dim > 0, "JepaConfig: in_dim = ", in_dim, ", expected > 0");
+    require<ConfigError>(tokenizer_bias_std >= 0 && std::isfinite(tokenizer_bias_std),
+                         "JepaConfig: tokenizer_bias_std = ", tokenizer_bias_std, ", expected >= 0");
     require<ConfigError>(axes > 0 && in_dim % axes == 0, "JepaConfig: axes = ", axes,
                          ", expected > 0 and dividing in_dim = ", in_dim, " (in_dim = m·τ)");
     require<ConfigError>(group_size.empty() || static_cast<int>(group_size.size()) == encoder.num_tokens,
@@ -60,6 +71,7 @@ struct JepaConfig {
     return {{"in_dim", in_dim},
             {"axes", axes},
             {"group_size", group_size},
+            {"tokenizer_bias_std", tokenizer_bias_std},
             {"encoder",
              {{"num_tokens", e.num_tokens}, {"dim", e.dim}, {"depth", e.depth}, {"heads", e.heads},
               {"mlp_ratio", e.mlp_ratio}, {"bias", e.bias}, {"eps", e.eps}}},
@@ -91,6 +103,13 @@ class JepaModel {
     context.allocate();
     predictor_params.allocate();
     init_params(context, seed);
+    if (c.tokenizer_bias_std > 0) {
+      Rng r(seed, 0x746f6b62696173ull);  // "tokbias"
+      for (const auto& m : tokenizer.maps) {
+        T* b = context.value(m.proj.bias);
+        for (int i = 0; i < m.proj.out; ++i) b[i] = static_cast<T>(c.tokenizer_bias_std * r.normal());
+      }
+    }
     init_params(predictor_params, seed ^ 0x7072656469637472ull);  // "predictr": an unrelated stream
     target = context;
   }

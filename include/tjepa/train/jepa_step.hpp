@@ -71,6 +71,7 @@ struct JepaWorkspace {
 struct JepaLossResult {
   double loss = 0;
   double target_std = 0;
+  double target_sample_std = 0;
   std::vector<double> target_losses;  // [num targets]
 };
 
@@ -114,6 +115,8 @@ JepaLossResult jepa_loss(JepaModel<T>& model, const T* x, int B, const MaskBatch
   model.encoder.forward(model.target, tokens, B, nullptr, N, h, nullptr, w.ws, EncoderOptions{target_dp, nullptr});
   JepaLossResult result;
   result.target_std = embedding_std(h, BN, d);
+  // h as [B, N·d]: the spread over the batch at each token and dimension.
+  result.target_sample_std = embedding_std(h, static_cast<std::size_t>(B), N * d);
   if (cfg.normalize_targets) normalize_rows(h, BN, d);
 
   // Context encoder on the context tokens.
@@ -201,6 +204,7 @@ JepaStepStats jepa_train_step(JepaModel<T>& model, AdamW<T>& opt, const Training
   st.momentum = schedule.momentum_at(s);
   st.grad_norm = norm;
   st.target_std = r.target_std;
+  st.target_sample_std = r.target_sample_std;
   st.target_losses = std::move(r.target_losses);
   opt.step(st.lr, st.weight_decay);
   ema_update(model.target, model.context, st.momentum);
