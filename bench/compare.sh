@@ -2,11 +2,12 @@
 # Runs tjepa's benchmarks and PyTorch's (bench/compare_torch.py) side by side, at 1 and 2
 # threads, and writes bench/RESULTS.md. Run it on a quiet machine: `bench/compare.sh`.
 # PyTorch comes from Debian's python3-torch (installed here if missing, as root); it is never a
-# dependency of the library or its tests.
+# dependency of the library or its tests. libopenblas0-pthread is ensured too: without it Debian's
+# PyTorch falls back to the netlib reference BLAS and the comparison measures that instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source tools/deps.sh
-tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" python3-torch
+tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" python3-torch libopenblas0-pthread
 cmake --preset release -DTJEPA_BUILD_BENCHMARKS=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=OFF >/dev/null
 cmake --build --preset release --target tjepa_bench -j "$(nproc)"
 

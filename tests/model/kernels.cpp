@@ -122,6 +122,16 @@ TEST_SUITE("nn") {
       CHECK(max_rel_diff(di2, di1) < simd_tolerance<T>());
       CHECK(max_rel_diff(dW2, dW1) < simd_tolerance<T>());
       CHECK(max_rel_diff(dB2, dB1) < simd_tolerance<T>());
+      // ... with fewer outputs than inputs (dWᵀ is computed and added transposed), onto nonzero
+      // gradients, din overwritten (add_din = false) rather than added to
+      const int Nf = std::max(1, C / 2);
+      auto Wf = random_vector<T>(std::size_t(Nf) * C, rng), gf = random_vector<T>(std::size_t(M) * Nf, rng);
+      std::vector<T> dWf1(Wf.size(), T(0.25)), dWf2(Wf.size(), T(0.25)), dif1(n, T(0)), dif2(n, T(3));
+      ref::linear_backward(dif1.data(), dWf1.data(), static_cast<T*>(nullptr), gf.data(), x.data(), Wf.data(), M, C, Nf);
+      linear_backward(dif2.data(), dWf2.data(), static_cast<T*>(nullptr), gf.data(), x.data(), Wf.data(), M, C, Nf,
+                      false);
+      CHECK(max_rel_diff(dWf2, dWf1) < simd_tolerance<T>());
+      CHECK(max_rel_diff(dif2, dif1) < simd_tolerance<T>());
       // Drop-path: samples are the M rows
       std::vector<T> scale(M);
       drop_path_sample(scale.data(), 1, M, 0.4, 5);
@@ -209,6 +219,12 @@ TEST_SUITE("nn") {
       std::vector<float> dpre(x.size(), 7.0f);
       linear_backward_input_gelu(dpre.data(), g.data(), W.data(), x.data(), M, K, N);
       CHECK(max_rel_diff(dpre, expect(dx, [&](std::size_t i, double v) { return v * detail::gelu_grad(double(x[i])); })) <
+            3e-5);
+      // C = r + x·Wᵀ + b from a separate residual r (the block's residual add without a copy)
+      std::vector<float> cr(y.size(), -1.0f);
+      detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, cr.data(), N,
+                          {false, b.data(), nullptr, nullptr, c0.data()});
+      CHECK(max_rel_diff(cr, expect(y, [&](std::size_t i, double v) { return v + b[i % std::size_t(N)] + c0[i]; })) <
             3e-5);
     }
   }

@@ -46,10 +46,13 @@ struct SelfAttention {
   // x [B·L, d] → y [B·Lq, d] (y += when accumulate), Lq = L - q_from: the outputs of the query
   // rows [q_from, L) of each sample (q_from = 0: every row; the predictor's last block keeps only
   // its target rows). qkv_buf [B·L, 3d] and att [B·Lq, d] are filled (kept for backward); lse
-  // [B, H, L] may be nullptr (inference). key_valid [B, L] or nullptr.
+  // [B, H, L] may be nullptr (inference). key_valid [B, L] or nullptr. residual [B·Lq, d] (with
+  // accumulate false) or nullptr: y = residual + the output, the block's residual add without a
+  // copy of the stream.
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* qkv_buf,
-               T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws, int q_from = 0) const {
+               T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws, int q_from = 0,
+               const T* residual = nullptr) const {
     const int d = dim(), Dh = d / heads, Lq = L - q_from;
     qkv.forward(ps, x, qkv_buf, B * L);
     // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
@@ -71,21 +74,22 @@ struct SelfAttention {
                         att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
                         lse ? lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()]);
     }
-    if (accumulate)
-      proj.forward_accumulate(ps, att, y, B * Lq);
+    if (accumulate) residual = y;
+    if (residual)
+      proj.forward_residual(ps, att, residual, y, B * Lq);
     else
       proj.forward(ps, att, y, B * Lq);
   }
 
-  // dx [B·L, d] += ∂L/∂x given dy [B·Lq, d]. dqkv [B·L, 3d] and datt [B·Lq, d] are scratch.
+  // dx [B·L, d] += ∂L/∂x given dy [B·Lq, d] (= when add_dx is false). dqkv [B·L, 3d] and datt
+  // [B·Lq, d] are scratch.
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, const T* x, int B, int L, const std::uint8_t* key_valid,
                 const T* qkv_buf, const T* att, const T* lse, T* dqkv, T* datt, T* dx, Workspace<T>& ws,
-                int q_from = 0) const {
+                int q_from = 0, bool add_dx = true) const {
     const int d = dim(), Dh = d / heads, Lq = L - q_from;
     const std::size_t Mq = std::size_t(B) * Lq;
-    detail::parallel_fill(datt, datt + Mq * d, T(0));
-    proj.backward(ps, dy, att, datt, int(Mq));  // y = att · Wprojᵀ + b
+    proj.backward(ps, dy, att, datt, int(Mq), false);  // y = att · Wprojᵀ + b
     detail::parallel_fill(dqkv, dqkv + std::size_t(B) * L * 3 * d, T(0));
     const AttentionShape s = head_shape(L, q_from);
     AttentionWorkspace<T>* aws = ws.attention_per_thread();
@@ -99,7 +103,7 @@ struct SelfAttention {
                          key_valid ? key_valid + std::size_t(b) * L : nullptr, att + oo, lse + std::size_t(bh) * L,
                          datt + oo, dqkv + qo, dqkv + ko, dqkv + ko + d, aws[detail::thread_id()]);
     }
-    qkv.backward(ps, dqkv, x, dx, B * L);  // qkv = x · Wqkvᵀ + b
+    qkv.backward(ps, dqkv, x, dx, B * L, add_dx);  // qkv = x · Wqkvᵀ + b
   }
 };
 

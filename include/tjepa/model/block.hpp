@@ -208,9 +208,8 @@ struct BlockStack {
           drop_path_backward(dbranch + q * d, gq + q * d, s2 + b0, n, per_sample);
           g2 = dbranch + q * d;
         }
-        detail::parallel_fill(dln + q * d, dln + (q + rows) * d, T(0));
         blk.mlp.backward(ps, g2, c.ln2.data() + o + q * d, c.h_pre.data() + std::size_t(i) * M * hid + q * hid,
-                         h + q * hid, dh + q * hid, dln + q * d, rows);
+                         h + q * hid, dh + q * hid, dln + q * d, rows, false);
         blk.norm2.backward(ps, dln + q * d, c.x_mid.data() + o + q * d, c.mean2.data() + r + q,
                            c.rstd2.data() + r + q, gq + q * d, rows);
       });
@@ -228,10 +227,9 @@ struct BlockStack {
           drop_path_backward(dbranch + q * d, gq + q * d, s1 + b0, n, per_sample);
           g1 = dbranch + q * d;
         }
-        detail::parallel_fill(dln + f * d, dln + (f + std::size_t(n) * L) * d, T(0));
         blk.attn.backward(ps, g1, c.ln1.data() + o + f * d, n, L, kv ? kv + f : nullptr, c.qkv.data() + 3 * o + f * 3 * d,
                           c.att.data() + o + q * d, c.lse.data() + std::size_t(i) * B * H * L + std::size_t(b0) * H * L,
-                          dqkv + f * 3 * d, datt + q * d, dln + f * d, ws, q_from);
+                          dqkv + f * 3 * d, datt + q * d, dln + f * d, ws, q_from, false);
         blk.norm1.backward(ps, dln + f * d, c.xs.data() + o + f * d, c.mean1.data() + r + f, c.rstd1.data() + r + f,
                            dx + f * d, n * L);
       });
@@ -289,7 +287,10 @@ struct BlockStack {
                             Workspace<T>& ws) {
     const int d = blk.attn.dim(), H = blk.attn.heads, hid = blk.mlp.hidden(), Lq = L - q_from;
     const std::size_t per_sample = std::size_t(Lq) * d;
-    keep_rows(buf.x_mid, x_in, B, L, q_from, d);
+    // Without drop-path on all rows the residual adds read their stream in the GEMM epilogues:
+    // x_mid = x_in + attn, x_out = x_mid + mlp, no copies.
+    const bool direct1 = !buf.scale1 && q_from == 0, direct2 = !buf.scale2;
+    if (!direct1) keep_rows(buf.x_mid, x_in, B, L, q_from, d);
     for_each_kept_run(buf.scale1, B, [&](int b0, int b1) {
       const int n = b1 - b0;
       const std::size_t f = std::size_t(b0) * L, q = std::size_t(b0) * Lq;
@@ -297,18 +298,20 @@ struct BlockStack {
                         buf.rstd1 ? buf.rstd1 + f : nullptr, n * L);
       T* y = buf.scale1 ? branch + q * d : buf.x_mid + q * d;
       blk.attn.forward(ps, buf.ln1 + f * d, n, L, key_valid ? key_valid + f : nullptr, buf.qkv + f * 3 * d,
-                       buf.att + q * d, buf.lse ? buf.lse + std::size_t(b0) * H * L : nullptr, y, !buf.scale1, ws,
-                       q_from);
+                       buf.att + q * d, buf.lse ? buf.lse + std::size_t(b0) * H * L : nullptr, y,
+                       !buf.scale1 && !direct1, ws, q_from, direct1 ? x_in + f * d : nullptr);
       if (buf.scale1) drop_path_forward(buf.x_mid + q * d, branch + q * d, buf.scale1 + b0, n, per_sample);
     });
-    if (x_out != buf.x_mid) detail::parallel_copy(buf.x_mid, buf.x_mid + std::size_t(B) * per_sample, x_out);
+    if (x_out != buf.x_mid && !direct2)
+      detail::parallel_copy(buf.x_mid, buf.x_mid + std::size_t(B) * per_sample, x_out);
     for_each_kept_run(buf.scale2, B, [&](int b0, int b1) {
       const int n = b1 - b0, rows = n * Lq;
       const std::size_t q = std::size_t(b0) * Lq;
       blk.norm2.forward(ps, buf.x_mid + q * d, buf.ln2 + q * d, buf.mean2 ? buf.mean2 + q : nullptr,
                         buf.rstd2 ? buf.rstd2 + q : nullptr, rows);
       T* y = buf.scale2 ? branch + q * d : x_out + q * d;
-      blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, !buf.scale2);
+      blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, false,
+                      direct2 ? buf.x_mid + q * d : nullptr);
       if (buf.scale2) drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
     });
   }

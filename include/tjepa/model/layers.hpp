@@ -61,11 +61,16 @@ struct LinearParams {
   void forward_accumulate(const ParamSet<T>& ps, const T* x, T* y, int M) const {
     linear_forward_accumulate(y, x, ps.value(weight), b(ps), M, in, out);
   }
-  // dx (may be nullptr) += dy · W; dW += dyᵀ · x; db += Σ dy
+  // y[M, out] = r[M, out] + x · Wᵀ + b (r may equal y)
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dy, const T* x, T* dx, int M) const {
+  void forward_residual(const ParamSet<T>& ps, const T* x, const T* r, T* y, int M) const {
+    linear_forward_residual(y, r, x, ps.value(weight), b(ps), M, in, out);
+  }
+  // dx (may be nullptr) += dy · W (= when add_dx is false); dW += dyᵀ · x; db += Σ dy
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, T* dx, int M, bool add_dx = true) const {
     linear_backward(dx, ps.grad(weight), has_bias ? ps.grad(bias) : nullptr, dy, x, ps.value(weight), M, in,
-                    out);
+                    out, add_dx);
   }
 };
 

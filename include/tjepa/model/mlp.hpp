@@ -26,11 +26,14 @@ struct Mlp {
 
   // x [M, d] → y [M, out] (y += when accumulate: the residual add). h_pre [M, hidden] receives
   // fc1's output + bias (kept for backward), h [M, hidden] the activation; h may equal h_pre.
+  // residual [M, out] (with accumulate false) or nullptr: y = residual + the output.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, bool accumulate) const {
+  void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, bool accumulate,
+               const T* residual = nullptr) const {
     linear_bias_gelu_forward(h, h_pre, x, ps.value(fc1.weight), fc1.b(ps), M, fc1.in, fc1.out);
-    if (accumulate)
-      fc2.forward_accumulate(ps, h, y, M);
+    if (accumulate) residual = y;
+    if (residual)
+      fc2.forward_residual(ps, h, residual, y, M);
     else
       fc2.forward(ps, h, y, M);
   }
@@ -38,12 +41,14 @@ struct Mlp {
   // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]. h, dh [M, hidden] are scratch (h is recomputed from
   // h_pre rather than kept: the largest activation of a block).
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M) const {
+  // add_dx = false: dx = ∂L/∂x (overwritten).
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M,
+                bool add_dx = true) const {
     gelu_forward(h, h_pre, std::size_t(M) * std::size_t(fc1.out));
     fc2.backward(ps, dy, h, static_cast<T*>(nullptr), M);  // y = h · W2ᵀ + b2: dW2, db2
     // dh = ∂L/∂h_pre = (dy · W2) ⊙ gelu'(h_pre), one fused product.
     linear_backward_input_gelu(dh, dy, ps.value(fc2.weight), h_pre, M, fc2.in, fc2.out);
-    fc1.backward(ps, dh, x, dx, M);  // h_pre = x · W1ᵀ + b1
+    fc1.backward(ps, dh, x, dx, M, add_dx);  // h_pre = x · W1ᵀ + b1
   }
 };
 

@@ -19,6 +19,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
+#include "tjepa/model/detail/parallel.hpp"
 
 namespace tjepa {
 
@@ -104,7 +105,7 @@ class ParamSet {
   std::span<T> grad_span(const ParamId& id) { return {grad(id), id.size}; }
   std::span<const T> grad_span(const ParamId& id) const { return {grad(id), id.size}; }
 
-  void zero_grad() { std::fill(grad_.begin(), grad_.end(), T(0)); }
+  void zero_grad() { detail::parallel_fill(grad_.data(), grad_.data() + grad_.size(), T(0)); }
 
   // Iteration by name, in registration order.
   const std::vector<ParamInfo>& infos() const { return infos_; }

@@ -79,22 +79,46 @@ void parallel_copy(const T* first, const T* last, T* out) {
 }
 
 // db[N] += Σ_m x[m, :] for x [M, N]: columns split over the threads above the grain, each column
-// summed on its own first so that adding twice gives exactly twice.
+// summed on its own first so that adding twice gives exactly twice. A thread walks its columns in
+// chunks of up to 128 that it sums row by row: contiguous, vectorized reads of x.
 template <class T>
 void add_column_sums(T* db, const T* x, int M, int N) {
-  constexpr int C = 16;
-  const int blocks = (N + C - 1) / C;
+  constexpr int G = 16, C = 128;
+  const int groups = (N + G - 1) / G;
   [[maybe_unused]] const int threads =
-      std::size_t(M) * std::size_t(N) > parallel_grain ? std::min(max_threads(), blocks) : 1;
-  TJEPA_OMP(omp parallel for schedule(static) num_threads(threads) if (threads > 1))
-  for (int blk = 0; blk < blocks; ++blk) {
-    const int n0 = blk * C, nc = std::min(C, N - n0);
-    T acc[C] = {};
-    for (int m = 0; m < M; ++m) {
-      const T* r = x + std::size_t(m) * std::size_t(N) + n0;
-      for (int j = 0; j < nc; ++j) acc[j] += r[j];
+      std::size_t(M) * std::size_t(N) > parallel_grain ? std::min(max_threads(), groups) : 1;
+  TJEPA_OMP(omp parallel num_threads(threads) if (threads > 1))
+  {
+    const int t = thread_id(), n = team_size();
+    const int c1 = std::min(N, groups * (t + 1) / n * G);
+    for (int n0 = std::min(N, groups * t / n * G); n0 < c1; n0 += C) {
+      const int nc = std::min(C, c1 - n0);
+      alignas(64) T acc[C] = {};
+      for (int m = 0; m < M; ++m) {
+        const T* r = x + std::size_t(m) * std::size_t(N) + n0;
+        for (int j = 0; j < nc; ++j) acc[j] += r[j];
+      }
+      for (int j = 0; j < nc; ++j) db[n0 + j] += acc[j];
     }
-    for (int j = 0; j < nc; ++j) db[n0 + j] += acc[j];
+  }
+}
+
+// dst[C, R] += srcᵀ for src [R, C], in 16 × 16 tiles (each line of src and dst read once); rows
+// of dst split over the threads above the grain.
+template <class T>
+void add_transposed(T* dst, const T* src, int R, int C) {
+  constexpr int B = 16;
+  const int blocks = (C + B - 1) / B;
+  [[maybe_unused]] const int threads =
+      std::size_t(R) * std::size_t(C) > parallel_grain ? std::min(max_threads(), blocks) : 1;
+  TJEPA_OMP(omp parallel for schedule(static) num_threads(threads) if (threads > 1))
+  for (int cb = 0; cb < blocks; ++cb) {
+    const int c0 = cb * B, c1 = std::min(C, c0 + B);
+    for (int r0 = 0; r0 < R; r0 += B) {
+      const int r1 = std::min(R, r0 + B);
+      for (int c = c0; c < c1; ++c)
+        for (int r = r0; r < r1; ++r) dst[std::size_t(c) * R + r] += src[std::size_t(r) * C + c];
+    }
   }
 }
 

@@ -37,12 +37,14 @@ enum class Order { row_major, col_major };
 // What happens to a finished tile. bias [cols] is added once; gelu [rows, ldc]: C keeps the
 // pre-activation and gelu receives gelu(C) (the MLP's fc1). accumulate: C += A·B, else C = A·B.
 // gelu_grad [rows, ldc] (with accumulate = false): C = (A·B) ⊙ gelu'(gelu_grad), the MLP's
-// backward through its GELU fused into the product that yields ∂L/∂h.
+// backward through its GELU fused into the product that yields ∂L/∂h. residual [rows, ldc] (with
+// accumulate = false; may equal C): C = residual + A·B, a residual add without a copy of the stream.
 struct Epilogue {
   bool accumulate = false;
   const float* bias = nullptr;
   float* gelu = nullptr;
   const float* gelu_grad = nullptr;
+  const float* residual = nullptr;
 };
 
 inline V gelu(V x) { return detail::gelu<float>(x); }
@@ -54,37 +56,72 @@ inline float gelu(float x) {
   return y;
 }
 
-// C[R, cols ≤ NR] over one depth block of kc: a(i, k) = a[i·ars + k·acs], b packed [kc][NR].
-// load_c: C already holds a partial sum (or the value accumulated into); bias on the first depth
-// block, g (gelu output) and gg (gelu_grad input) on the last.
-template <int R>
-void micro_kernel(int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs, const float* b, float* c,
-                  std::ptrdiff_t ldc, int cols, bool load_c, const float* bias, float* g, const float* gg) {
+// acc[R][NR] = A · B over one depth block of kc: a(i, k) = a[i·lda + k] (AO row-major) or
+// a[k·lda + i] (column-major), b packed [kc][NR]. pf: the next row block's A, prefetched while
+// this one computes (A is read in place, and in a training step it comes cold from memory);
+// nullptr: none. Not inlined: with only the loop's own values live, g++ keeps all R·NV
+// accumulators in registers (inlined into the epilogue's many arguments, it spills some).
+template <Order AO, int R>
+[[gnu::noinline]] void depth_loop(int kc, const float* a, std::ptrdiff_t lda, const float* b, const float* pf,
+                                  float* acc_out) {
   V acc[R][NV];
 #pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
 #pragma GCC unroll 4
     for (int j = 0; j < NV; ++j) acc[i][j] = V(0.0f);
-  for (int k = 0; k < kc; ++k) {
-    V bv[NV];
-#pragma GCC unroll 4
-    for (int j = 0; j < NV; ++j) bv[j] = V::load_aligned(b + std::ptrdiff_t(k) * NR + j * W);
-    const float* ak = a + k * acs;
+  constexpr int line = 64 / int(sizeof(float));
+  for (int k0 = 0; k0 < kc; k0 += line) {
+    const int k1 = std::min(kc, k0 + line);
+    // Row-major A: one line of each of the next block's rows per line of depth.
+    if (AO == Order::row_major && pf)
 #pragma GCC unroll 8
-    for (int i = 0; i < R; ++i) {
-      const V ai(ak[i * ars]);
+      for (int i = 0; i < MR; ++i) __builtin_prefetch(pf + i * lda + k0);
+    for (int k = k0; k < k1; ++k) {
+      V bv[NV];
 #pragma GCC unroll 4
-      for (int j = 0; j < NV; ++j) acc[i][j] = xsimd::fma(ai, bv[j], acc[i][j]);
+      for (int j = 0; j < NV; ++j) bv[j] = V::load_aligned(b + std::ptrdiff_t(k) * NR + j * W);
+      // Column-major A: the next block's MR values at this depth (one line, or two).
+      if (AO == Order::col_major && pf) {
+        __builtin_prefetch(pf + k * lda);
+        __builtin_prefetch(pf + k * lda + MR - 1);
+      }
+#pragma GCC unroll 8
+      for (int i = 0; i < R; ++i) {
+        const V ai(AO == Order::row_major ? a[i * lda + k] : a[k * lda + i]);
+#pragma GCC unroll 4
+        for (int j = 0; j < NV; ++j) acc[i][j] = xsimd::fma(ai, bv[j], acc[i][j]);
+      }
     }
   }
+#pragma GCC unroll 8
+  for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
+    for (int j = 0; j < NV; ++j) acc[i][j].store_aligned(acc_out + i * NR + j * W);
+}
+
+// C[R, cols ≤ NR] from one depth block (see depth_loop). c_in [R, ldc]: what the product is added
+// to (C itself holding a partial sum or the value accumulated into, or the residual) or nullptr;
+// bias on the first depth block, g (gelu output) and gg (gelu_grad input) on the last.
+template <Order AO, int R>
+void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, float* c, std::ptrdiff_t ldc, int cols,
+                  const float* c_in, const float* bias, float* g, const float* gg, const float* pf) {
+  // The tile's C (and GELU input) lines arrive while the depth loop runs.
+  for (int i = 0; i < R; ++i)
+    for (int j = 0; j < NV; ++j) {
+      __builtin_prefetch(c + i * ldc + j * W, 1);
+      if (c_in && c_in != c) __builtin_prefetch(c_in + i * ldc + j * W);
+      if (gg) __builtin_prefetch(gg + i * ldc + j * W);
+    }
+  alignas(64) float tile[R * NR];
+  depth_loop<AO, R>(kc, a, lda, b, pf, tile);
   if (cols == NR) {
 #pragma GCC unroll 8
     for (int i = 0; i < R; ++i) {
       float* ci = c + i * ldc;
 #pragma GCC unroll 4
       for (int j = 0; j < NV; ++j) {
-        V v = acc[i][j];
-        if (load_c) v += V::load_unaligned(ci + j * W);
+        V v = V::load_aligned(tile + i * NR + j * W);
+        if (c_in) v += V::load_unaligned(c_in + i * ldc + j * W);
         if (bias) v += V::load_unaligned(bias + j * W);
         if (gg) v *= gelu_grad(V::load_unaligned(gg + i * ldc + j * W));
         v.store_unaligned(ci + j * W);
@@ -93,13 +130,11 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs
     }
     return;
   }
-  alignas(64) float tile[NR];
   for (int i = 0; i < R; ++i) {
-    for (int j = 0; j < NV; ++j) acc[i][j].store_aligned(tile + j * W);
     float* ci = c + i * ldc;
     for (int j = 0; j < cols; ++j) {
-      float v = tile[j];
-      if (load_c) v += ci[j];
+      float v = tile[i * NR + j];
+      if (c_in) v += c_in[i * ldc + j];
       if (bias) v += bias[j];
       if (gg) v *= gelu_grad(gg[i * ldc + j]);
       ci[j] = v;
@@ -108,63 +143,77 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs
   }
 }
 
-using Kernel = void (*)(int, const float*, std::ptrdiff_t, std::ptrdiff_t, const float*, float*, std::ptrdiff_t, int,
-                        bool, const float*, float*, const float*);
-template <int... R>
+using Kernel = void (*)(int, const float*, std::ptrdiff_t, const float*, float*, std::ptrdiff_t, int, const float*,
+                        const float*, float*, const float*, const float*);
+template <Order AO, int... R>
 constexpr auto kernel_table(std::integer_sequence<int, R...>) {
-  return std::array<Kernel, sizeof...(R)>{&micro_kernel<R + 1>...};
+  return std::array<Kernel, sizeof...(R)>{&micro_kernel<AO, R + 1>...};
 }
-// kernels[R - 1] handles R rows: the last row block of a split may be short.
-inline constexpr auto kernels = kernel_table(std::make_integer_sequence<int, MR>{});
+// kernels[order][R - 1] handles R rows: the last row block of a split may be short.
+inline constexpr std::array<std::array<Kernel, MR>, 2> kernels = {
+    kernel_table<Order::row_major>(std::make_integer_sequence<int, MR>{}),
+    kernel_table<Order::col_major>(std::make_integer_sequence<int, MR>{})};
 
 // B(k, n) = b[k·ldb + n] (row-major) or b[n·ldb + k] (column-major, a PyTorch weight [cols, depth]
-// read as its transpose) → panel p of dst: [depth][NR], columns p·NR + j.
-inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p) {
+// read as its transpose) → depths [k0, k1) of panel p of dst: [depth][NR], columns p·NR + j.
+// k0 is a multiple of 16.
+inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p, int k0,
+                       int k1) {
   const int n0 = p * NR, nc = std::min(NR, cols - n0);
   float* d = dst + std::ptrdiff_t(p) * depth * NR;
   if (order == Order::row_major) {
-    for (int k = 0; k < depth; ++k) {
+    for (int k = k0; k < k1; ++k) {
       const float* s = b + std::ptrdiff_t(k) * ldb + n0;
       float* o = d + std::ptrdiff_t(k) * NR;
-      std::copy(s, s + nc, o);
-      std::fill(o + nc, o + NR, 0.0f);
+      if (nc == NR) {  // a whole row in registers: no memmove call per 256 bytes
+#pragma GCC unroll 4
+        for (int j = 0; j < NV; ++j) V::load_unaligned(s + j * W).store_aligned(o + j * W);
+      } else {
+        std::copy(s, s + nc, o);
+        std::fill(o + nc, o + NR, 0.0f);
+      }
     }
     return;
   }
   // A transpose in 16 × nc tiles: each source row's cache line is read once, each packed row
   // written whole.
   constexpr int T = 16;
-  for (int k0 = 0; k0 < depth; k0 += T) {
-    const int kt = std::min(T, depth - k0);
+  for (int t0 = k0; t0 < k1; t0 += T) {
+    const int kt = std::min(T, k1 - t0);
     for (int j = 0; j < nc; ++j) {
-      const float* s = b + std::ptrdiff_t(n0 + j) * ldb + k0;
-      for (int k = 0; k < kt; ++k) d[std::ptrdiff_t(k0 + k) * NR + j] = s[k];
+      const float* s = b + std::ptrdiff_t(n0 + j) * ldb + t0;
+      for (int k = 0; k < kt; ++k) d[std::ptrdiff_t(t0 + k) * NR + j] = s[k];
     }
     for (int k = 0; k < kt; ++k) {
-      float* o = d + std::ptrdiff_t(k0 + k) * NR;
+      float* o = d + std::ptrdiff_t(t0 + k) * NR;
       std::fill(o + nc, o + NR, 0.0f);
     }
   }
 }
 
 // Rows [r0, r1) of C from the packed B.
-inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t ars, std::ptrdiff_t acs,
+inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
                          const float* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
+  const std::ptrdiff_t ars = a_order == Order::row_major ? lda : 1, acs = a_order == Order::row_major ? 1 : lda;
+  const auto& table = kernels[a_order == Order::row_major ? 0 : 1];
   const int panels = (cols + NR - 1) / NR;
   for (int k0 = 0; k0 < depth; k0 += KC) {
     const int kc = std::min(KC, depth - k0);
     const bool first = k0 == 0, last = k0 + kc == depth;
-    const bool load_c = !first || e.accumulate;
+    const float* c_in = !first || e.accumulate ? C : e.residual;
     for (int i0 = r0; i0 < r1; i0 += MR) {
       const int R = std::min(MR, r1 - i0);
-      const Kernel kern = kernels[std::size_t(R - 1)];
+      const Kernel kern = table[std::size_t(R - 1)];
       const float* a = A + i0 * ars + k0 * acs;
+      // A is read in place: its next row block is prefetched during this one's first panel (a
+      // whole block when the next one is short, harmlessly).
+      const float* next = i0 + MR < r1 ? a + MR * ars : nullptr;
       for (int p = 0; p < panels; ++p) {
         const int n0 = p * NR;
-        kern(kc, a, ars, acs, packed + (std::ptrdiff_t(p) * depth + k0) * NR, C + i0 * ldc + n0, ldc,
-             std::min(NR, cols - n0), load_c, first && e.bias ? e.bias + n0 : nullptr,
+        kern(kc, a, lda, packed + (std::ptrdiff_t(p) * depth + k0) * NR, C + i0 * ldc + n0, ldc,
+             std::min(NR, cols - n0), c_in ? c_in + i0 * ldc + n0 : nullptr, first && e.bias ? e.bias + n0 : nullptr,
              last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
-             last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr);
+             last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr, p == 0 ? next : nullptr);
       }
     }
   }
@@ -180,13 +229,13 @@ inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t l
     for (int i = 0; i < rows; ++i)
       for (int j = 0; j < cols; ++j) {
         float& c = C[std::ptrdiff_t(i) * ldc + j];
-        c = (e.accumulate ? c : 0.0f) + (e.bias ? e.bias[j] : 0.0f);
+        c = (e.accumulate ? c : e.residual ? e.residual[std::ptrdiff_t(i) * ldc + j] : 0.0f) +
+            (e.bias ? e.bias[j] : 0.0f);
         if (e.gelu_grad) c = 0.0f;
         if (e.gelu) e.gelu[std::ptrdiff_t(i) * ldc + j] = gelu(c);
       }
     return;
   }
-  const std::ptrdiff_t ars = a_order == Order::row_major ? lda : 1, acs = a_order == Order::row_major ? 1 : lda;
   const int panels = (cols + NR - 1) / NR;
   thread_local AlignedVector<float> pack;
   float* packed = grow(pack, std::size_t(panels) * std::size_t(depth) * NR);
@@ -194,18 +243,24 @@ inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t l
   const int blocks = (rows + MR - 1) / MR;
   const int threads = flops > parallel_min_flops ? std::min(max_threads(), blocks) : 1;
   if (threads <= 1) {
-    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p);
-    compute_rows(0, rows, cols, depth, A, ars, acs, packed, C, ldc, e);
+    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth);
+    compute_rows(0, rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
     return;
   }
   TJEPA_OMP(omp parallel num_threads(threads))
   {
+    // Packing tasks of one panel × one depth block: a long depth (dW) with few panels still
+    // splits evenly.
+    const int kblocks = (depth + KC - 1) / KC;
     TJEPA_OMP(omp for schedule(static))
-    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p);
+    for (int task = 0; task < panels * kblocks; ++task) {
+      const int kb = task % kblocks;
+      pack_panel(packed, B, ldb, b_order, depth, cols, task / kblocks, kb * KC, std::min(depth, (kb + 1) * KC));
+    }
     // Whole MR-row blocks, as even as possible.
     const int t = thread_id(), n = team_size();
     const int b0 = blocks * t / n, b1 = blocks * (t + 1) / n;
-    compute_rows(std::min(rows, b0 * MR), std::min(rows, b1 * MR), cols, depth, A, ars, acs, packed, C, ldc, e);
+    compute_rows(std::min(rows, b0 * MR), std::min(rows, b1 * MR), cols, depth, A, lda, a_order, packed, C, ldc, e);
   }
 }
 

@@ -2,6 +2,7 @@
 // LayerNorm over the last dimension of [M, C] rows (PyTorch semantics, biased variance):
 //   out = (x - mean) · rstd · w + b,   rstd = 1 / sqrt(var + eps).
 // mean[M] and rstd[M] are what backward needs; pass nullptr for inference.
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 
@@ -132,21 +133,40 @@ void layer_norm_backward(T* din, T* dw, T* db, const T* dout, const T* in, const
       }
     }
   }
-  // Parameter gradients: a reduction over rows, summed per column block in registers and added
-  // once, so that a second backward adds exactly the same amount (and the order is fixed).
-  std::size_t i = 0;
-  for (; i + W <= n; i += W) {
-    V aw(T(0)), ab(T(0));
-    for (int m = 0; m < M; ++m) {
-      const V gv = xsimd::load_unaligned(dout + std::size_t(m) * n + i);
-      const V xh = (xsimd::load_unaligned(in + std::size_t(m) * n + i) - V(mean[m])) * V(rstd[m]);
-      aw = xsimd::fma(gv, xh, aw);
-      ab += gv;
+  // Parameter gradients: a reduction over rows, summed per column in registers and added once,
+  // so that a second backward adds exactly the same amount (and the order is fixed whatever the
+  // thread count). Columns are split over the threads in whole vectors; a thread walks its
+  // columns in chunks of up to CV vectors row by row (contiguous reads of dout and in).
+  constexpr std::size_t CV = 8;
+  const std::size_t nvec = n / W;
+  [[maybe_unused]] const int threads =
+      std::size_t(M) * n > detail::parallel_grain ? std::min<int>(detail::max_threads(), int(std::max<std::size_t>(nvec, 1))) : 1;
+  TJEPA_OMP(omp parallel num_threads(threads) if (threads > 1))
+  {
+    const std::size_t t = std::size_t(detail::thread_id()), k = std::size_t(detail::team_size());
+    const std::size_t v1 = nvec * (t + 1) / k;
+    for (std::size_t v0 = nvec * t / k; v0 < v1; v0 += CV) {
+      const std::size_t nv = std::min(CV, v1 - v0);
+      V aw[CV], ab[CV];
+      for (std::size_t v = 0; v < CV; ++v) aw[v] = ab[v] = V(T(0));
+      for (int m = 0; m < M; ++m) {
+        const T* g = dout + std::size_t(m) * n + v0 * W;
+        const T* x = in + std::size_t(m) * n + v0 * W;
+        const V vmu(mean[m]), vrs(rstd[m]);
+        for (std::size_t v = 0; v < nv; ++v) {
+          const V gv = xsimd::load_unaligned(g + v * W);
+          aw[v] = xsimd::fma(gv, (xsimd::load_unaligned(x + v * W) - vmu) * vrs, aw[v]);
+          ab[v] += gv;
+        }
+      }
+      for (std::size_t v = 0; v < nv; ++v) {
+        const std::size_t c = (v0 + v) * W;
+        (xsimd::load_unaligned(dw + c) + aw[v]).store_unaligned(dw + c);
+        (xsimd::load_unaligned(db + c) + ab[v]).store_unaligned(db + c);
+      }
     }
-    (xsimd::load_unaligned(dw + i) + aw).store_unaligned(dw + i);
-    (xsimd::load_unaligned(db + i) + ab).store_unaligned(db + i);
   }
-  for (; i < n; ++i) {
+  for (std::size_t i = nvec * W; i < n; ++i) {
     T aw = 0, ab = 0;
     for (int m = 0; m < M; ++m) {
       const T g = dout[std::size_t(m) * n + i];

@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <type_traits>
 
+#include "tjepa/core/aligned.hpp"
 #include "tjepa/core/eigen.hpp"
 #include "tjepa/model/detail/gemm.hpp"
 #include "tjepa/model/detail/sgemm.hpp"
@@ -60,29 +61,51 @@ void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, i
   detail::gemm_accumulate<Eigen::RowMajor, Eigen::ColMajor>(M, N, K, in, K, w, K, out, N);
 }
 
-// out[M, N] += in[M, K] · wᵀ (+ b): the residual add fused into the GEMM's accumulation.
+// out[M, N] = residual[M, N] + in[M, K] · wᵀ (+ b): the residual add fused into the GEMM's
+// epilogue. residual may equal out (out += ...).
 template <class T>
-void linear_forward_accumulate(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
+void linear_forward_residual(T* out, const T* residual, const T* in, const T* w, const T* b, int M, int K, int N) {
   if constexpr (std::is_same_v<T, float>) {
     using detail::sgemm::Order;
-    detail::sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, {true, b, nullptr});
+    detail::sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N,
+                        {false, b, nullptr, nullptr, residual});
     return;
   }
-  if (b) MatrixMap<T>(out, M, N).rowwise() += ConstRowVectorMap<T>(b, N);
+  MatrixMap<T> o(out, M, N);
+  if (residual != out) o = ConstMatrixMap<T>(residual, M, N);
+  if (b) o.rowwise() += ConstRowVectorMap<T>(b, N);
   detail::gemm_accumulate<Eigen::RowMajor, Eigen::ColMajor>(M, N, K, in, K, w, K, out, N);
+}
+
+// out[M, N] += in[M, K] · wᵀ (+ b).
+template <class T>
+void linear_forward_accumulate(T* out, const T* in, const T* w, const T* b, int M, int K, int N) {
+  linear_forward_residual(out, static_cast<const T*>(out), in, w, b, M, K, N);
 }
 
 // Differentiates out = in · wᵀ + b:
 //   din[M, K] += dout · w,   dw[N, K] += doutᵀ · in,   db[N] += Σ_m dout[m, :].
-// Any of din, dw, db may be nullptr (not wanted).
+// Any of din, dw, db may be nullptr (not wanted). add_din = false: din = dout · w (overwritten,
+// so the caller need not zero it first).
 template <class T>
 void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* w, int M, int K,
-                     int N) {
+                     int N, bool add_din = true) {
   if constexpr (std::is_same_v<T, float>) {
     using detail::sgemm::Order;
-    if (din) detail::sgemm::gemm(M, K, N, dout, N, Order::row_major, w, K, Order::row_major, din, K, {true});
-    if (dw) detail::sgemm::gemm(N, K, M, dout, N, Order::col_major, in, K, Order::row_major, dw, K, {true});
+    if (din) detail::sgemm::gemm(M, K, N, dout, N, Order::row_major, w, K, Order::row_major, din, K, {add_din});
+    if (dw && N < K) {
+      // Few outputs (fc2: 192 × 768): the product is computed as dwᵀ [K, N] = inᵀ · dout, whose
+      // packed B (dout) per depth block is N columns instead of K and stays in L2, then added
+      // transposed.
+      thread_local AlignedVector<float> dwt;
+      float* t = detail::grow(dwt, std::size_t(K) * std::size_t(N));
+      detail::sgemm::gemm(K, N, M, in, K, Order::col_major, dout, N, Order::row_major, t, N);
+      detail::add_transposed(dw, t, K, N);
+    } else if (dw) {
+      detail::sgemm::gemm(N, K, M, dout, N, Order::col_major, in, K, Order::row_major, dw, K, {true});
+    }
   } else {
+    if (din && !add_din) std::fill(din, din + std::size_t(M) * std::size_t(K), T(0));
     if (din) detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, din, K);
     if (dw) detail::gemm_accumulate<Eigen::ColMajor, Eigen::RowMajor>(N, K, M, dout, N, in, K, dw, K);
   }
