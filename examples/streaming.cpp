@@ -13,7 +13,7 @@
 // control-loop rate over a ring buffer of the last τ frames of the 368-taxel Allegro hand.
 //
 // Each tick: one new frame arrives [N, m] → preprocessed in place → written into the ring
-// [τ, N, m] → the window is copied out taxel-major [N, τ, m] (oldest frame first) → tokenizer →
+// [τ, N, m] → the window is copied out as tokenizer rows [N, m·τ] (oldest frame first) → tokenizer →
 // encoder (all N tokens) → probe → force (3) and indenter logits. Every buffer is made before the
 // loop and the modules' workspaces stop growing after the first tick, so the steady state
 // allocates nothing: every malloc of the process is counted and the example checks it.
