@@ -8,8 +8,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source tools/deps.sh
 tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" python3-torch libopenblas0-pthread
-cmake --preset release -DTJEPA_BUILD_BENCHMARKS=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=OFF >/dev/null
-cmake --build --preset release --target tjepa_bench -j "$(nproc)"
+cmake --preset release -DTJEPA_BUILD_BENCHMARKS=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=ON >/dev/null
+cmake --build --preset release --target tjepa_bench tjepa_streaming -j "$(nproc)"
 
 out=build/compare
 mkdir -p "$out"
@@ -24,5 +24,22 @@ for t in 1 2; do
     /usr/bin/python3 bench/compare_torch.py --threads "$t" > "$out/torch_t$t.jsonl"
 done
 /usr/bin/python3 bench/make_results.py "$out" > "$out/RESULTS.md"
+# The inference goal (issue 8): latency per control-loop tick, p99 against p50, and allocations.
+echo "tjepa_streaming" >&2
+{
+  echo
+  echo "## Inference latency"
+  echo
+  echo "\`OMP_NUM_THREADS=1 build/release/examples/tjepa_streaming --ticks 2000 --rate 0\` (the demo's encoder,"
+  echo "d = 96, 4 blocks, 368 taxels, batch 1, one thread), three runs:"
+  echo
+  echo "| run | p50 µs | p99 µs | p99/p50 | allocations in steady state |"
+  echo "|---|---|---|---|---|"
+  for r in 1 2 3; do
+    OMP_NUM_THREADS=1 build/release/examples/tjepa_streaming --ticks 2000 --rate 0 |
+      awk -v r="$r" '/^latency/ { p50 = $5; p99 = $8 } /^allocations/ { a = $5 }
+        END { printf "| %d | %d | %d | %.2f | %d |\n", r, p50, p99, p99 / p50, a }'
+  done
+} >> "$out/RESULTS.md"
 mv "$out/RESULTS.md" bench/RESULTS.md
 echo "wrote bench/RESULTS.md" >&2
