@@ -10,6 +10,10 @@
 #include <doctest/doctest.h>
 
 #include <tjepa/tjepa.hpp>
+// The modules this file tests (the umbrella above holds them all; named here so each is traceable).
+#include <tjepa/train/health.hpp>
+#include <tjepa/train/jepa_model.hpp>
+#include <tjepa/train/jepa_step.hpp>
 
 #include <cmath>
 #include <cstring>
