@@ -114,6 +114,8 @@ int main(int argc, char** argv) {
   auto* demo = app.add_subcommand("demo", "Pre-train on simulated Allegro data, then compare probes on held-out data");
   demo->add_option("--seed", dm.seed, "seed of everything (data, init, masks)")->capture_default_str();
   demo->add_option("--out", dm.out, "output directory")->capture_default_str();
+  std::string demo_config;
+  demo->add_option("--config", demo_config, "JSON run configuration (keys as in the checkpoint's config.run); flags override it");
   run_override<int>(demo, "--steps", "steps", demo_overrides, "pre-training steps");
   run_override<int>(demo, "--batch", "batch", demo_overrides, "pre-training batch");
   run_override<int>(demo, "--warmup", "warmup_steps", demo_overrides, "pre-training warm-up steps");
@@ -159,6 +161,7 @@ int main(int argc, char** argv) {
     if (*probe) return run_probe(pb, std::cout);
     if (*embed) return run_embed(eo, std::cout);
     if (*demo) {
+      if (!demo_config.empty()) dm.run = RunConfig::from_file(demo_config);
       dm.run.update(demo_overrides, "command line");
       return run_demo(dm, std::cout);
     }

@@ -466,7 +466,9 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
       << model.context.numel() << " parameters); predictor " << o.run.predictor_depth << " blocks ("
       << model.predictor_params.numel() << ")\n";
   out << "pre-training: " << pre_src.size() << " unlabelled windows, " << o.run.steps << " steps of " << o.run.batch
-      << ", lr " << o.run.lr << ", reference masks (2 local + 2 global targets over the taxel graph)\n"
+      << ", lr " << o.run.lr << ", masks: " << o.run.local_targets << " local + " << o.run.global_targets
+      << " global targets of " << o.run.target_ratio_lo << "-" << o.run.target_ratio_hi << " of the taxels, context "
+      << o.run.context_ratio_lo << "-" << o.run.context_ratio_hi << "\n"
       << std::flush;
   PretrainOutcome pr;
   if (loaded) {
