@@ -74,6 +74,8 @@ int main(int argc, char** argv) {
   pretrain->add_option("--preprocess", po.preprocess, "magnetic | standardize | none");
   pretrain->add_option("--axes", po.axes, "axes per taxel of text recordings")->capture_default_str();
   pretrain->add_option("--simulate", po.simulate_frames, "frames of simulated data")->capture_default_str();
+  pretrain->add_option("--simulate-contacts", po.simulate_contacts, "indenters touching at once in simulated data")
+      ->capture_default_str();
   pretrain->add_option("--out", po.out, "output directory")->capture_default_str();
   pretrain->add_flag("--force", po.force, "overwrite an existing checkpoint");
   pretrain->add_flag("--quiet", po.quiet, "no progress line");
@@ -128,6 +130,8 @@ int main(int argc, char** argv) {
   run_override<double>(demo, "--tokenizer-bias", "tokenizer_bias_std", demo_overrides,
                        "std of the tokenizer's initial bias (reference: 0)");
   demo->add_option("--pretrain-frames", dm.pretrain_frames, "unlabelled simulated frames")->capture_default_str();
+  demo->add_option("--pretrain-contacts", dm.pretrain_contacts, "indenters touching at once in the unlabelled data")
+      ->capture_default_str();
   demo->add_option("--probe-frames", dm.probe_frames, "labelled simulated frames (probe training)")->capture_default_str();
   demo->add_option("--probe-windows", dm.probe_windows, "labelled training windows")->capture_default_str();
   demo->add_option("--probe-epochs", dm.probe.epochs, "probe epochs (also the end-to-end budget)")->capture_default_str();

@@ -290,11 +290,11 @@ struct SimulatedData {
 };
 
 inline SimulatedData simulate(const Skin& skin, std::uint64_t seed, int pretrain_frames, int probe_frames,
-                              int test_frames, int baseline_frames = 300) {
+                              int test_frames, int pretrain_contacts = 1, int baseline_frames = 300) {
   SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, seed);
   SimulatedData d;
   d.baseline = sim.record_baseline(baseline_frames);
-  d.pretrain = sim.record(pretrain_frames).recording;
+  d.pretrain = sim.record(pretrain_frames, pretrain_contacts).recording;
   d.probe_train = sim.record(probe_frames);
   d.test = sim.record(test_frames);
   return d;
