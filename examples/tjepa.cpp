@@ -165,7 +165,7 @@ int main(int argc, char** argv) {
     if (*probe) return run_probe(pb, std::cout);
     if (*embed) return run_embed(eo, std::cout);
     if (*demo) {
-      if (!demo_config.empty()) dm.run = RunConfig::from_file(demo_config);
+      if (!demo_config.empty()) dm.run.update_from_file(demo_config);
       dm.run.update(demo_overrides, "command line");
       return run_demo(dm, std::cout);
     }

@@ -209,7 +209,8 @@ struct RunConfig {
       }
     }
   }
-  static RunConfig from_file(const std::filesystem::path& path) {
+  // Overrides the fields a JSON file names.
+  void update_from_file(const std::filesystem::path& path) {
     std::ifstream in(path);
     require<FileError>(static_cast<bool>(in), "cannot open config file '", path.string(), "'");
     nlohmann::json j;
@@ -218,8 +219,11 @@ struct RunConfig {
     } catch (const nlohmann::json::exception& e) {
       fail<ConfigError>(path.string(), ": not valid JSON: ", e.what());
     }
+    update(j, path.string());
+  }
+  static RunConfig from_file(const std::filesystem::path& path) {
     RunConfig c;
-    c.update(j, path.string());
+    c.update_from_file(path);
     return c;
   }
   void validate() const {
