@@ -20,7 +20,8 @@ struct Workspace {
   AlignedVector<T> ln;      // [M, d] LayerNorm output
   AlignedVector<T> qkv;     // [M, 3d]
   AlignedVector<T> att;     // [M, d] attention output before proj
-  AlignedVector<T> hidden;  // [M, hidden] MLP activation
+  AlignedVector<T> hidden;  // [M, hidden] MLP activation (training)
+  AlignedVector<T> mlp;     // the row-tiled inference MLP: packed weights + [tile, hidden] per thread
   AlignedVector<T> branch;  // [M, d] a residual branch under drop-path
   AlignedVector<T> scales;  // [depth, 2, B] drop-path scales of the inference path
   AlignedVector<T> rows;    // [rows, ·] gathered rows (predictor targets, tokenizer groups)

@@ -191,6 +191,15 @@ inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order ord
   }
 }
 
+// The whole of B packed for compute_rows: [panels][depth][NR]. gemm packs per call; a caller that
+// runs several products against one B (the row-tiled MLP) packs it once.
+inline std::size_t packed_size(int cols, int depth) {
+  return std::size_t((cols + NR - 1) / NR) * std::size_t(depth) * NR;
+}
+inline void pack(float* packed, const float* B, std::ptrdiff_t ldb, Order b_order, int depth, int cols) {
+  for (int p = 0; p < (cols + NR - 1) / NR; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth);
+}
+
 // Rows [r0, r1) of C from the packed B.
 inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
                          const float* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
@@ -237,13 +246,13 @@ inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t l
     return;
   }
   const int panels = (cols + NR - 1) / NR;
-  thread_local AlignedVector<float> pack;
-  float* packed = grow(pack, std::size_t(panels) * std::size_t(depth) * NR);
+  thread_local AlignedVector<float> pack_buffer;
+  float* packed = grow(pack_buffer, packed_size(cols, depth));
   const double flops = 2.0 * double(rows) * double(cols) * double(depth);
   const int blocks = (rows + MR - 1) / MR;
   const int threads = flops > parallel_min_flops ? std::min(max_threads(), blocks) : 1;
   if (threads <= 1) {
-    for (int p = 0; p < panels; ++p) pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth);
+    pack(packed, B, ldb, b_order, depth, cols);
     compute_rows(0, rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
     return;
   }

@@ -125,6 +125,61 @@ void linear_bias_gelu_forward(T* out, T* pre, const T* in, const T* w, const T* 
   }
 }
 
+// Rows per tile of the row-tiled MLP: a [48, hidden] activation tile (72 KiB at hidden 384) stays
+// in L2 next to both packed weights while fc2 reads it back.
+inline constexpr int mlp_tile_rows = 48;
+
+// The MLP's inference forward, row-tiled: out[M, N] = (residual +) gelu(in · w1ᵀ + b1) · w2ᵀ + b2
+// with in [M, K], w1 [H, K], w2 [N, H]. Per tile of rows the activation h [tile, H] is computed and
+// consumed at once, so the [M, H] activation (the largest of a block) never goes to memory, and
+// both weights are packed once per call (float). Same values as linear_bias_gelu_forward then
+// linear_forward(_residual) on whole matrices. residual may equal out, or be nullptr. scratch
+// grows to the packed weights plus one [tile, H] activation per thread and is reused.
+template <class T>
+void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, const T* b1, const T* w2, const T* b2,
+                       int M, int K, int H, int N, AlignedVector<T>& scratch) {
+  if (M <= 0) return;
+  const int tiles = (M + mlp_tile_rows - 1) / mlp_tile_rows;
+  const double flops = 4.0 * double(M) * double(H) * (double(K) + double(N));
+  const int threads = flops > detail::parallel_min_flops ? std::min(detail::max_threads(), tiles) : 1;
+  const std::size_t tile_size = std::size_t(mlp_tile_rows) * std::size_t(H);
+  std::size_t packed1 = 0, packed2 = 0;
+  if constexpr (std::is_same_v<T, float>) {
+    packed1 = detail::sgemm::packed_size(H, K);
+    packed2 = detail::sgemm::packed_size(N, H);
+  }
+  T* const base = detail::grow(scratch, packed1 + packed2 + std::size_t(threads) * tile_size);
+  T* const tile_base = base + packed1 + packed2;
+  if constexpr (std::is_same_v<T, float>) {
+    using detail::sgemm::Order;
+    detail::sgemm::pack(base, w1, K, Order::col_major, K, H);
+    detail::sgemm::pack(base + packed1, w2, H, Order::col_major, H, N);
+  }
+  auto run_tile = [&](int t, T* h) {
+    const int i0 = t * mlp_tile_rows, r = std::min(mlp_tile_rows, M - i0);
+    const T* x = in + std::size_t(i0) * K;
+    T* y = out + std::size_t(i0) * N;
+    const T* res = residual ? residual + std::size_t(i0) * N : nullptr;
+    if constexpr (std::is_same_v<T, float>) {
+      using detail::sgemm::Order;
+      detail::sgemm::compute_rows(0, r, H, K, x, K, Order::row_major, base, h, H, {false, b1, h});
+      detail::sgemm::compute_rows(0, r, N, H, h, H, Order::row_major, base + packed1, y, N,
+                                  {false, b2, nullptr, nullptr, res});
+    } else {
+      linear_bias_gelu_forward(h, h, x, w1, b1, r, K, H);
+      if (res)
+        linear_forward_residual(y, res, h, w2, b2, r, H, N);
+      else
+        linear_forward(y, h, w2, b2, r, H, N);
+    }
+  };
+  if (threads <= 1) {
+    for (int t = 0; t < tiles; ++t) run_tile(t, tile_base);
+    return;
+  }
+  TJEPA_OMP(omp parallel for schedule(static) num_threads(threads))
+  for (int t = 0; t < tiles; ++t) run_tile(t, tile_base + std::size_t(detail::thread_id()) * tile_size);
+}
 
 // The MLP's backward through fc2 and its GELU in one product: dpre[M, K] = (dout · w) ⊙ gelu'(pre)
 // for out = gelu(pre) · wᵀ + b (dout [M, N], w [N, K]). dpre is overwritten, not added to.
