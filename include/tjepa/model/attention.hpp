@@ -55,6 +55,7 @@ struct SelfAttention {
                const T* residual = nullptr) const {
     const int d = dim(), Dh = d / heads, Lq = L - q_from;
     qkv.forward(ps, x, qkv_buf, B * L);
+    ws.mark("qkv");
     // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
     // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads).
     const int pairs = B * heads, threads = detail::max_threads();
@@ -74,11 +75,13 @@ struct SelfAttention {
                         att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
                         lse ? lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()]);
     }
+    ws.mark("attention");
     if (accumulate) residual = y;
     if (residual)
       proj.forward_residual(ps, att, residual, y, B * Lq);
     else
       proj.forward(ps, att, y, B * Lq);
+    ws.mark("proj");
   }
 
   // dx [B·L, d] += ∂L/∂x given dy [B·Lq, d] (= when add_dx is false). dqkv [B·L, 3d] and datt

@@ -295,6 +295,7 @@ struct BlockStack {
       const std::size_t f = std::size_t(b0) * L, q = std::size_t(b0) * Lq;
       blk.norm1.forward(ps, x_in + f * d, buf.ln1 + f * d, buf.mean1 ? buf.mean1 + f : nullptr,
                         buf.rstd1 ? buf.rstd1 + f : nullptr, n * L);
+      ws.mark("norm1");
       T* y = buf.scale1 ? branch + q * d : buf.x_mid + q * d;
       blk.attn.forward(ps, buf.ln1 + f * d, n, L, key_valid ? key_valid + f : nullptr, buf.qkv + f * 3 * d,
                        buf.att + q * d, buf.lse ? buf.lse + std::size_t(b0) * H * L : nullptr, y,
@@ -308,12 +309,14 @@ struct BlockStack {
       const std::size_t q = std::size_t(b0) * Lq;
       blk.norm2.forward(ps, buf.x_mid + q * d, buf.ln2 + q * d, buf.mean2 ? buf.mean2 + q : nullptr,
                         buf.rstd2 ? buf.rstd2 + q : nullptr, rows);
+      ws.mark("norm2");
       T* y = buf.scale2 ? branch + q * d : x_out + q * d;
       const T* residual = direct2 ? buf.x_mid + q * d : nullptr;
       if (buf.h)
         blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, false, residual);
       else
         blk.mlp.forward_tiled(ps, buf.ln2 + q * d, y, rows, residual, ws.mlp);
+      ws.mark("mlp");
       if (buf.scale2) drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
     });
   }

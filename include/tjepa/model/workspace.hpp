@@ -9,6 +9,7 @@
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/model/detail/parallel.hpp"
 #include "tjepa/model/kernels/attention.hpp"
+#include "tjepa/model/stage_clock.hpp"
 
 namespace tjepa {
 
@@ -35,6 +36,11 @@ struct Workspace {
   AlignedVector<T> hidden2;  // [M, hidden] recomputed activation
   AlignedVector<T> drows;    // [rows, ·]
   AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
+  // Times the stages of inference calls when set (StageClock); nullptr: off.
+  StageClock* clock = nullptr;
+  void mark(const char* stage) {
+    if (clock) clock->mark(stage);
+  }
   // One attention workspace per OpenMP thread.
   std::vector<AttentionWorkspace<T>> attention;
 
