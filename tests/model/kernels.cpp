@@ -264,6 +264,23 @@ TEST_SUITE("nn") {
       std::vector<T> z = r;
       mlp_forward_tiled(z.data(), z.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch);
       CHECK(z == y);
+      // Weights packed once (PackedWeights; float only) give the same values as packing per call.
+      PackedWeights<T> cache;
+      const T* p1 = cache.get(w1.data(), H, K);
+      const T* p2 = cache.get(w2.data(), N, H);
+      CHECK(cache.get(w1.data(), H, K) == p1);
+      CHECK(cache.size() == (std::is_same_v<T, float> ? 2u : 0u));
+      CHECK((p1 == nullptr) == std::is_same_v<T, double>);
+      z = r;
+      mlp_forward_tiled(z.data(), z.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch,
+                        p1, p2);
+      CHECK(z == y);
+      std::vector<T> h2(h.size()), y2(r.size());
+      linear_forward(h2.data(), x.data(), w1.data(), b1.data(), M, K, H);
+      linear_forward(hr.data(), x.data(), w1.data(), b1.data(), M, K, H, p1);
+      CHECK(hr == h2);
+      linear_forward_residual(y2.data(), r.data(), h.data(), w2.data(), b2.data(), M, H, N, p2);
+      CHECK(y2 == fast);
     }
   }
 

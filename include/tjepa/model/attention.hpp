@@ -54,7 +54,7 @@ struct SelfAttention {
                T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws, int q_from = 0,
                const T* residual = nullptr) const {
     const int d = dim(), Dh = d / heads, Lq = L - q_from;
-    qkv.forward(ps, x, qkv_buf, B * L);
+    qkv.forward(ps, x, qkv_buf, B * L, ws.frozen());
     ws.mark("qkv");
     // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
     // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads).
@@ -78,9 +78,9 @@ struct SelfAttention {
     ws.mark("attention");
     if (accumulate) residual = y;
     if (residual)
-      proj.forward_residual(ps, att, residual, y, B * Lq);
+      proj.forward_residual(ps, att, residual, y, B * Lq, ws.frozen());
     else
-      proj.forward(ps, att, y, B * Lq);
+      proj.forward(ps, att, y, B * Lq, ws.frozen());
     ws.mark("proj");
   }
 

@@ -315,7 +315,7 @@ struct BlockStack {
       if (buf.h)
         blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, false, residual);
       else
-        blk.mlp.forward_tiled(ps, buf.ln2 + q * d, y, rows, residual, ws.mlp);
+        blk.mlp.forward_tiled(ps, buf.ln2 + q * d, y, rows, residual, ws.mlp, ws.frozen());
       ws.mark("mlp");
       if (buf.scale2) drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
     });

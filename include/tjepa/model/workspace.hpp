@@ -9,6 +9,7 @@
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/model/detail/parallel.hpp"
 #include "tjepa/model/kernels/attention.hpp"
+#include "tjepa/model/kernels/linear.hpp"
 #include "tjepa/model/stage_clock.hpp"
 
 namespace tjepa {
@@ -36,6 +37,12 @@ struct Workspace {
   AlignedVector<T> hidden2;  // [M, hidden] recomputed activation
   AlignedVector<T> drows;    // [rows, ·]
   AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
+  // Inference on weights that do not change between calls (a frozen encoder in a control loop):
+  // set frozen_weights and the encoder's products pack each weight once, into `packed`, instead of
+  // on every call. Clear `packed` when the values change (its entries are keyed by address).
+  bool frozen_weights = false;
+  PackedWeights<T> packed;
+  PackedWeights<T>* frozen() { return frozen_weights ? &packed : nullptr; }
   // Times the stages of inference calls when set (StageClock); nullptr: off.
   StageClock* clock = nullptr;
   void mark(const char* stage) {

@@ -228,6 +228,33 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
   }
 }
 
+// Threads for a product: one below parallel_min_flops, never more than MR-row blocks.
+inline int gemm_threads(int rows, int cols, int depth) {
+  const double flops = 2.0 * double(rows) * double(cols) * double(depth);
+  return flops > parallel_min_flops ? std::min(max_threads(), (rows + MR - 1) / MR) : 1;
+}
+// Inside a parallel region: this thread's rows of C, whole MR-row blocks as even as possible.
+inline void compute_share(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
+                          const float* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
+  const int blocks = (rows + MR - 1) / MR, t = thread_id(), n = team_size();
+  const int b0 = blocks * t / n, b1 = blocks * (t + 1) / n;
+  compute_rows(std::min(rows, b0 * MR), std::min(rows, b1 * MR), cols, depth, A, lda, a_order, packed, C, ldc, e);
+}
+
+// C (+)= A · B per the epilogue with B packed beforehand (pack(), packed_size(cols, depth)):
+// products with weights that were packed once. depth ≥ 1.
+inline void gemm_packed(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
+                        const float* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e = {}) {
+  if (rows <= 0 || cols <= 0) return;
+  const int threads = gemm_threads(rows, cols, depth);
+  if (threads <= 1) {
+    compute_rows(0, rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
+    return;
+  }
+  TJEPA_OMP(omp parallel num_threads(threads))
+  compute_share(rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
+}
+
 // C[rows, cols] (ldc) (+)= A · B per the epilogue; A(i, k) = A[i·lda + k] (row-major) or
 // A[k·lda + i] (column-major), B likewise with ldb. rows, cols ≥ 0; depth 0 leaves the epilogue
 // applied to an empty product.
@@ -248,9 +275,7 @@ inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t l
   const int panels = (cols + NR - 1) / NR;
   thread_local AlignedVector<float> pack_buffer;
   float* packed = grow(pack_buffer, packed_size(cols, depth));
-  const double flops = 2.0 * double(rows) * double(cols) * double(depth);
-  const int blocks = (rows + MR - 1) / MR;
-  const int threads = flops > parallel_min_flops ? std::min(max_threads(), blocks) : 1;
+  const int threads = gemm_threads(rows, cols, depth);
   if (threads <= 1) {
     pack(packed, B, ldb, b_order, depth, cols);
     compute_rows(0, rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
@@ -266,10 +291,7 @@ inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t l
       const int kb = task % kblocks;
       pack_panel(packed, B, ldb, b_order, depth, cols, task / kblocks, kb * KC, std::min(depth, (kb + 1) * KC));
     }
-    // Whole MR-row blocks, as even as possible.
-    const int t = thread_id(), n = team_size();
-    const int b0 = blocks * t / n, b1 = blocks * (t + 1) / n;
-    compute_rows(std::min(rows, b0 * MR), std::min(rows, b1 * MR), cols, depth, A, lda, a_order, packed, C, ldc, e);
+    compute_share(rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
   }
 }
 
