@@ -19,14 +19,20 @@
 // allocates nothing: every malloc of the process is counted and the example checks it.
 //
 //   streaming [--checkpoint runs/demo/checkpoint.safetensors] [--ticks 2000] [--rate 100] [--spin]
-//             [--stages] [--controls]
+//             [--realtime] [--stages] [--controls] [--repack]
 // Prints latency p50 / p99 / max per tick and the allocations after warm-up. --stages times each
 // stage of every tick (StageClock) and says where the slowest ticks lose their time. --controls
 // then times two fixed loops of the median tick's length the same way: FMAs in registers (what
 // the clock and the scheduler alone give) and read-modify-write sweeps over a 4 MiB buffer, the
 // encoder's working set (what the memory system alone gives): a p99/p50 no better than theirs is
-// the machine's, not the encoder's.
+// the machine's, not the encoder's. Ticks during which the thread was preempted (an involuntary
+// context switch) are counted, and p50 / p99 are also given without them: on a shared machine the
+// scheduler alone can set the p99. --realtime (SCHED_FIFO) is how a control loop avoids that;
+// back to back it runs into the kernel's RT throttling (50 ms per second by default), so use it with
+// --rate.
 #include <CLI/CLI.hpp>
+#include <sched.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <atomic>
@@ -34,6 +40,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <map>
 #include <memory>
 #include <string>
@@ -50,21 +57,38 @@ std::atomic<long long> g_allocations{0};
 
 using Clock = std::chrono::steady_clock;
 
+// Latency of each timed tick, and whether the thread was preempted during it (an involuntary
+// context switch: the scheduler's jitter, not the tick's own).
+struct Timings {
+  std::vector<double> us;
+  std::vector<char> preempted;
+};
+
+long involuntary_switches() {
+  rusage u{};
+  getrusage(RUSAGE_THREAD, &u);
+  return u.ru_nivcsw;
+}
+
 // Runs tick(k) for k < warmup + ticks at `rate` Hz (0: back to back), sleeping or busy-waiting
-// (spin) until each next tick; returns the latencies of the timed ticks in µs. on_warm() runs
-// once, right before the first timed tick.
+// (spin) until each next tick. on_warm() runs once, right before the first timed tick.
 template <class Tick, class OnWarm>
-std::vector<double> timed_loop(int warmup, int ticks, double rate, bool spin, Tick&& tick, OnWarm&& on_warm) {
-  std::vector<double> latency_us;
-  latency_us.reserve(static_cast<std::size_t>(ticks));
+Timings timed_loop(int warmup, int ticks, double rate, bool spin, Tick&& tick, OnWarm&& on_warm) {
+  Timings t;
+  t.us.reserve(static_cast<std::size_t>(ticks));
+  t.preempted.reserve(static_cast<std::size_t>(ticks));
   const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(rate > 0 ? 1.0 / rate : 0.0));
   auto next = Clock::now();
   for (int k = 0; k < warmup + ticks; ++k) {
     if (k == warmup) on_warm();
+    const long switches = involuntary_switches();
     const auto t0 = Clock::now();
     tick(k);
     const auto t1 = Clock::now();
-    if (k >= warmup) latency_us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+    if (k >= warmup) {
+      t.us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+      t.preempted.push_back(involuntary_switches() != switches);
+    }
     if (rate > 0) {
       next += period;
       if (spin)
@@ -74,7 +98,7 @@ std::vector<double> timed_loop(int warmup, int ticks, double rate, bool spin, Ti
         std::this_thread::sleep_until(next);
     }
   }
-  return latency_us;
+  return t;
 }
 
 // Value at quantile p of sorted values.
@@ -82,10 +106,25 @@ double quantile(const std::vector<double>& sorted, double p) {
   return sorted[std::min(sorted.size() - 1, static_cast<std::size_t>(p * static_cast<double>(sorted.size())))];
 }
 
-void print_latency(const char* what, std::vector<double> latency_us) {
-  std::sort(latency_us.begin(), latency_us.end());
-  const double p50 = quantile(latency_us, 0.5), p99 = quantile(latency_us, 0.99);
-  std::printf("%s: p50 %.0f us, p99 %.0f us, max %.0f us, p99/p50 %.3f\n", what, p50, p99, latency_us.back(), p99 / p50);
+// p50 / p99 of the ticks the scheduler left alone.
+void print_unpreempted(const Timings& t) {
+  std::vector<double> alone;
+  for (std::size_t i = 0; i < t.us.size(); ++i)
+    if (!t.preempted[i]) alone.push_back(t.us[i]);
+  if (alone.empty()) return;
+  std::sort(alone.begin(), alone.end());
+  const double p50 = quantile(alone, 0.5), p99 = quantile(alone, 0.99);
+  std::printf("  %zu of %zu ticks preempted; the others: p50 %.0f us, p99 %.0f us, p99/p50 %.3f\n",
+              t.us.size() - alone.size(), t.us.size(), p50, p99, p99 / p50);
+}
+
+// p50 / p99 / max of all ticks, then of the unpreempted ones.
+void print_latency(const char* what, const Timings& t) {
+  std::vector<double> all = t.us;
+  std::sort(all.begin(), all.end());
+  const double p50 = quantile(all, 0.5), p99 = quantile(all, 0.99);
+  std::printf("%s: p50 %.0f us, p99 %.0f us, max %.0f us, p99/p50 %.3f\n", what, p50, p99, all.back(), p99 / p50);
+  print_unpreempted(t);
 }
 
 // Per stage name (summed over the blocks of a tick): median time, p99, and how much longer the
@@ -208,12 +247,14 @@ int main(int argc, char** argv) {
   std::string checkpoint;
   int ticks = 2000, warmup = 20;
   double rate = 0;
-  bool spin = false, stages = false, controls = false, repack = false;
+  bool spin = false, stages = false, controls = false, repack = false, realtime = false;
   app.add_option("--checkpoint", checkpoint, "checkpoint of `tjepa pretrain`/`tjepa demo` (default: random weights, demo size)");
   app.add_option("--ticks", ticks, "control-loop ticks to time")->capture_default_str();
   app.add_option("--warmup", warmup, "ticks before timing and allocation counting")->capture_default_str();
   app.add_option("--rate", rate, "control-loop rate in Hz (0: back to back)")->capture_default_str();
   app.add_flag("--spin", spin, "busy-wait between ticks instead of sleeping (with --rate)");
+  app.add_flag("--realtime", realtime,
+               "run under SCHED_FIFO (priority 10), as a control loop would: other threads no longer preempt it");
   app.add_flag("--repack", repack, "pack the weights for the GEMM on every call, as training does (A/B of frozen weights)");
   app.add_flag("--stages", stages, "time each stage of every tick and show where the slowest ticks lose time");
   app.add_flag("--controls", controls, "then time an FMA loop and a 4 MiB memory sweep of the median tick's length the same way");
@@ -225,6 +266,14 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
+    if (realtime) {
+      const sched_param param{10};
+      if (sched_setscheduler(0, SCHED_FIFO, &param) != 0) {
+        std::fprintf(stderr, "streaming: error: SCHED_FIFO refused (%s): needs CAP_SYS_NICE or an rtprio limit\n",
+                     std::strerror(errno));
+        return 1;
+      }
+    }
     require<ConfigError>(ticks > 0 && warmup >= 1, "--ticks ", ticks, ", --warmup ", warmup, ", expected > 0");
     const Skin skin = layouts::allegro_xela();
     // The sensor: a simulated recording played back frame by frame.
@@ -263,9 +312,13 @@ int main(int argc, char** argv) {
     if (stages) {
       ws.clock = &clock;
       stage_us.resize(static_cast<std::size_t>(ticks));
-      for (auto& v : stage_us) v.reserve(StageClock::capacity);
+      for (auto& v : stage_us) {  // touched now: no page faults while timing
+        v.resize(StageClock::capacity);
+        v.clear();
+      }
     }
     long long allocations_before = 0;
+    rusage usage_before{};  // page faults and preemptions: jitter the allocation count does not show
     double checksum = 0;
     int head = 0;  // ring slot of the next frame
     auto tick = [&](int k) {
@@ -294,21 +347,30 @@ int main(int argc, char** argv) {
         for (int i = 0; i < clock.count(); ++i) v.emplace_back(clock.name(i), 1e-3 * double(clock.elapsed_ns(i)));
       }
     };
-    const std::vector<double> latency_us =
-        timed_loop(warmup, ticks, rate, spin, tick, [&] { allocations_before = g_allocations.load(); });
+    const Timings timings = timed_loop(warmup, ticks, rate, spin, tick, [&] {
+      allocations_before = g_allocations.load();
+      getrusage(RUSAGE_SELF, &usage_before);
+    });
     const long long steady_allocations = g_allocations.load() - allocations_before;
-    std::vector<double> sorted = latency_us;
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    std::vector<double> sorted = timings.us;
     std::sort(sorted.begin(), sorted.end());
     auto pct = [&](double p) { return quantile(sorted, p); };
     std::printf("streaming: %d taxels x %d axes, window of %d frames, encoder d=%d, %d blocks, %d heads%s\n", N, m, tau,
                 d, model->config.encoder.depth, model->config.encoder.heads,
                 checkpoint.empty() ? " (random weights)" : "");
-    std::printf("%d ticks after %d warm-up ticks, 1 thread%s\n", ticks, warmup,
-                rate > 0 ? (spin ? ", busy-waiting between ticks" : ", sleeping between ticks") : ", back to back");
+    std::printf("%d ticks after %d warm-up ticks, 1 thread%s%s\n", ticks, warmup,
+                rate > 0 ? (spin ? ", busy-waiting between ticks" : ", sleeping between ticks") : ", back to back",
+                realtime ? ", SCHED_FIFO" : "");
     std::printf("latency per tick: p50 %.0f us, p99 %.0f us, max %.0f us (%.0f Hz sustainable at p99), p99/p50 %.3f\n",
                 pct(0.5), pct(0.99), sorted.back(), 1e6 / pct(0.99), pct(0.99) / pct(0.5));
+    print_unpreempted(timings);
     std::printf("allocations in steady state: %lld (checksum %.3f)\n", steady_allocations, checksum);
-    if (stages) print_stages(latency_us, stage_us);
+    std::printf("in steady state: %ld page faults, %ld involuntary context switches\n",
+                (usage.ru_minflt - usage_before.ru_minflt) + (usage.ru_majflt - usage_before.ru_majflt),
+                usage.ru_nivcsw - usage_before.ru_nivcsw);
+    if (stages) print_stages(timings.us, stage_us);
     if (controls) {
       volatile float sink = 0;
       FmaControl fma;

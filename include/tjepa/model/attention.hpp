@@ -137,8 +137,8 @@ struct CrossAttention {
   void forward(const ParamSet<T>& ps, const T* query, const T* x, int B, int L, const std::uint8_t* key_valid,
                T* qbuf, T* kvbuf, T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws) const {
     const int d = dim();
-    q.forward(ps, query, qbuf, B);
-    kv.forward(ps, x, kvbuf, B * L);
+    q.forward(ps, query, qbuf, B, ws.frozen());
+    kv.forward(ps, x, kvbuf, B * L, ws.frozen());
     const AttentionShape s = shape(L);
     AttentionWorkspace<T>* aws = ws.attention_per_thread();
     TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
