@@ -5,7 +5,8 @@
 //   C[rows, cols] (+)= A[rows, depth] · B[depth, cols] (+ bias[cols]) (then G = gelu(C))
 //
 // A is read in place (row- or column-major, any stride); B is packed once per call into panels of
-// NR columns, [depth][NR] each, zero-padded on the right, shared by the threads. The rows of C are
+// NR columns, [depth][NR] each (a last panel of at most NR/2 columns [depth][NR/2]), zero-padded
+// on the right, shared by the threads. The rows of C are
 // split over the OpenMP threads in whole MR-row blocks. Depth runs in KC blocks: the A
 // micro-panel (MR × KC) stays in L1 while the B panels of one depth block (KC × cols) stream from
 // L2. xsimd's default architecture picks AVX-512, AVX2 or SSE2 at compile time.
@@ -57,8 +58,8 @@ inline float gelu(float x) {
 }
 
 // acc[R][NK·W] = A · B over one depth block of kc: a(i, k) = a[i·lda + k] (AO row-major) or
-// a[k·lda + i] (column-major), b packed [kc][NR], of which the first NK vectors (NK < NV: a
-// partial last panel, whose zero padding is not multiplied). pf: the next row block's A, prefetched while
+// a[k·lda + i] (column-major), b packed [kc][NK·W] (NK < NV: a last panel of at most NK·W
+// columns, packed that narrow). pf: the next row block's A, prefetched while
 // this one computes (A is read in place, and in a training step it comes cold from memory);
 // nullptr: none. Not inlined: with only the loop's own values live, g++ keeps all R·NV
 // accumulators in registers (inlined into the epilogue's many arguments, it spills some).
@@ -80,7 +81,7 @@ template <Order AO, int R, int NK>
     for (int k = k0; k < k1; ++k) {
       V bv[NK];
 #pragma GCC unroll 4
-      for (int j = 0; j < NK; ++j) bv[j] = V::load_aligned(b + std::ptrdiff_t(k) * NR + j * W);
+      for (int j = 0; j < NK; ++j) bv[j] = V::load_aligned(b + std::ptrdiff_t(k) * NK * W + j * W);
       // Column-major A: the next block's MR values at this depth (one line, or two).
       if (AO == Order::col_major && pf) {
         __builtin_prefetch(pf + k * lda);
@@ -162,22 +163,26 @@ inline constexpr std::array<std::array<Kernel, MR>, 2> half_kernels = {
     kernel_table<Order::col_major, NH>(std::make_integer_sequence<int, MR>{})};
 
 // B(k, n) = b[k·ldb + n] (row-major) or b[n·ldb + k] (column-major, a PyTorch weight [cols, depth]
-// read as its transpose) → depths [k0, k1) of panel p of dst: [depth][NR], columns p·NR + j.
-// k0 is a multiple of 16.
+// read as its transpose) → depths [k0, k1) of panel p of dst: [depth][panel_width], columns
+// p·NR + j, at dst + p·depth·NR. k0 is a multiple of 16.
+// Values per depth of a panel of nc columns: NR, or NR/2 for a narrow last panel (no padding to
+// fetch from memory for the half-width kernel).
+inline int panel_width(int nc) { return nc <= NH * W ? NH * W : NR; }
+
 inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p, int k0,
                        int k1) {
-  const int n0 = p * NR, nc = std::min(NR, cols - n0);
+  const int n0 = p * NR, nc = std::min(NR, cols - n0), pw = panel_width(nc);
   float* d = dst + std::ptrdiff_t(p) * depth * NR;
   if (order == Order::row_major) {
     for (int k = k0; k < k1; ++k) {
       const float* s = b + std::ptrdiff_t(k) * ldb + n0;
-      float* o = d + std::ptrdiff_t(k) * NR;
+      float* o = d + std::ptrdiff_t(k) * pw;
       if (nc == NR) {  // a whole row in registers: no memmove call per 256 bytes
 #pragma GCC unroll 4
         for (int j = 0; j < NV; ++j) V::load_unaligned(s + j * W).store_aligned(o + j * W);
       } else {
         std::copy(s, s + nc, o);
-        std::fill(o + nc, o + NR, 0.0f);
+        std::fill(o + nc, o + pw, 0.0f);
       }
     }
     return;
@@ -189,11 +194,11 @@ inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order ord
     const int kt = std::min(T, k1 - t0);
     for (int j = 0; j < nc; ++j) {
       const float* s = b + std::ptrdiff_t(n0 + j) * ldb + t0;
-      for (int k = 0; k < kt; ++k) d[std::ptrdiff_t(t0 + k) * NR + j] = s[k];
+      for (int k = 0; k < kt; ++k) d[std::ptrdiff_t(t0 + k) * pw + j] = s[k];
     }
     for (int k = 0; k < kt; ++k) {
-      float* o = d + std::ptrdiff_t(t0 + k) * NR;
-      std::fill(o + nc, o + NR, 0.0f);
+      float* o = d + std::ptrdiff_t(t0 + k) * pw;
+      std::fill(o + nc, o + pw, 0.0f);
     }
   }
 }
@@ -227,8 +232,8 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
       for (int p = 0; p < panels; ++p) {
         const int n0 = p * NR;
         const int nc = std::min(NR, cols - n0);
-        (nc <= NH * W ? half : kern)(kc, a, lda, packed + (std::ptrdiff_t(p) * depth + k0) * NR, C + i0 * ldc + n0,
-                                     ldc, nc, c_in ? c_in + i0 * ldc + n0 : nullptr,
+        const float* b = packed + std::ptrdiff_t(p) * depth * NR + std::ptrdiff_t(k0) * panel_width(nc);
+        (nc <= NH * W ? half : kern)(kc, a, lda, b, C + i0 * ldc + n0, ldc, nc, c_in ? c_in + i0 * ldc + n0 : nullptr,
                                      first && e.bias ? e.bias + n0 : nullptr,
                                      last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
                                      last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr, p == 0 ? next : nullptr);
