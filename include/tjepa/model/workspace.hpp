@@ -39,7 +39,8 @@ struct Workspace {
   AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
   // Inference on weights that do not change between calls (a frozen encoder in a control loop):
   // set frozen_weights and the products of the tokenizer, the encoder (qkv, proj, MLP) and the
-  // attentive probe's cross-attention pack each weight once, into `packed`, instead of on every call. Clear `packed` when the values change (its entries are keyed by address).
+  // attentive probe's cross-attention pack each weight once, into `packed`, instead of on every
+  // call. Clear `packed` when the values change (its entries are keyed by address).
   bool frozen_weights = false;
   PackedWeights<T> packed;
   PackedWeights<T>* frozen() { return frozen_weights ? &packed : nullptr; }
