@@ -74,6 +74,8 @@ int main(int argc, char** argv) {
   pretrain->add_option("--preprocess", po.preprocess, "magnetic | standardize | none");
   pretrain->add_option("--axes", po.axes, "axes per taxel of text recordings")->capture_default_str();
   pretrain->add_option("--simulate", po.simulate_frames, "frames of simulated data")->capture_default_str();
+  pretrain->add_option("--simulate-contacts", po.simulate_contacts, "indenters touching at once in simulated data")
+      ->capture_default_str();
   pretrain->add_option("--out", po.out, "output directory")->capture_default_str();
   pretrain->add_flag("--force", po.force, "overwrite an existing checkpoint");
   pretrain->add_flag("--quiet", po.quiet, "no progress line");
@@ -114,6 +116,8 @@ int main(int argc, char** argv) {
   auto* demo = app.add_subcommand("demo", "Pre-train on simulated Allegro data, then compare probes on held-out data");
   demo->add_option("--seed", dm.seed, "seed of everything (data, init, masks)")->capture_default_str();
   demo->add_option("--out", dm.out, "output directory")->capture_default_str();
+  std::string demo_config;
+  demo->add_option("--config", demo_config, "JSON run configuration (keys as in the checkpoint's config.run); flags override it");
   run_override<int>(demo, "--steps", "steps", demo_overrides, "pre-training steps");
   run_override<int>(demo, "--batch", "batch", demo_overrides, "pre-training batch");
   run_override<int>(demo, "--warmup", "warmup_steps", demo_overrides, "pre-training warm-up steps");
@@ -126,6 +130,8 @@ int main(int argc, char** argv) {
   run_override<double>(demo, "--tokenizer-bias", "tokenizer_bias_std", demo_overrides,
                        "std of the tokenizer's initial bias (reference: 0)");
   demo->add_option("--pretrain-frames", dm.pretrain_frames, "unlabelled simulated frames")->capture_default_str();
+  demo->add_option("--pretrain-contacts", dm.pretrain_contacts, "indenters touching at once in the unlabelled data")
+      ->capture_default_str();
   demo->add_option("--probe-frames", dm.probe_frames, "labelled simulated frames (probe training)")->capture_default_str();
   demo->add_option("--probe-windows", dm.probe_windows, "labelled training windows")->capture_default_str();
   demo->add_option("--probe-epochs", dm.probe.epochs, "probe epochs (also the end-to-end budget)")->capture_default_str();
@@ -159,6 +165,7 @@ int main(int argc, char** argv) {
     if (*probe) return run_probe(pb, std::cout);
     if (*embed) return run_embed(eo, std::cout);
     if (*demo) {
+      if (!demo_config.empty()) dm.run = RunConfig::from_file(demo_config);
       dm.run.update(demo_overrides, "command line");
       return run_demo(dm, std::cout);
     }

@@ -110,6 +110,7 @@ struct PretrainOptions {
   std::string preprocess = "";        // magnetic | standardize | none ("" = magnetic if a baseline, else standardize)
   int axes = 3;
   int simulate_frames = 20000;        // simulated data: frames of the pre-training recording
+  int simulate_contacts = 1;          // simulated data: indenters touching at once (SimulatedSkin::record)
   std::string out = "runs/pretrain";
   bool force = false;
   bool quiet = false;
@@ -127,7 +128,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
     require<ConfigError>(o.simulate_frames >= run.tau, "--simulate ", o.simulate_frames, " frames, expected >= tau");
     SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, run.seed);
     baseline = sim.record_baseline(300);
-    recs.push_back(sim.record(o.simulate_frames).recording);
+    recs.push_back(sim.record(o.simulate_frames, o.simulate_contacts).recording);
     if (mode.empty()) mode = "magnetic";
   } else {
     for (const auto& p : o.data) recs.push_back(read_recording(p, o.axes));
@@ -406,6 +407,7 @@ struct DemoOptions {
   std::string out = "runs/demo";
   RunConfig run;                   // model and pre-training (run.seed is set from seed)
   int pretrain_frames = 60000;     // unlabelled
+  int pretrain_contacts = 1;       // indenters touching at once in the unlabelled data
   int probe_frames = 20000;        // labelled, probe training
   int test_frames = 10000;         // labelled, held out
   int min_contact = 5;
@@ -436,9 +438,10 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   out << "tjepa " << version_string << " demo, seed " << o.seed << ": Allegro hand, " << skin.size() << " taxels in "
       << skin.layout.num_groups() << " pads, " << skin.graph.num_edges() << " edges; " << detail::max_threads()
       << " thread(s)\n";
-  out << "simulating " << o.pretrain_frames << " unlabelled + " << o.probe_frames << " labelled + " << o.test_frames
-      << " held-out frames at 100 Hz ...\n" << std::flush;
-  SimulatedData d = simulate(skin, o.seed, o.pretrain_frames, o.probe_frames, o.test_frames);
+  out << "simulating " << o.pretrain_frames << " unlabelled (up to " << o.pretrain_contacts
+      << " indenter(s) at once) + " << o.probe_frames << " labelled + " << o.test_frames
+      << " held-out frames (one indenter) at 100 Hz ...\n" << std::flush;
+  SimulatedData d = simulate(skin, o.seed, o.pretrain_frames, o.probe_frames, o.test_frames, o.pretrain_contacts);
   const Preprocessor pre = fit_preprocessor("magnetic", &d.baseline, std::span<const Recording>(&d.pretrain, 1));
   const WindowSpec spec{o.run.tau};
   const WindowSource pre_src(d.pretrain, spec, {}, pre);
@@ -466,7 +469,9 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
       << model.context.numel() << " parameters); predictor " << o.run.predictor_depth << " blocks ("
       << model.predictor_params.numel() << ")\n";
   out << "pre-training: " << pre_src.size() << " unlabelled windows, " << o.run.steps << " steps of " << o.run.batch
-      << ", lr " << o.run.lr << ", reference masks (2 local + 2 global targets over the taxel graph)\n"
+      << ", lr " << o.run.lr << ", masks: " << o.run.local_targets << " local + " << o.run.global_targets
+      << " global targets of " << o.run.target_ratio_lo << "-" << o.run.target_ratio_hi << " of the taxels, context "
+      << o.run.context_ratio_lo << "-" << o.run.context_ratio_hi << "\n"
       << std::flush;
   PretrainOutcome pr;
   if (loaded) {

@@ -36,10 +36,11 @@ inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, cons
   require<DataError>(src.size() >= B, "pre-training: ", src.size(), " windows, fewer than one batch of ", B);
   require<ShapeError>(graph.num_nodes() == model.num_tokens(), "pre-training: the graph has ", graph.num_nodes(),
                       " taxels, the model ", model.num_tokens(), " tokens");
-  const MaskCollator collator(graph);  // REFERENCE §3 defaults: 2 local + 2 global targets
+  const MaskCollator collator(graph, run.masks());  // REFERENCE §3 defaults: 2 local + 2 global targets
   const TrainingSchedule schedule = run.schedule();
   JepaStepConfig step_cfg;
   step_cfg.drop_path = run.drop_path;
+  step_cfg.activity_weight = run.activity_weight;
   JepaWorkspace<float> w;
   WindowBatch batch;
   AlignedVector<float> rows;  // tokenizer input [B, N, m·τ]

@@ -9,6 +9,8 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -154,6 +156,11 @@ struct RunConfig {
   double ema_start = 0.99, ema_end = 1.0;
   double drop_path = 0.0;
   double tokenizer_bias_std = 1.0;  // JepaConfig::tokenizer_bias_std (the reference: 0)
+  // Masks (MaskConfig; the reference's defaults): per-batch context and target ratios, targets per sample.
+  double context_ratio_lo = 0.5, context_ratio_hi = 0.9;
+  double target_ratio_lo = 0.10, target_ratio_hi = 0.18;
+  int local_targets = 2, global_targets = 2;
+  double activity_weight = 0.0;  // JepaStepConfig::activity_weight (the reference: 0, a plain mean)
   std::uint64_t seed = 0;
 
   nlohmann::json to_json() const {
@@ -161,7 +168,9 @@ struct RunConfig {
             {"predictor_depth", predictor_depth}, {"steps", steps}, {"batch", batch}, {"warmup_steps", warmup_steps},
             {"lr", lr}, {"start_lr", start_lr}, {"final_lr", final_lr}, {"wd_start", wd_start}, {"wd_end", wd_end},
             {"ema_start", ema_start}, {"ema_end", ema_end}, {"drop_path", drop_path},
-            {"tokenizer_bias_std", tokenizer_bias_std}, {"seed", seed}};
+            {"tokenizer_bias_std", tokenizer_bias_std}, {"context_ratio", {context_ratio_lo, context_ratio_hi}},
+            {"target_ratio", {target_ratio_lo, target_ratio_hi}}, {"local_targets", local_targets},
+            {"global_targets", global_targets}, {"activity_weight", activity_weight}, {"seed", seed}};
   }
   // Overrides the fields the JSON names; an unknown key or a wrong type is an error.
   void update(const nlohmann::json& j, const std::string& source) {
@@ -188,6 +197,11 @@ struct RunConfig {
         else if (k == "ema_end") ema_end = v.get<double>();
         else if (k == "drop_path") drop_path = v.get<double>();
         else if (k == "tokenizer_bias_std") tokenizer_bias_std = v.get<double>();
+        else if (k == "context_ratio") std::tie(context_ratio_lo, context_ratio_hi) = v.get<std::pair<double, double>>();
+        else if (k == "target_ratio") std::tie(target_ratio_lo, target_ratio_hi) = v.get<std::pair<double, double>>();
+        else if (k == "local_targets") local_targets = v.get<int>();
+        else if (k == "global_targets") global_targets = v.get<int>();
+        else if (k == "activity_weight") activity_weight = v.get<double>();
         else if (k == "seed") seed = v.get<std::uint64_t>();
       } catch (const nlohmann::json::exception&) {
         fail<ConfigError>(source, ": key '", k, "' = ", v.dump(), " has the wrong type (expected like ",
@@ -223,6 +237,14 @@ struct RunConfig {
     require<ConfigError>(tokenizer_bias_std >= 0, "config: tokenizer_bias_std = ", tokenizer_bias_std,
                          ", expected >= 0");
     require<ConfigError>(drop_path >= 0 && drop_path < 1, "config: drop_path = ", drop_path, ", expected in [0, 1)");
+    require<ConfigError>(activity_weight >= 0 && std::isfinite(activity_weight), "config: activity_weight = ",
+                         activity_weight, ", expected >= 0");
+    const MaskConfig m = masks();
+    detail::check_ratio_range(m.context_ratio, "context_ratio");
+    detail::check_ratio_range(m.target_ratio, "target_ratio");
+    require<ConfigError>(local_targets >= 0 && global_targets >= 0 && local_targets + global_targets > 0,
+                         "config: local_targets = ", local_targets, ", global_targets = ", global_targets,
+                         ", expected >= 0 and at least one target");
   }
 
   JepaConfig model(int num_tokens, int axes) const {
@@ -236,6 +258,14 @@ struct RunConfig {
     c.predictor.heads = heads;
     c.tokenizer_bias_std = tokenizer_bias_std;
     return c;
+  }
+  MaskConfig masks() const {
+    MaskConfig m;
+    m.context_ratio = {context_ratio_lo, context_ratio_hi};
+    m.target_ratio = {target_ratio_lo, target_ratio_hi};
+    m.num_local = local_targets;
+    m.num_global = global_targets;
+    return m;
   }
   TrainingSchedule schedule() const {
     TrainingSchedule s;
@@ -260,11 +290,11 @@ struct SimulatedData {
 };
 
 inline SimulatedData simulate(const Skin& skin, std::uint64_t seed, int pretrain_frames, int probe_frames,
-                              int test_frames, int baseline_frames = 300) {
+                              int test_frames, int pretrain_contacts = 1, int baseline_frames = 300) {
   SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, seed);
   SimulatedData d;
   d.baseline = sim.record_baseline(baseline_frames);
-  d.pretrain = sim.record(pretrain_frames).recording;
+  d.pretrain = sim.record(pretrain_frames, pretrain_contacts).recording;
   d.probe_train = sim.record(probe_frames);
   d.test = sim.record(test_frames);
   return d;

@@ -276,6 +276,43 @@ TEST_CASE("pretrain: a failing run leaves no files behind") {
   }
 }
 
+TEST_CASE("run config: masks and activity weighting from JSON, round trip and bad values named") {
+  RunConfig r;
+  r.update({{"local_targets", 0}, {"global_targets", 4}, {"target_ratio", {0.05, 0.08}},
+            {"context_ratio", {0.6, 0.7}}, {"activity_weight", 0.5}},
+           "test");
+  const MaskConfig m = r.masks();
+  CHECK(m.num_local == 0);
+  CHECK(m.num_global == 4);
+  CHECK(m.target_ratio == RatioRange{0.05, 0.08});
+  CHECK(m.context_ratio == RatioRange{0.6, 0.7});
+  RunConfig back;
+  back.update(r.to_json(), "round trip");
+  CHECK(back.to_json() == r.to_json());
+  // The collator samples what the config says: 4 global targets of 5-8% of the 368 taxels.
+  const MaskBatch b = MaskCollator(layouts::allegro_xela().graph, m).sample(2, 1, 0);
+  REQUIRE(b.num_targets() == 4);
+  for (const TargetSet& ts : b.targets) {
+    CHECK(ts.kind == TargetKind::global);
+    CHECK(ts.size >= 18);
+    CHECK(ts.size <= 29);
+  }
+  auto error_of = [](const nlohmann::json& j) {
+    RunConfig c;
+    try {
+      c.update(j, "cfg");
+      c.validate();
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  CHECK(error_of({{"target_ratio", {0.3, 0.2}}}).find("target_ratio") != std::string::npos);
+  CHECK(error_of({{"local_targets", 0}, {"global_targets", 0}}).find("at least one target") != std::string::npos);
+  CHECK(error_of({{"activity_weight", -1.0}}).find("activity_weight") != std::string::npos);
+  CHECK(error_of({{"target_ratio", "wide"}}).find("'target_ratio'") != std::string::npos);
+}
+
 TEST_CASE("demo: the whole pipeline at toy size prints the table and writes its outputs") {
   TempDir t;
   DemoOptions o;

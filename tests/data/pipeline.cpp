@@ -239,6 +239,44 @@ TEST_SUITE("data") {
     CHECK(corr(cy, ly) > 0.95);
   }
 
+  TEST_CASE("simulated skin: several indenters at once add their signals and the first one is labelled") {
+    const auto geo = test_geometry();
+    auto active_pads = [&](const tjepa::SimulatedSkin& sim, const float* f, std::set<int>& pads) {
+      const float noise_bound = static_cast<float>(3.47 * sim.config().noise_std);
+      pads.clear();
+      for (int i = 0; i < sim.taxels(); ++i)
+        for (int k = 0; k < 3; ++k)
+          if (std::abs(f[3 * i + k] - sim.offsets()[3 * i + k]) > noise_bound) pads.insert(sim.geometry().pad[i]);
+    };
+    tjepa::SimulatedSkin one(geo, quiet_config(), 5), three(geo, quiet_config(), 5);
+    const auto r1 = one.record(3000), r3 = three.record(3000, 3);
+    int multi1 = 0, multi3 = 0, labelled = 0;
+    std::set<int> pads;
+    for (int t = 0; t < 3000; ++t) {
+      active_pads(one, r1.recording.frame(t), pads);
+      multi1 += pads.size() > 1;
+      active_pads(three, r3.recording.frame(t), pads);
+      multi3 += pads.size() > 1;
+      const tjepa::FrameLabel& l = r3.labels[t];
+      if (l.pad >= 0 && l.force[2] > 1.0f) {
+        ++labelled;
+        CHECK(pads.count(l.pad) == 1);  // the labelled indenter's pad responds
+      }
+    }
+    CHECK(multi1 == 0);     // one indenter: one pad at a time
+    CHECK(multi3 > 1000);   // three: often two or more pads at once
+    CHECK(labelled > 300);
+    // The first indenter's events are drawn like a single indenter's: as many labelled frames.
+    int contact1 = 0, contact3 = 0;
+    for (int t = 0; t < 3000; ++t) {
+      contact1 += r1.labels[t].pad >= 0;
+      contact3 += r3.labels[t].pad >= 0;
+    }
+    CHECK(std::abs(contact1 - contact3) < 600);
+    CHECK_THROWS_AS(three.record(10, 0), tjepa::ConfigError);
+    CHECK_THROWS_AS(three.record(10, 65), tjepa::ConfigError);
+  }
+
   TEST_CASE("simulated skin: drop-outs are exact zeros on all axes at about the configured rate") {
     tjepa::SimConfig cfg;
     cfg.dropout_rate = 2e-3;

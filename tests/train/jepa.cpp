@@ -167,6 +167,7 @@ TEST_SUITE("train") {
       cfg.normalize_targets = true;
       cfg.predictor_pos_from_context = true;
     }
+    SUBCASE("activity-weighted MSE, lambda = 2") { cfg.activity_weight = 2.0; }
     JepaWorkspace<double> w;
     const std::uint64_t noise = 77;
     auto loss = [&] { return jepa_loss(model, x.data(), 2, masks, w, cfg, noise, false).loss; };
@@ -185,6 +186,63 @@ TEST_SUITE("train") {
     const auto pos = model.context.grad_span(model.encoder.pos_embed());
     const bool pos_grad = std::any_of(pos.begin(), pos.end(), [](double g) { return g != 0.0; });
     CHECK(pos_grad);  // the context encoder's own use of its rows always gives one
+  }
+
+  TEST_CASE("row-weighted regression loss: the weighted mean and its gradient") {
+    Rng rng(3);
+    const int rows = 5, d = 3;
+    std::vector<double> pred(rows * d), target(rows * d), weight(rows);
+    for (auto& v : pred) v = rng.normal();
+    for (auto& v : target) v = rng.normal();
+    for (auto& v : weight) v = rng.uniform(0.5, 4.0);
+    for (JepaLossKind kind : {JepaLossKind::mse, JepaLossKind::smooth_l1}) {
+      CAPTURE(to_string(kind));
+      auto ell = [&](double e) { return kind == JepaLossKind::mse ? e * e : (std::abs(e) < 1 ? 0.5 * e * e : std::abs(e) - 0.5); };
+      double num = 0, den = 0;
+      for (int r = 0; r < rows; ++r) {
+        for (int c = 0; c < d; ++c) num += weight[r] * ell(pred[r * d + c] - target[r * d + c]);
+        den += weight[r] * d;
+      }
+      std::vector<double> g(rows * d);
+      const double l = regression_loss(pred.data(), target.data(), g.data(), pred.size(), kind, 0.5, weight.data(), d);
+      CHECK(l == doctest::Approx(num / den).epsilon(1e-14));
+      for (std::size_t i = 0; i < pred.size(); ++i) {
+        const double h = 1e-6, keep = pred[i];
+        pred[i] = keep + h;
+        const double up = regression_loss(pred.data(), target.data(), static_cast<double*>(nullptr), pred.size(), kind, 1.0, weight.data(), d);
+        pred[i] = keep - h;
+        const double down = regression_loss(pred.data(), target.data(), static_cast<double*>(nullptr), pred.size(), kind, 1.0, weight.data(), d);
+        pred[i] = keep;
+        CHECK(g[i] == doctest::Approx(0.5 * (up - down) / (2 * h)).epsilon(1e-7));
+      }
+      // Equal weights give the plain mean and its gradient, bit for bit up to rounding.
+      std::vector<double> ones(rows, 3.0), g1(rows * d), g0(rows * d);
+      const double l1 = regression_loss(pred.data(), target.data(), g1.data(), pred.size(), kind, 1.0, ones.data(), d);
+      const double l0 = regression_loss(pred.data(), target.data(), g0.data(), pred.size(), kind);
+      CHECK(l1 == doctest::Approx(l0).epsilon(1e-14));
+      for (std::size_t i = 0; i < g0.size(); ++i) CHECK(g1[i] == doctest::Approx(g0[i]).epsilon(1e-14));
+    }
+  }
+
+  TEST_CASE("activity weighting: equal activity is the plain mean, contact tokens weigh more") {
+    auto model = random_model(31);
+    JepaWorkspace<double> w;
+    JepaStepConfig plain, weighted;
+    plain.drop_path = weighted.drop_path = 0.0;
+    weighted.activity_weight = 3.0;
+    // Every token's input row with the same mean square: all weights equal.
+    std::vector<double> x(2 * 9 * 4);
+    for (std::size_t i = 0; i < x.size(); ++i) x[i] = (i % 2 ? 0.7 : -0.7);
+    const double l0 = jepa_loss(model, x.data(), 2, tiny_masks(), w, plain, 1, false).loss;
+    CHECK(jepa_loss(model, x.data(), 2, tiny_masks(), w, weighted, 1, false).loss == doctest::Approx(l0).epsilon(1e-12));
+    // Sample 0's token 3 (in two targets) in contact, the rest idle: its weight is 1 + λ·a/ā.
+    std::fill(x.begin(), x.end(), 0.0);
+    for (int k = 0; k < 4; ++k) x[3 * 4 + k] = 2.0;
+    std::vector<double> tw;
+    detail::activity_weights(x.data(), 18, 4, 3.0, tw);
+    CHECK(tw[3] == doctest::Approx(1 + 3.0 * 18));
+    CHECK(tw[0] == 1.0);
+    CHECK(tw[9 + 3] == 1.0);
   }
 
   TEST_CASE("two backward passes accumulate twice the gradient") {

@@ -2,7 +2,8 @@
 // SimulatedSkin: tjepa's built-in data. A physically plausible magnetic skin (like Xela uSkin: each
 // taxel reads x, y shear and z normal) over any layout with coordinates, touched by indenters.
 //
-// Model, per contact event (one at a time; events follow each other with free gaps):
+// Model, per contact event (one at a time by default, events following each other with free gaps;
+// record(frames, contacts) lets several indenters touch at once, each with its own events):
 //   * An indenter of one of four shapes lands on a random pad at a random point (a random taxel of
 //     the pad, jittered by up to half the pad's pitch):
 //       sphere       radius R ∈ [4, 15] mm: Hertz contact, radius a = (3·F·R / 4E*)^(1/3) grows with
@@ -263,19 +264,28 @@ class SimulatedSkin {
 
   // A recording of `frames` frames with contact events, and its labels. Successive calls continue
   // the same sensor (drift, drop-outs) with new events.
-  SimRecording record(int frames) {
+  // contacts > 1: up to that many indenters touch at once (a hand holding and manipulating: each
+  // runs its own sequence of events and gaps, on a pad of its own choosing; the signals add). The
+  // labels then describe the first indenter only, so such recordings are meant for unlabelled
+  // pre-training. contacts = 1 gives the same data as before this option existed.
+  SimRecording record(int frames, int contacts = 1) {
     require<ConfigError>(frames >= 0, "SimulatedSkin::record: frames = ", frames, ", expected >= 0");
+    require<ConfigError>(contacts >= 1 && contacts <= 64, "SimulatedSkin::record: contacts = ", contacts,
+                         ", expected in [1, 64]");
+    if (static_cast<int>(channels_.size()) < contacts) channels_.resize(static_cast<std::size_t>(contacts));
     SimRecording out;
     out.recording = Recording(frames, taxels(), axes());
-    out.recording.set_source("simulated skin");
+    out.recording.set_source(contacts == 1 ? "simulated skin" : "simulated skin, multi-contact");
     out.labels.resize(frames);
     float* x = out.recording.mutable_data();
     for (int t = 0; t < frames; ++t) {
       float* f = x + static_cast<std::size_t>(t) * taxels() * axes();
       sensor_frame(f);
-      ContactState c;
-      if (next_contact(c)) {
+      for (int k = 0; k < contacts; ++k) {
+        ContactState c;
+        if (!next_contact(channels_[static_cast<std::size_t>(k)], c)) continue;
         add_signal(c, f);
+        if (k > 0) continue;
         FrameLabel& l = out.labels[t];
         l.force = {static_cast<float>(c.shear_u), static_cast<float>(c.shear_v), static_cast<float>(c.normal)};
         const auto loc = location(c.pad, c.u, c.v);
@@ -321,6 +331,12 @@ class SimulatedSkin {
     double static_frac, static_dir;
     int gap, press, hold, slide, release;
     int total() const { return gap + press + hold + slide + release; }
+  };
+  // One indenter: its current event, the frame within it and its lagging tangential force.
+  struct Channel {
+    std::optional<Event> event;
+    int k = 0;
+    double shear_u = 0, shear_v = 0;
   };
 
   void build_pads() {
@@ -549,15 +565,17 @@ class SimulatedSkin {
     return e;
   }
 
-  // Advances the event clock by one frame; true (and c filled) if the skin is touched.
-  bool next_contact(ContactState& c) {
-    if (!event_ || k_ >= event_->total()) {
-      event_ = draw_event();
-      k_ = 0;
-      shear_u_ = shear_v_ = 0;
+  // Advances one indenter's event clock by one frame; true (and c filled) if it touches the skin.
+  bool next_contact(Channel& ch, ContactState& c) {
+    if (!ch.event || ch.k >= ch.event->total()) {
+      ch.event = draw_event();
+      ch.k = 0;
+      ch.shear_u = ch.shear_v = 0;
     }
-    const Event& e = *event_;
-    const int k = k_++;
+    const Event& e = *ch.event;
+    const int k = ch.k++;
+    double& su = ch.shear_u;
+    double& sv = ch.shear_v;
     if (k < e.gap) return false;
     const int t = k - e.gap;
     double fn, pos = 0.0;
@@ -586,12 +604,12 @@ class SimulatedSkin {
         tv = e.mu * fn * dv / len;
       }
     }
-    shear_u_ += 0.3 * (tu - shear_u_);
-    shear_v_ += 0.3 * (tv - shear_v_);
-    const double mag = std::hypot(shear_u_, shear_v_), limit = e.mu * fn;
+    su += 0.3 * (tu - su);
+    sv += 0.3 * (tv - sv);
+    const double mag = std::hypot(su, sv), limit = e.mu * fn;
     if (mag > limit) {
-      shear_u_ *= limit / mag;
-      shear_v_ *= limit / mag;
+      su *= limit / mag;
+      sv *= limit / mag;
     }
     c.shape = e.shape;
     c.size = e.size;
@@ -600,8 +618,8 @@ class SimulatedSkin {
     c.u = e.u0 + pos * (e.u1 - e.u0);
     c.v = e.v0 + pos * (e.v1 - e.v0);
     c.normal = fn;
-    c.shear_u = shear_u_;
-    c.shear_v = shear_v_;
+    c.shear_u = su;
+    c.shear_v = sv;
     return true;
   }
 
@@ -618,9 +636,7 @@ class SimulatedSkin {
   std::int64_t frame_ = 0;       // frames generated so far
   std::vector<int> dropout_left_;  // [N] frames of drop-out left
   std::int64_t next_dropout_ = 0;  // taxel-frames until the next drop-out starts
-  std::optional<Event> event_;
-  int k_ = 0;                       // frame within the current event
-  double shear_u_ = 0, shear_v_ = 0;
+  std::vector<Channel> channels_ = std::vector<Channel>(1);  // one per simultaneous indenter
 };
 
 }  // namespace tjepa

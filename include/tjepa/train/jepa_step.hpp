@@ -43,12 +43,18 @@ struct JepaStepConfig {
   double drop_path = 0.3;                 // the reference's stochastic depth in every block
   bool target_drop_path = true;           // the reference's target encoder runs in train mode too
   double clip_grad_norm = 10.0;
+  // λ ≥ 0: each target token's error is weighted by 1 + λ·a/ā, a = the mean square of the token's
+  // input row x[b, n, :] (preprocessed, so an idle taxel reads ≈ 0) and ā its mean over the batch;
+  // the loss stays a weighted mean. 0 is the reference's plain mean. On a skin where most taxels
+  // are idle in every window, the plain mean is mostly the error at idle tokens, which are trivially
+  // predictable; λ moves the loss's weight to the tokens in contact.
+  double activity_weight = 0.0;
 
   nlohmann::json to_json() const {
     return {{"loss", to_string(loss)},       {"normalize_targets", normalize_targets},
             {"predictor_pos_from_context", predictor_pos_from_context},
             {"drop_path", drop_path},        {"target_drop_path", target_drop_path},
-            {"clip_grad_norm", clip_grad_norm}};
+            {"clip_grad_norm", clip_grad_norm}, {"activity_weight", activity_weight}};
   }
 };
 
@@ -65,6 +71,7 @@ struct JepaWorkspace {
   AlignedVector<T> z, dz;       // [B, K, d] context embeddings and their gradient
   AlignedVector<T> pred, y, dpred;  // [R·B, t, d] predictions, targets, ∂L/∂pred of a group
   std::vector<int> idx;         // [R·B, t] target token ids of a group
+  std::vector<double> token_weight, row_weight;  // [B, N] and [R·B·t]: JepaStepConfig::activity_weight
 };
 
 // What the forward pass found.
@@ -76,6 +83,22 @@ struct JepaLossResult {
 };
 
 namespace detail {
+// JepaStepConfig::activity_weight: weight [BN] = 1 + λ·a/ā of the rows x [BN, W].
+template <class T>
+const double* activity_weights(const T* x, std::size_t BN, int W, double lambda, std::vector<double>& weight) {
+  weight.resize(BN);
+  for (std::size_t i = 0; i < BN; ++i) {
+    double a = 0;
+    for (int k = 0; k < W; ++k) a += static_cast<double>(x[i * W + k]) * static_cast<double>(x[i * W + k]);
+    weight[i] = a / W;
+  }
+  double mean = 0;
+  for (double a : weight) mean += a;
+  mean /= static_cast<double>(BN);
+  for (double& a : weight) a = 1.0 + (mean > 0 ? lambda * a / mean : 0.0);
+  return weight.data();
+}
+
 inline void check_masks(const MaskBatch& masks, int B, int N) {
   require<ShapeError>(masks.B == B, "JEPA step: masks for B = ", masks.B, " samples, batch has ", B);
   require<ShapeError>(masks.K > 0 && masks.context.size() == static_cast<std::size_t>(B) * masks.K,
@@ -134,6 +157,11 @@ JepaLossResult jepa_loss(JepaModel<T>& model, const T* x, int B, const MaskBatch
   const T* pos = pos_set.value(model.encoder.pos_embed());
   T* dpos = backward && cfg.predictor_pos_from_context ? model.context.grad(model.encoder.pos_embed()) : nullptr;
   const int num_targets = masks.num_targets();
+  const double* token_weight = nullptr;
+  if (cfg.activity_weight > 0) {
+    require<ConfigError>(std::isfinite(cfg.activity_weight), "jepa_loss: activity_weight = ", cfg.activity_weight);
+    token_weight = detail::activity_weights(x, BN, model.token_width(), cfg.activity_weight, w.token_weight);
+  }
   result.target_losses.assign(static_cast<std::size_t>(num_targets), 0.0);
   std::vector<char> done(static_cast<std::size_t>(num_targets), 0);
   for (int first = 0; first < num_targets; ++first) {
@@ -159,10 +187,17 @@ JepaLossResult jepa_loss(JepaModel<T>& model, const T* x, int B, const MaskBatch
     model.predictor.forward(model.predictor_params, z, B, K, pos, N, idx, R * B, t, pred,
                             backward ? &w.predictor_cache : nullptr, w.ws);
     for (int r = 0; r < R; ++r) gather_rows(y + r * rows * d, h, static_cast<std::size_t>(N) * d, idx + r * rows, B, t, d);
+    const double* row_weight = nullptr;
+    if (token_weight) {
+      w.row_weight.resize(R * rows);
+      for (std::size_t q = 0; q < R * rows; ++q)
+        w.row_weight[q] = token_weight[(q % rows) / t * N + idx[q]];
+      row_weight = w.row_weight.data();
+    }
     for (int r = 0; r < R; ++r) {
       const std::size_t off = r * rows * d;
       const double l = regression_loss(pred + off, y + off, dpred ? dpred + off : nullptr, rows * d, cfg.loss,
-                                       1.0 / num_targets);
+                                       1.0 / num_targets, row_weight ? row_weight + r * rows : nullptr, d);
       result.target_losses[static_cast<std::size_t>(group[static_cast<std::size_t>(r)])] = l;
     }
     if (backward) model.predictor.backward(model.predictor_params, dpred, dz, dpos, w.predictor_cache, w.ws);

@@ -43,15 +43,22 @@ void normalize_rows(T* x, std::size_t M, int d, double eps = target_norm_eps) {
 
 // Returns mean_i ℓ(pred_i − target_i) over n elements (summed in double, the same on any thread
 // count). dpred, if not null, receives scale · ∂loss/∂pred (overwritten, not added).
+// With row_weight [n / row_len] (row_len elements per row: a token's embedding), the mean is
+// weighted by row: Σ_i w_row(i) ℓ_i / (row_len · Σ_r w_r); weights all equal give the plain mean.
 template <class T>
 double regression_loss(const T* pred, const T* target, T* dpred, std::size_t n, JepaLossKind kind,
-                       double scale = 1.0) {
-  const double inv_n = 1.0 / static_cast<double>(n);
+                       double scale = 1.0, const double* row_weight = nullptr, std::size_t row_len = 1) {
+  auto weight = [&](std::size_t i) { return row_weight ? row_weight[i / row_len] : 1.0; };
+  double total_weight = static_cast<double>(n);
+  if (row_weight)
+    total_weight = static_cast<double>(row_len) *
+                   detail::deterministic_sum(n / row_len, [&](std::size_t r) { return row_weight[r]; });
+  const double inv_n = 1.0 / total_weight;
   const double sum = detail::deterministic_sum(n, [&](std::size_t i) {
     const double e = static_cast<double>(pred[i]) - static_cast<double>(target[i]);
-    if (kind == JepaLossKind::mse) return e * e;
+    if (kind == JepaLossKind::mse) return weight(i) * e * e;
     const double a = std::abs(e);
-    return a < 1.0 ? 0.5 * e * e : a - 0.5;
+    return weight(i) * (a < 1.0 ? 0.5 * e * e : a - 0.5);
   });
   if (dpred) {
     const double g = scale * inv_n;
@@ -61,7 +68,7 @@ double regression_loss(const T* pred, const T* target, T* dpred, std::size_t n, 
       const double e = static_cast<double>(pred[i]) - static_cast<double>(target[i]);
       // ∂ℓ/∂e: 2e for mse; e inside the quadratic zone, sign(e) outside for smooth-L1.
       const double de = kind == JepaLossKind::mse ? 2.0 * e : (std::abs(e) < 1.0 ? e : (e > 0 ? 1.0 : -1.0));
-      dpred[i] = static_cast<T>(g * de);
+      dpred[i] = static_cast<T>(g * weight(static_cast<std::size_t>(i)) * de);
     }
   }
   return sum * inv_n;
