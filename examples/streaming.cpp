@@ -18,9 +18,21 @@
 // loop and the modules' workspaces stop growing after the first tick, so the steady state
 // allocates nothing: every malloc of the process is counted and the example checks it.
 //
-//   streaming [--checkpoint runs/demo/checkpoint.safetensors] [--ticks 2000] [--rate 100]
-// Prints latency p50 / p99 / max per tick and the allocations after warm-up.
+//   streaming [--checkpoint runs/demo/checkpoint.safetensors] [--ticks 2000] [--rate 100] [--spin]
+//             [--realtime] [--stages] [--controls] [--repack]
+// Prints latency p50 / p99 / max per tick and the allocations after warm-up. --stages times each
+// stage of every tick (StageClock) and says where the slowest ticks lose their time. --controls
+// then times two fixed loops of the median tick's length the same way: FMAs in registers (what
+// the clock and the scheduler alone give) and read-modify-write sweeps over a 4 MiB buffer, the
+// encoder's working set (what the memory system alone gives): a p99/p50 no better than theirs is
+// the machine's, not the encoder's. Ticks during which the thread was preempted (an involuntary
+// context switch) are counted, and p50 / p99 are also given without them: on a shared machine the
+// scheduler alone can set the p99. --realtime (SCHED_FIFO) is how a control loop avoids that;
+// back to back it runs into the kernel's RT throttling (50 ms per second by default), so use it with
+// --rate.
 #include <CLI/CLI.hpp>
+#include <sched.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <atomic>
@@ -28,7 +40,10 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <map>
 #include <memory>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -39,6 +54,156 @@
 // xsimd's aligned allocator all end in one of these): glibc lets the program interpose them.
 namespace {
 std::atomic<long long> g_allocations{0};
+
+using Clock = std::chrono::steady_clock;
+
+// Latency of each timed tick, and whether the thread was preempted during it (an involuntary
+// context switch: the scheduler's jitter, not the tick's own).
+struct Timings {
+  std::vector<double> us;
+  std::vector<char> preempted;
+};
+
+long involuntary_switches() {
+  rusage u{};
+  getrusage(RUSAGE_THREAD, &u);
+  return u.ru_nivcsw;
+}
+
+// Runs tick(k) for k < warmup + ticks at `rate` Hz (0: back to back), sleeping or busy-waiting
+// (spin) until each next tick. on_warm() runs once, right before the first timed tick.
+template <class Tick, class OnWarm>
+Timings timed_loop(int warmup, int ticks, double rate, bool spin, Tick&& tick, OnWarm&& on_warm) {
+  Timings t;
+  t.us.reserve(static_cast<std::size_t>(ticks));
+  t.preempted.reserve(static_cast<std::size_t>(ticks));
+  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(rate > 0 ? 1.0 / rate : 0.0));
+  auto next = Clock::now();
+  for (int k = 0; k < warmup + ticks; ++k) {
+    if (k == warmup) on_warm();
+    const long switches = involuntary_switches();
+    const auto t0 = Clock::now();
+    tick(k);
+    const auto t1 = Clock::now();
+    if (k >= warmup) {
+      t.us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
+      t.preempted.push_back(involuntary_switches() != switches);
+    }
+    if (rate > 0) {
+      next += period;
+      if (spin)
+        while (Clock::now() < next) {
+        }
+      else
+        std::this_thread::sleep_until(next);
+    }
+  }
+  return t;
+}
+
+// Value at quantile p of sorted values.
+double quantile(const std::vector<double>& sorted, double p) {
+  return sorted[std::min(sorted.size() - 1, static_cast<std::size_t>(p * static_cast<double>(sorted.size())))];
+}
+
+// p50 / p99 of the ticks the scheduler left alone.
+void print_unpreempted(const Timings& t) {
+  std::vector<double> alone;
+  for (std::size_t i = 0; i < t.us.size(); ++i)
+    if (!t.preempted[i]) alone.push_back(t.us[i]);
+  if (alone.empty()) return;
+  std::sort(alone.begin(), alone.end());
+  const double p50 = quantile(alone, 0.5), p99 = quantile(alone, 0.99);
+  std::printf("  %zu of %zu ticks preempted; the others: p50 %.0f us, p99 %.0f us, p99/p50 %.3f\n",
+              t.us.size() - alone.size(), t.us.size(), p50, p99, p99 / p50);
+}
+
+// p50 / p99 / max of all ticks, then of the unpreempted ones.
+void print_latency(const char* what, const Timings& t) {
+  std::vector<double> all = t.us;
+  std::sort(all.begin(), all.end());
+  const double p50 = quantile(all, 0.5), p99 = quantile(all, 0.99);
+  std::printf("%s: p50 %.0f us, p99 %.0f us, max %.0f us, p99/p50 %.3f\n", what, p50, p99, all.back(), p99 / p50);
+  print_unpreempted(t);
+}
+
+// Per stage name (summed over the blocks of a tick): median time, p99, and how much longer the
+// stage took in the slowest 1% of ticks than in the ticks around the median — where the tail lives.
+void print_stages(const std::vector<double>& latency_us, const std::vector<std::vector<std::pair<const char*, double>>>& stages) {
+  std::vector<std::size_t> order(latency_us.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return latency_us[a] < latency_us[b]; });
+  const std::size_t n = order.size(), tail = std::max<std::size_t>(1, n / 100);
+  std::vector<std::string> names;
+  std::map<std::string, std::vector<double>> per_tick;  // stage → µs per tick
+  for (std::size_t t = 0; t < n; ++t)
+    for (const auto& [name, us] : stages[t]) {
+      auto& v = per_tick[name];
+      if (v.empty()) {
+        v.assign(n, 0.0);
+        names.emplace_back(name);
+      }
+      v[t] += us;
+    }
+  std::printf("%-10s %9s %9s %8s %22s\n", "stage", "p50 us", "p99 us", "p99/p50", "slowest 1% vs median");
+  for (const auto& name : names) {
+    const std::vector<double>& v = per_tick.at(name);
+    double slow = 0, mid = 0;
+    for (std::size_t i = 0; i < tail; ++i) {
+      slow += v[order[n - 1 - i]];
+      mid += v[order[std::min(n - 1, n / 2 - tail / 2 + i)]];
+    }
+    std::vector<double> sorted = v;
+    std::sort(sorted.begin(), sorted.end());
+    const double p50 = quantile(sorted, 0.5), p99 = quantile(sorted, 0.99);
+    std::printf("%-10s %9.1f %9.1f %8.3f %+15.1f us/tick\n", name.c_str(), p50, p99, p99 / p50, (slow - mid) / double(tail));
+  }
+}
+
+// The controls: each runs `reps` times a fixed amount of work; calibrate() finds the reps that
+// take about `us` µs.
+struct FmaControl {
+  float operator()(int reps) const {
+    using V = xsimd::batch<float>;
+    V a[8];
+    for (int i = 0; i < 8; ++i) a[i] = V(1.0f + 1e-3f * float(i));
+    volatile float mv = 0.9999999f, cv = 1e-7f;  // opaque: else g++ folds the loop away
+    const V m(mv), c(cv);
+    for (int r = 0; r < reps; ++r)
+      for (int i = 0; i < 8; ++i) a[i] = xsimd::fma(a[i], m, c);
+    float s = 0;
+    for (int i = 0; i < 8; ++i) s += tjepa::detail::hsum<float>(a[i]);
+    return s;
+  }
+};
+struct MemoryControl {
+  tjepa::AlignedVector<float> buffer = tjepa::AlignedVector<float>((std::size_t(4) << 20) / sizeof(float), 1.0f);
+  float operator()(int reps) {
+    using V = xsimd::batch<float>;
+    V acc(0.0f);
+    const V one(1.0f);
+    for (int r = 0; r < reps; ++r)
+      for (std::size_t i = 0; i < buffer.size(); i += V::size) {
+        const V v = V::load_aligned(buffer.data() + i);
+        acc += v;
+        (v * one).store_aligned(buffer.data() + i);
+      }
+    return tjepa::detail::hsum<float>(acc);
+  }
+};
+template <class Control>
+int calibrate(Control& control, double us) {
+  volatile float sink = 0;
+  int reps = 1;
+  for (;;) {
+    const auto t0 = Clock::now();
+    sink = sink + control(reps);
+    const double took = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+    if (took > us / 4 || reps > (1 << 28)) return std::max(1, static_cast<int>(reps * us / took));
+    reps *= 2;
+  }
+}
+
 }  // namespace
 
 extern "C" {
@@ -82,10 +247,17 @@ int main(int argc, char** argv) {
   std::string checkpoint;
   int ticks = 2000, warmup = 20;
   double rate = 0;
+  bool spin = false, stages = false, controls = false, repack = false, realtime = false;
   app.add_option("--checkpoint", checkpoint, "checkpoint of `tjepa pretrain`/`tjepa demo` (default: random weights, demo size)");
   app.add_option("--ticks", ticks, "control-loop ticks to time")->capture_default_str();
   app.add_option("--warmup", warmup, "ticks before timing and allocation counting")->capture_default_str();
   app.add_option("--rate", rate, "control-loop rate in Hz (0: back to back)")->capture_default_str();
+  app.add_flag("--spin", spin, "busy-wait between ticks instead of sleeping (with --rate)");
+  app.add_flag("--realtime", realtime,
+               "run under SCHED_FIFO (priority 10), as a control loop would: other threads no longer preempt it");
+  app.add_flag("--repack", repack, "pack the weights for the GEMM on every call, as training does (A/B of frozen weights)");
+  app.add_flag("--stages", stages, "time each stage of every tick and show where the slowest ticks lose time");
+  app.add_flag("--controls", controls, "then time an FMA loop and a 4 MiB memory sweep of the median tick's length the same way");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -94,6 +266,14 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
+    if (realtime) {
+      const sched_param param{10};
+      if (sched_setscheduler(0, SCHED_FIFO, &param) != 0) {
+        std::fprintf(stderr, "streaming: error: SCHED_FIFO refused (%s): needs CAP_SYS_NICE or an rtprio limit\n",
+                     std::strerror(errno));
+        return 1;
+      }
+    }
     require<ConfigError>(ticks > 0 && warmup >= 1, "--ticks ", ticks, ", --warmup ", warmup, ", expected > 0");
     const Skin skin = layouts::allegro_xela();
     // The sensor: a simulated recording played back frame by frame.
@@ -126,16 +306,23 @@ int main(int argc, char** argv) {
     std::vector<float> tokens(static_cast<std::size_t>(N) * d), emb(tokens.size());
     std::vector<float> y(static_cast<std::size_t>(probe.outputs()));
     Workspace<float> ws;
-    std::vector<double> latency_us;
-    latency_us.reserve(static_cast<std::size_t>(ticks));
+    ws.frozen_weights = !repack;  // the encoder's weights are packed for the GEMM once, on the first tick
+    StageClock clock;
+    std::vector<std::vector<std::pair<const char*, double>>> stage_us;  // [tick] (stage, µs), made before the loop
+    if (stages) {
+      ws.clock = &clock;
+      stage_us.resize(static_cast<std::size_t>(ticks));
+      for (auto& v : stage_us) {  // touched now: no page faults while timing
+        v.resize(StageClock::capacity);
+        v.clear();
+      }
+    }
     long long allocations_before = 0;
+    rusage usage_before{};  // page faults and preemptions: jitter the allocation count does not show
     double checksum = 0;
     int head = 0;  // ring slot of the next frame
-    const auto period = rate > 0 ? std::chrono::duration<double>(1.0 / rate) : std::chrono::duration<double>(0);
-    auto next = std::chrono::steady_clock::now();
-    for (int k = 0; k < warmup + ticks; ++k) {
-      if (k == warmup) allocations_before = g_allocations.load();
-      const auto t0 = std::chrono::steady_clock::now();
+    auto tick = [&](int k) {
+      clock.start();
       float* slot = ring.data() + static_cast<std::size_t>(head) * N * m;
       std::copy_n(stream.recording.frame(k % stream.recording.frames()), static_cast<std::size_t>(N) * m, slot);
       pre.apply(slot, 1, N, 1, m);
@@ -148,28 +335,53 @@ int main(int argc, char** argv) {
           for (int a = 0; a < m; ++a)
             window[(static_cast<std::size_t>(n) * m + a) * tau + j] = f[static_cast<std::size_t>(n) * m + a];
       }
+      ws.mark("window");
       model->tokenizer.forward(model->target, window.data(), 1, tokens.data(), nullptr, ws);
+      ws.mark("tokenizer");
       model->encoder.forward(model->target, tokens.data(), 1, nullptr, N, emb.data(), nullptr, ws);
       probe.probe.forward(probe.params, emb.data(), 1, N, nullptr, y.data(), nullptr, ws);
+      ws.mark("probe");
       checksum += y[0];
-      const auto t1 = std::chrono::steady_clock::now();
-      if (k >= warmup) latency_us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
-      if (rate > 0) {
-        next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
-        std::this_thread::sleep_until(next);
+      if (stages && k >= warmup) {
+        auto& v = stage_us[static_cast<std::size_t>(k - warmup)];
+        for (int i = 0; i < clock.count(); ++i) v.emplace_back(clock.name(i), 1e-3 * double(clock.elapsed_ns(i)));
       }
-    }
+    };
+    const Timings timings = timed_loop(warmup, ticks, rate, spin, tick, [&] {
+      allocations_before = g_allocations.load();
+      getrusage(RUSAGE_SELF, &usage_before);
+    });
     const long long steady_allocations = g_allocations.load() - allocations_before;
-    std::vector<double> sorted = latency_us;
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    std::vector<double> sorted = timings.us;
     std::sort(sorted.begin(), sorted.end());
-    auto pct = [&](double p) { return sorted[std::min(sorted.size() - 1, static_cast<std::size_t>(p * sorted.size()))]; };
+    auto pct = [&](double p) { return quantile(sorted, p); };
     std::printf("streaming: %d taxels x %d axes, window of %d frames, encoder d=%d, %d blocks, %d heads%s\n", N, m, tau,
                 d, model->config.encoder.depth, model->config.encoder.heads,
                 checkpoint.empty() ? " (random weights)" : "");
-    std::printf("%d ticks after %d warm-up ticks, 1 thread%s\n", ticks, warmup, rate > 0 ? "" : ", back to back");
-    std::printf("latency per tick: p50 %.0f us, p99 %.0f us, max %.0f us (%.0f Hz sustainable at p99)\n", pct(0.5),
-                pct(0.99), sorted.back(), 1e6 / pct(0.99));
+    std::printf("%d ticks after %d warm-up ticks, 1 thread%s%s\n", ticks, warmup,
+                rate > 0 ? (spin ? ", busy-waiting between ticks" : ", sleeping between ticks") : ", back to back",
+                realtime ? ", SCHED_FIFO" : "");
+    std::printf("latency per tick: p50 %.0f us, p99 %.0f us, max %.0f us (%.0f Hz sustainable at p99), p99/p50 %.3f\n",
+                pct(0.5), pct(0.99), sorted.back(), 1e6 / pct(0.99), pct(0.99) / pct(0.5));
+    print_unpreempted(timings);
     std::printf("allocations in steady state: %lld (checksum %.3f)\n", steady_allocations, checksum);
+    std::printf("in steady state: %ld page faults, %ld involuntary context switches\n",
+                (usage.ru_minflt - usage_before.ru_minflt) + (usage.ru_majflt - usage_before.ru_majflt),
+                usage.ru_nivcsw - usage_before.ru_nivcsw);
+    if (stages) print_stages(timings.us, stage_us);
+    if (controls) {
+      volatile float sink = 0;
+      FmaControl fma;
+      const int fma_reps = calibrate(fma, pct(0.5));
+      print_latency("control, FMAs in registers",
+                    timed_loop(warmup, ticks, rate, spin, [&](int) { sink = sink + fma(fma_reps); }, [] {}));
+      MemoryControl memory;
+      const int memory_reps = calibrate(memory, pct(0.5));
+      print_latency("control, 4 MiB memory sweeps",
+                    timed_loop(warmup, ticks, rate, spin, [&](int) { sink = sink + memory(memory_reps); }, [] {}));
+    }
     return steady_allocations == 0 ? 0 : 3;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "streaming: error: %s\n", e.what());

@@ -66,6 +66,7 @@
 #include "tjepa/model/mlp.hpp"
 #include "tjepa/model/position_table.hpp"
 #include "tjepa/model/predictor.hpp"
+#include "tjepa/model/stage_clock.hpp"
 #include "tjepa/model/tokenizer.hpp"
 #include "tjepa/model/workspace.hpp"
 #include "tjepa/model/prefixed_params.hpp"

@@ -476,6 +476,37 @@ TEST_SUITE("nn") {
     CHECK_FALSE(a.infos()[a.id("norm.weight").index].decay);
   }
 
+  TEST_CASE("Inference (row-tiled MLP) - frozen packed weights: the training forward's outputs, bit for bit") {
+    ParamSet<float> ps;
+    const int N = 53, d = 48, B = 2;
+    Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
+    ps.allocate();
+    init_params(ps, 3);
+    Rng rng(15);
+    std::vector<float> tokens(std::size_t(B) * N * d), train(tokens.size()), infer(tokens.size()), frozen(tokens.size());
+    test::fill_normal(tokens, rng);
+    EncoderCache<float> cache;
+    Workspace<float> ws, fws;
+    fws.frozen_weights = true;
+    enc.forward(ps, tokens.data(), B, nullptr, N, train.data(), &cache, ws);  // untiled MLP, per-call packing
+    enc.forward(ps, tokens.data(), B, nullptr, N, infer.data(), nullptr, ws);
+    CHECK(infer == train);
+    enc.forward(ps, tokens.data(), B, nullptr, N, frozen.data(), nullptr, fws);
+    CHECK(frozen == train);
+    CHECK(fws.packed.size() == 8);  // qkv, proj, fc1, fc2 of 2 blocks, packed once
+    const long n = count_allocations([&] { enc.forward(ps, tokens.data(), B, nullptr, N, frozen.data(), nullptr, fws); });
+    CHECK(n == 0);
+    CHECK(frozen == train);
+    CHECK(fws.packed.size() == 8);
+    // The packed copies are keyed by address: new values need clear(), then they are used.
+    for (float& v : ps.values()) v *= 1.5f;
+    enc.forward(ps, tokens.data(), B, nullptr, N, infer.data(), nullptr, ws);
+    fws.packed.clear();
+    enc.forward(ps, tokens.data(), B, nullptr, N, frozen.data(), nullptr, fws);
+    CHECK(frozen == infer);
+    CHECK(infer != train);
+  }
+
   TEST_CASE("Inference after warm-up makes no heap allocation (counting allocator)") {
     ParamSet<float> ps;
     const int N = 40, d = 48, B = 2, K = 23, t = 7;

@@ -54,7 +54,8 @@ struct SelfAttention {
                T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws, int q_from = 0,
                const T* residual = nullptr) const {
     const int d = dim(), Dh = d / heads, Lq = L - q_from;
-    qkv.forward(ps, x, qkv_buf, B * L);
+    qkv.forward(ps, x, qkv_buf, B * L, ws.frozen());
+    ws.mark("qkv");
     // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
     // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads).
     const int pairs = B * heads, threads = detail::max_threads();
@@ -74,11 +75,13 @@ struct SelfAttention {
                         att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
                         lse ? lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()]);
     }
+    ws.mark("attention");
     if (accumulate) residual = y;
     if (residual)
-      proj.forward_residual(ps, att, residual, y, B * Lq);
+      proj.forward_residual(ps, att, residual, y, B * Lq, ws.frozen());
     else
-      proj.forward(ps, att, y, B * Lq);
+      proj.forward(ps, att, y, B * Lq, ws.frozen());
+    ws.mark("proj");
   }
 
   // dx [B·L, d] += ∂L/∂x given dy [B·Lq, d] (= when add_dx is false). dqkv [B·L, 3d] and datt
@@ -134,8 +137,8 @@ struct CrossAttention {
   void forward(const ParamSet<T>& ps, const T* query, const T* x, int B, int L, const std::uint8_t* key_valid,
                T* qbuf, T* kvbuf, T* att, T* lse, T* y, bool accumulate, Workspace<T>& ws) const {
     const int d = dim();
-    q.forward(ps, query, qbuf, B);
-    kv.forward(ps, x, kvbuf, B * L);
+    q.forward(ps, query, qbuf, B, ws.frozen());
+    kv.forward(ps, x, kvbuf, B * L, ws.frozen());
     const AttentionShape s = shape(L);
     AttentionWorkspace<T>* aws = ws.attention_per_thread();
     TJEPA_OMP(omp parallel for schedule(static) if (B > 1))

@@ -51,7 +51,7 @@ struct Block {
 };
 
 // Activations one block keeps for backward (training), or scratch (inference: mean/rstd/lse
-// nullptr, x_mid = x_out = x_in, h_pre doubles as the activation).
+// nullptr, x_mid = x_out = x_in, h_pre = h = nullptr: the MLP runs row-tiled without them).
 template <class T>
 struct BlockBuffers {
   T *ln1, *mean1, *rstd1, *qkv, *att, *lse, *x_mid, *ln2, *mean2, *rstd2, *h_pre, *h;
@@ -123,13 +123,12 @@ struct BlockStack {
       // until the last block writes the kept rows to x_out.
       T* x = keep_from == 0 ? x_out : detail::grow(ws.stream, Md);
       if (x != x_in) detail::parallel_copy(x_in, x_in + Md, x);
-      T* hidden = detail::grow(ws.hidden, M * hid);
       for (int i = 0; i < D; ++i) {
         const bool last = i == D - 1;
         T* out = last ? x_out : x;
         BlockBuffers<T> buf{detail::grow(ws.ln, Md), nullptr, nullptr, detail::grow(ws.qkv, 3 * Md),
                             detail::grow(ws.att, Md), nullptr, out, detail::grow(ws.ln, Md), nullptr, nullptr,
-                            hidden, hidden, scale(i, 0), scale(i, 1)};
+                            nullptr, nullptr, scale(i, 0), scale(i, 1)};
         block_forward(ps, blocks[std::size_t(i)], x, out, B, L, last ? keep_from : 0, key_valid, buf, branch, ws);
       }
       return;
@@ -296,6 +295,7 @@ struct BlockStack {
       const std::size_t f = std::size_t(b0) * L, q = std::size_t(b0) * Lq;
       blk.norm1.forward(ps, x_in + f * d, buf.ln1 + f * d, buf.mean1 ? buf.mean1 + f : nullptr,
                         buf.rstd1 ? buf.rstd1 + f : nullptr, n * L);
+      ws.mark("norm1");
       T* y = buf.scale1 ? branch + q * d : buf.x_mid + q * d;
       blk.attn.forward(ps, buf.ln1 + f * d, n, L, key_valid ? key_valid + f : nullptr, buf.qkv + f * 3 * d,
                        buf.att + q * d, buf.lse ? buf.lse + std::size_t(b0) * H * L : nullptr, y,
@@ -309,9 +309,14 @@ struct BlockStack {
       const std::size_t q = std::size_t(b0) * Lq;
       blk.norm2.forward(ps, buf.x_mid + q * d, buf.ln2 + q * d, buf.mean2 ? buf.mean2 + q : nullptr,
                         buf.rstd2 ? buf.rstd2 + q : nullptr, rows);
+      ws.mark("norm2");
       T* y = buf.scale2 ? branch + q * d : x_out + q * d;
-      blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, false,
-                      direct2 ? buf.x_mid + q * d : nullptr);
+      const T* residual = direct2 ? buf.x_mid + q * d : nullptr;
+      if (buf.h)
+        blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, false, residual);
+      else
+        blk.mlp.forward_tiled(ps, buf.ln2 + q * d, y, rows, residual, ws.mlp, ws.frozen());
+      ws.mark("mlp");
       if (buf.scale2) drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
     });
   }

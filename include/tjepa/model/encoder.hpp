@@ -85,6 +85,7 @@ struct Encoder {
     else
       detail::parallel_copy(tokens, tokens + M * d, x);
     pos.forward(ps, x, context, B, K);
+    ws.mark("embed");
     if (cache) {
       cache->B = B;
       cache->K = K;
@@ -97,6 +98,7 @@ struct Encoder {
     T* mean = cache ? detail::grow(cache->mean, M) : nullptr;
     T* rstd = cache ? detail::grow(cache->rstd, M) : nullptr;
     norm.forward(ps, x, out, mean, rstd, int(M));
+    ws.mark("norm");
   }
 
   // dout [B, K, d] → parameter gradients (added to ps) and dtokens [B, N, d] += (may be nullptr).

@@ -51,10 +51,15 @@ struct LinearParams {
   template <class T>
   const T* b(const ParamSet<T>& ps) const { return has_bias ? ps.value(bias) : nullptr; }
 
-  // out[M, out] = in[M, in] · Wᵀ + b
+  // The weight packed once (PackedWeights), or nullptr without a cache.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, T* y, int M) const {
-    linear_forward(y, x, ps.value(weight), b(ps), M, in, out);
+  const T* packed(const ParamSet<T>& ps, PackedWeights<T>* cache) const {
+    return cache ? cache->get(ps.value(weight), out, in) : nullptr;
+  }
+  // out[M, out] = in[M, in] · Wᵀ + b. cache: packed weights (frozen inference) or nullptr.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, T* y, int M, PackedWeights<T>* cache = nullptr) const {
+    linear_forward(y, x, ps.value(weight), b(ps), M, in, out, packed(ps, cache));
   }
   // y[M, out] += x · Wᵀ + b (residual add fused into the GEMM)
   template <class T>
@@ -63,8 +68,9 @@ struct LinearParams {
   }
   // y[M, out] = r[M, out] + x · Wᵀ + b (r may equal y)
   template <class T>
-  void forward_residual(const ParamSet<T>& ps, const T* x, const T* r, T* y, int M) const {
-    linear_forward_residual(y, r, x, ps.value(weight), b(ps), M, in, out);
+  void forward_residual(const ParamSet<T>& ps, const T* x, const T* r, T* y, int M,
+                        PackedWeights<T>* cache = nullptr) const {
+    linear_forward_residual(y, r, x, ps.value(weight), b(ps), M, in, out, packed(ps, cache));
   }
   // dx (may be nullptr) += dy · W (= when add_dx is false); dW += dyᵀ · x; db += Σ dy
   template <class T>

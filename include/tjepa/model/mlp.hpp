@@ -38,6 +38,16 @@ struct Mlp {
       fc2.forward(ps, h, y, M);
   }
 
+  // Inference: y [M, out] = (residual +) mlp(x), row-tiled (kernels/linear.hpp's
+  // mlp_forward_tiled): no [M, hidden] buffer. residual may equal y, or be nullptr. cache: packed
+  // weights (frozen inference) or nullptr.
+  template <class T>
+  void forward_tiled(const ParamSet<T>& ps, const T* x, T* y, int M, const T* residual, AlignedVector<T>& scratch,
+                     PackedWeights<T>* cache = nullptr) const {
+    mlp_forward_tiled(y, residual, x, ps.value(fc1.weight), fc1.b(ps), ps.value(fc2.weight), fc2.b(ps), M, fc1.in,
+                      fc1.out, fc2.out, scratch, fc1.packed(ps, cache), fc2.packed(ps, cache));
+  }
+
   // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]. h, dh [M, hidden] are scratch (h is recomputed from
   // h_pre rather than kept: the largest activation of a block).
   template <class T>

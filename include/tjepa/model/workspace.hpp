@@ -9,6 +9,8 @@
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/model/detail/parallel.hpp"
 #include "tjepa/model/kernels/attention.hpp"
+#include "tjepa/model/kernels/linear.hpp"
+#include "tjepa/model/stage_clock.hpp"
 
 namespace tjepa {
 
@@ -20,7 +22,8 @@ struct Workspace {
   AlignedVector<T> ln;      // [M, d] LayerNorm output
   AlignedVector<T> qkv;     // [M, 3d]
   AlignedVector<T> att;     // [M, d] attention output before proj
-  AlignedVector<T> hidden;  // [M, hidden] MLP activation
+  AlignedVector<T> hidden;  // [M, hidden] MLP activation (training)
+  AlignedVector<T> mlp;     // the row-tiled inference MLP: packed weights + [tile, hidden] per thread
   AlignedVector<T> branch;  // [M, d] a residual branch under drop-path
   AlignedVector<T> scales;  // [depth, 2, B] drop-path scales of the inference path
   AlignedVector<T> rows;    // [rows, ·] gathered rows (predictor targets, tokenizer groups)
@@ -34,6 +37,18 @@ struct Workspace {
   AlignedVector<T> hidden2;  // [M, hidden] recomputed activation
   AlignedVector<T> drows;    // [rows, ·]
   AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
+  // Inference on weights that do not change between calls (a frozen encoder in a control loop):
+  // set frozen_weights and the products of the tokenizer, the encoder (qkv, proj, MLP) and the
+  // attentive probe's cross-attention pack each weight once, into `packed`, instead of on every
+  // call. Clear `packed` when the values change (its entries are keyed by address).
+  bool frozen_weights = false;
+  PackedWeights<T> packed;
+  PackedWeights<T>* frozen() { return frozen_weights ? &packed : nullptr; }
+  // Times the stages of inference calls when set (StageClock); nullptr: off.
+  StageClock* clock = nullptr;
+  void mark(const char* stage) {
+    if (clock) clock->mark(stage);
+  }
   // One attention workspace per OpenMP thread.
   std::vector<AttentionWorkspace<T>> attention;
 
