@@ -403,11 +403,10 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
 // tjepa demo
 
 // The demo's pre-training: RunConfig's defaults, run for 1500 steps (8 epochs of the 6000
-// unlabelled windows: the most the 10-minute budget allows on 2 cores) with 4 global targets.
-// Why (README, "The demo"): in the first ~500 steps every run predicts the shared "no contact"
-// embedding of the idle taxels and the embeddings spread less over samples; the features that beat
-// a random encoder grow after that. Runs of 600 steps, with the reference's 2 local + 2 global
-// targets or with 4 global, lost to the random encoder.
+// unlabelled windows: what the 10-minute budget allows on 2 cores) with 4 global targets.
+// Why (README, "The demo"): for the first ~500 steps every run predicts the shared "no contact"
+// embedding of the idle taxels, and its embeddings spread less over samples; they spread again
+// between steps 550 and 800. Runs of 600 steps lost to the random encoder in 11 of 12 cells.
 inline RunConfig demo_run_config() {
   RunConfig r;
   r.steps = 1500;
