@@ -14,8 +14,11 @@
 #include <atomic>
 #include <cstdlib>
 #include <new>
+#include <string>
+#include <vector>
 
 #include <tjepa/tjepa.hpp>
+#include <tjepa/model/stage_clock.hpp>  // tested directly below (StageClock)
 
 #include "gradcheck.hpp"
 
@@ -505,6 +508,39 @@ TEST_SUITE("nn") {
     enc.forward(ps, tokens.data(), B, nullptr, N, frozen.data(), nullptr, fws);
     CHECK(frozen == infer);
     CHECK(infer != train);
+  }
+
+  TEST_CASE("StageClock: an inference call marks its stages in order, changes no output, allocates nothing") {
+    ParamSet<float> ps;
+    const int N = 21, d = 24, B = 1;
+    Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
+    ps.allocate();
+    init_params(ps, 5);
+    Rng rng(9);
+    std::vector<float> tokens(std::size_t(B) * N * d), off(tokens.size()), on(tokens.size());
+    test::fill_normal(tokens, rng);
+    Workspace<float> ws;
+    enc.forward(ps, tokens.data(), B, nullptr, N, off.data(), nullptr, ws);
+    StageClock clock;
+    ws.clock = &clock;
+    clock.start();
+    const long n = count_allocations([&] { enc.forward(ps, tokens.data(), B, nullptr, N, on.data(), nullptr, ws); });
+    CHECK(n == 0);
+    CHECK(on == off);
+    std::vector<std::string> names;
+    for (int i = 0; i < clock.count(); ++i) {
+      names.emplace_back(clock.name(i));
+      CHECK(clock.elapsed_ns(i) >= 0);
+    }
+    const std::vector<std::string> block{"norm1", "qkv", "attention", "proj", "norm2", "mlp"};
+    std::vector<std::string> expected{"embed"};
+    for (int b = 0; b < 2; ++b) expected.insert(expected.end(), block.begin(), block.end());
+    expected.push_back("norm");
+    CHECK(names == expected);
+    // Past its capacity the clock drops marks instead of writing out of bounds.
+    clock.start();
+    for (int i = 0; i < 2 * StageClock::capacity; ++i) clock.mark("x");
+    CHECK(clock.count() == StageClock::capacity - 1);
   }
 
   TEST_CASE("Inference after warm-up makes no heap allocation (counting allocator)") {
