@@ -92,6 +92,9 @@ int main(int argc, char** argv) {
   probe->add_option("--max-windows", pb.max_windows, "labelled windows per split (0: all)")->capture_default_str();
   probe->add_option("--epochs", pb.probe.epochs, "probe epochs")->capture_default_str();
   probe->add_option("--batch", pb.probe.batch, "probe batch")->capture_default_str();
+  probe->add_option("--repeats", pb.repeats, "probes with seeds seed, seed+1, ... averaged (mean ± sd)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   probe->add_option_function<double>("--lr", [&pb](const double& v) { pb.probe.lr = v; pb.probe_lrs = {v}; },
                                      "one probe learning rate (no sweep)");
   probe->add_option("--lrs", pb.probe_lrs, "probe learning rates, chosen among on a validation split")
@@ -138,6 +141,10 @@ int main(int argc, char** argv) {
   demo->add_option_function<double>("--probe-lr", [&dm](const double& v) { dm.probe.lr = v; dm.probe_lrs = {v}; },
                                     "one probe learning rate (no sweep; also the end-to-end rate)");
   demo->add_option("--probe-lrs", dm.probe_lrs, "frozen probes' learning rates, chosen among on a validation split")
+      ->capture_default_str();
+  demo->add_option("--repeats", dm.repeats,
+                   "frozen probes per row, averaged: (a) probe seeds, (b) random initializations")
+      ->check(CLI::PositiveNumber)
       ->capture_default_str();
   demo->add_option("--end-to-end-epochs", dm.end_to_end_epochs, "epochs of (c) (0: as the probes)")->capture_default_str();
   demo->add_option("--checkpoint", dm.checkpoint, "skip pre-training and probe this demo checkpoint");

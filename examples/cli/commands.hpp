@@ -165,39 +165,91 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
 
 struct ProbeRow {
   std::string name;
-  ProbeMetrics metrics;
+  ProbeMetrics metrics;               // one probe, or the mean over `runs`
   double seconds = 0;
   double lr = 0;                      // the probe's learning rate (chosen by validation when swept)
   std::vector<double> lr_objective;   // validation objective per swept rate
+  std::vector<ProbeRow> runs;         // the repeats averaged into metrics (empty: a single probe)
+  ProbeMetrics spread;                // their sample standard deviation (0 for a single probe)
 };
 
+// The mean (and sample standard deviation) of repeated probes: other probe seeds, and for a random
+// encoder other initializations. One probe on 600 labelled windows moves by as much as the
+// differences between encoders; the demo compares means.
+inline ProbeRow average_rows(std::string name, std::vector<ProbeRow> runs) {
+  require<ConfigError>(!runs.empty(), "average_rows: no probes");
+  ProbeRow row{std::move(name), {}, 0, 0, {}, {}, {}};
+  const double n = static_cast<double>(runs.size());
+  auto stat = [&](auto get, double& mean, double& sd) {
+    double s = 0, s2 = 0;
+    for (const ProbeRow& r : runs) s += get(r.metrics);
+    mean = s / n;
+    for (const ProbeRow& r : runs) s2 += (get(r.metrics) - mean) * (get(r.metrics) - mean);
+    sd = runs.size() > 1 ? std::sqrt(s2 / (n - 1)) : 0.0;
+  };
+  for (int a = 0; a < force_axes; ++a)
+    stat([a](const ProbeMetrics& m) { return m.force_rmse[static_cast<std::size_t>(a)]; },
+         row.metrics.force_rmse[static_cast<std::size_t>(a)], row.spread.force_rmse[static_cast<std::size_t>(a)]);
+  stat([](const ProbeMetrics& m) { return m.indenter_accuracy; }, row.metrics.indenter_accuracy,
+       row.spread.indenter_accuracy);
+  row.metrics.majority_accuracy = runs.front().metrics.majority_accuracy;
+  row.metrics.windows = runs.front().metrics.windows;
+  for (const ProbeRow& r : runs) row.seconds += r.seconds;
+  row.runs = std::move(runs);
+  return row;
+}
+
+// Averaged rows print "mean ± sd" over their repeats, and the rate each repeat chose.
 inline void print_probe_table(std::ostream& out, const std::vector<ProbeRow>& rows) {
-  char buf[256];
-  std::snprintf(buf, sizeof buf, "%-34s %9s %9s %9s %9s %10s %9s\n", "encoder", "RMSE u/N", "RMSE v/N", "RMSE n/N",
-                "RMSE avg", "indenter", "probe lr");
+  char buf[384];
+  std::snprintf(buf, sizeof buf, "%-34s %15s %15s %15s %9s %14s  %s\n", "encoder", "RMSE u/N", "RMSE v/N",
+                "RMSE n/N", "RMSE avg", "indenter", "probe lr");
   out << buf;
+  auto cell = [](double mean, double sd, bool percent) {
+    char c[40];
+    if (percent)
+      std::snprintf(c, sizeof c, sd > 0 ? "%.1f%% ± %.1f" : "%.1f%%", 100 * mean, 100 * sd);
+    else
+      std::snprintf(c, sizeof c, sd > 0 ? "%.3f ± %.3f" : "%.3f", mean, sd);
+    return std::string(c);
+  };
   for (const auto& r : rows) {
     const auto& m = r.metrics;
-    char lr[16] = "-";
-    if (r.lr > 0) std::snprintf(lr, sizeof lr, "%.0e", r.lr);
-    std::snprintf(buf, sizeof buf, "%-34s %9.4f %9.4f %9.4f %9.4f %9.1f%% %9s\n", r.name.c_str(), m.force_rmse[0],
-                  m.force_rmse[1], m.force_rmse[2], (m.force_rmse[0] + m.force_rmse[1] + m.force_rmse[2]) / 3,
-                  100 * m.indenter_accuracy, lr);
+    std::string lrs;
+    for (const ProbeRow& x : r.runs.empty() ? std::vector<ProbeRow>{r} : r.runs) {
+      char lr[16] = "-";
+      if (x.lr > 0) std::snprintf(lr, sizeof lr, "%.0e", x.lr);
+      if (!lrs.empty()) lrs += ',';
+      lrs += lr;
+    }
+    std::snprintf(buf, sizeof buf, "%-34s %15s %15s %15s %9.3f %14s  %s\n", r.name.c_str(),
+                  cell(m.force_rmse[0], r.spread.force_rmse[0], false).c_str(),
+                  cell(m.force_rmse[1], r.spread.force_rmse[1], false).c_str(),
+                  cell(m.force_rmse[2], r.spread.force_rmse[2], false).c_str(),
+                  (m.force_rmse[0] + m.force_rmse[1] + m.force_rmse[2]) / 3,
+                  cell(m.indenter_accuracy, r.spread.indenter_accuracy, true).c_str(), lrs.c_str());
     out << buf;
   }
 }
 
 inline nlohmann::json probe_rows_json(const std::vector<ProbeRow>& rows) {
   nlohmann::json a = nlohmann::json::array();
-  for (const auto& r : rows)
-    a.push_back({{"encoder", r.name},
-                 {"force_rmse", r.metrics.force_rmse},
-                 {"indenter_accuracy", r.metrics.indenter_accuracy},
-                 {"majority_accuracy", r.metrics.majority_accuracy},
-                 {"windows", r.metrics.windows},
-                 {"probe_lr", r.lr},
-                 {"probe_lr_validation_objective", r.lr_objective},
-                 {"seconds", r.seconds}});
+  for (const auto& r : rows) {
+    nlohmann::json j = {{"encoder", r.name},
+                        {"force_rmse", r.metrics.force_rmse},
+                        {"indenter_accuracy", r.metrics.indenter_accuracy},
+                        {"majority_accuracy", r.metrics.majority_accuracy},
+                        {"windows", r.metrics.windows},
+                        {"probe_lr", r.lr},
+                        {"probe_lr_validation_objective", r.lr_objective},
+                        {"seconds", r.seconds}};
+    if (!r.runs.empty()) {
+      j["force_rmse_sd"] = r.spread.force_rmse;
+      j["indenter_accuracy_sd"] = r.spread.indenter_accuracy;
+      j["repeats"] = probe_rows_json(r.runs);
+    }
+    a.push_back(std::move(j));
+  }
   return a;
 }
 
@@ -213,7 +265,7 @@ inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& t
     for (int a = 0; a < force_axes; ++a) r[a] = s.mean[static_cast<std::size_t>(a)];
     r[force_axes + major] = 1.0f;
   }
-  ProbeRow row{"constant (train mean / majority)", {}, 0, 0, {}};
+  ProbeRow row{"constant (train mean / majority)", {}, 0, 0, {}, {}, {}};
   const auto rm = rmse_per_column(y.data(), static_cast<std::size_t>(force_axes + classes), test.force.data(),
                                   test.size(), force_axes);
   std::copy(rm.begin(), rm.end(), row.metrics.force_rmse.begin());
@@ -239,11 +291,14 @@ void train_with_progress(ForceIndenterProbe<float>& probe, Features& features, c
 
 // A probe on the frozen encoder (tokenizer + encoder reading `params`). With more than one rate in
 // `lrs`, the probe's learning rate is chosen among them on a validation split of the training
-// windows (select_probe_lr), then the probe trains on all of them; otherwise cfg.lr.
+// windows (select_probe_lr), then the probe trains on all of them; otherwise cfg.lr. repeats > 1:
+// that many probes (seeds cfg.seed, cfg.seed + 1, ...; each with its own rate choice) on the same
+// embeddings, averaged (average_rows).
 inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& params, const Tokenizer& tok,
                              const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
                              const WindowSource& test_src, const ProbeLabels& test, ProbeTrainConfig cfg,
-                             int heads, bool quiet, const std::vector<double>& lrs = {}) {
+                             int heads, bool quiet, const std::vector<double>& lrs = {}, int repeats = 1) {
+  require<ConfigError>(repeats >= 1, "frozen_probe: repeats = ", repeats, ", expected >= 1");
   ProgressLine embed_progress("  embed " + name, train.size() + test.size(), quiet);
   const auto t0 = std::chrono::steady_clock::now();
   auto emb_train = embed_windows(params, tok, enc, train_src, train.window, 32, [&](std::int64_t d, std::int64_t) {
@@ -252,21 +307,32 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
   auto emb_test = embed_windows(params, tok, enc, test_src, test.window, 32, [&](std::int64_t d, std::int64_t) {
     embed_progress.update(train.size() + d, train.size() + d, "");
   });
-  ProbeLrChoice choice{cfg.lr, {}};
-  if (lrs.size() > 1) {
-    ProgressLine sweep("  probe lr sweep " + name, static_cast<std::int64_t>(lrs.size()), quiet);
-    choice = select_probe_lr(std::span<const float>(emb_train), enc.num_tokens(), enc.dim(), train, lrs, cfg, heads,
-                             num_indenter_shapes);
-    sweep.update(static_cast<std::int64_t>(lrs.size()), 0, "");
-    cfg.lr = choice.lr;
-  }
+  const double embed_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   FrozenFeatures<float> ftrain(std::move(emb_train), enc.num_tokens(), enc.dim());
   FrozenFeatures<float> ftest(std::move(emb_test), enc.num_tokens(), enc.dim());
-  ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
-  train_with_progress(probe, ftrain, train, cfg, "  probe " + name, quiet);
-  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0, cfg.lr, choice.objective};
-  row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  return row;
+  std::vector<ProbeRow> runs;
+  for (int r = 0; r < repeats; ++r) {
+    const auto t1 = std::chrono::steady_clock::now();
+    ProbeTrainConfig c = cfg;
+    c.seed = cfg.seed + static_cast<std::uint64_t>(r);
+    const std::string label = repeats > 1 ? name + " #" + std::to_string(r + 1) : name;
+    ProbeLrChoice choice{c.lr, {}};
+    if (lrs.size() > 1) {
+      ProgressLine sweep("  probe lr sweep " + label, static_cast<std::int64_t>(lrs.size()), quiet);
+      choice = select_probe_lr(std::span<const float>(ftrain.embeddings()), enc.num_tokens(), enc.dim(), train, lrs,
+                               c, heads, num_indenter_shapes);
+      sweep.update(static_cast<std::int64_t>(lrs.size()), 0, "");
+      c.lr = choice.lr;
+    }
+    ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, c.seed);
+    train_with_progress(probe, ftrain, train, c, "  probe " + label, quiet);
+    ProbeRow row{label, evaluate_probe(probe, ftest, test), 0, c.lr, choice.objective, {}, {}};
+    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count() +
+                  (r == 0 ? embed_seconds : 0.0);
+    runs.push_back(std::move(row));
+  }
+  if (repeats == 1) return runs.front();
+  return average_rows(name, std::move(runs));
 }
 
 // An encoder (fresh, `params` as initialized) trained end to end with the probe.
@@ -279,7 +345,7 @@ inline ProbeRow end_to_end_probe(const std::string& name, ParamSet<float>& param
   ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
   train_with_progress(probe, ftrain, train, cfg, "  train " + name, quiet);
   EncoderFeatures<float> ftest(params, tok, enc, test_src, test.window);
-  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0, cfg.lr, {}};
+  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0, cfg.lr, {}, {}, {}};
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return row;
 }
@@ -299,6 +365,7 @@ struct ProbeOptions {
   int max_windows = 0;                     // per split, 0 = all
   ProbeTrainConfig probe;
   std::vector<double> probe_lrs{3e-4, 1e-3, 3e-3};  // swept on a validation split (one rate: no sweep)
+  int repeats = 1;                         // probes with seeds seed, seed + 1, ... averaged
   std::string out;                         // results JSON ("" = none)
   bool force = false;
   bool quiet = false;
@@ -350,7 +417,7 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes),
                              frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
                                           train_src, train, test_src, test, o.probe, m.run.heads, o.quiet,
-                                          o.probe_lrs)};
+                                          o.probe_lrs, o.repeats)};
   print_probe_table(out, rows);
   if (!o.out.empty()) {
     OutputFiles files;
@@ -431,6 +498,9 @@ struct DemoOptions {
   // The frozen probes' rate is chosen among these on a validation split of the labelled windows:
   // one fixed rate leaves some probes stuck at the training mean (their head's units die).
   std::vector<double> probe_lrs{3e-4, 1e-3, 3e-3};
+  // Frozen probes per row, averaged: (a) with this many probe seeds, (b) with as many random
+  // initializations. One probe's result moves by as much as the gap between (a) and (b).
+  int repeats = 3;
   bool end_to_end = true;
   // (c)'s epochs; 0: the probes' (the same budget). Each end-to-end step runs the encoder forward
   // and backward (about 30x a frozen probe step), so the default caps it to fit the 10 minutes.
@@ -503,16 +573,26 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   out << "probes: " << train.size() << " labelled training windows, " << test.size()
       << " held-out windows (>= " << o.min_contact << " of " << o.run.tau << " frames in contact); "
       << o.probe.epochs << " epochs of batch " << o.probe.batch << "; frozen probes' lr chosen among "
-      << nlohmann::json(o.probe_lrs).dump() << " on a validation split, end to end lr " << o.probe.lr << "\n"
+      << nlohmann::json(o.probe_lrs).dump() << " on a validation split, end to end lr " << o.probe.lr
+      << "; frozen rows average " << o.repeats << " probe(s)" << (o.repeats > 1 ? " (mean ± sd)" : "") << "\n"
       << std::flush;
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes)};
   rows.push_back(frozen_probe("(a) pre-trained, frozen", model.target, model.tokenizer, model.encoder, probe_src,
-                              train, test_src, test, o.probe, o.run.heads, o.quiet, o.probe_lrs));
-  // (b) and (c) start from the same random initialization (another seed than the pre-trained one).
+                              train, test_src, test, o.probe, o.run.heads, o.quiet, o.probe_lrs, o.repeats));
+  // (b): as many random initializations (seeds other than the pre-trained one's) as (a) has probe
+  // seeds, one probe each with (a)'s seeds; (c) starts from the first of them.
+  std::vector<ProbeRow> random_runs;
+  for (int r = 0; r < o.repeats; ++r) {
+    JepaModel<float> m(mc, o.seed + 1000 + static_cast<std::uint64_t>(r));
+    ProbeTrainConfig c = o.probe;
+    c.seed = o.probe.seed + static_cast<std::uint64_t>(r);
+    const std::string label = o.repeats > 1 ? "(b) random init #" + std::to_string(r + 1) : "(b) random init, frozen";
+    random_runs.push_back(frozen_probe(label, m.target, m.tokenizer, m.encoder, probe_src, train, test_src, test, c,
+                                       o.run.heads, o.quiet, o.probe_lrs));
+  }
+  rows.push_back(o.repeats > 1 ? average_rows("(b) random init, frozen", std::move(random_runs))
+                               : std::move(random_runs.front()));
   JepaModel<float> random_model(mc, o.seed + 1000);
-  rows.push_back(frozen_probe("(b) random init, frozen", random_model.target, random_model.tokenizer,
-                              random_model.encoder, probe_src, train, test_src, test, o.probe, o.run.heads, o.quiet,
-                              o.probe_lrs));
   if (o.end_to_end) {
     ProbeTrainConfig e2e = o.probe;
     if (o.end_to_end_epochs > 0) e2e.epochs = o.end_to_end_epochs;
@@ -529,6 +609,7 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   nlohmann::json results = {{"seed", o.seed},
                             {"run", o.run.to_json()},
                             {"probe", {{"epochs", o.probe.epochs}, {"batch", o.probe.batch}, {"lr", o.probe.lr},
+                                       {"repeats", o.repeats},
                                        {"train_windows", train.size()}, {"test_windows", test.size()}}},
                             {"pretrain_seconds", pr.seconds},
                             {"pretrain_windows_per_s", pr.windows_per_second},

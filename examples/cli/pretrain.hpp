@@ -1,10 +1,11 @@
 #pragma once
 // The pre-training loop of `tjepa pretrain` and `tjepa demo`: windows in shuffled epochs, the
 // reference's masks over the taxel graph, one jepa_train_step per batch, a progress line and a
-// log row per step.
+// log row per step. after_step(s), when given, runs after step s (a read-out, a snapshot).
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <string>
 
 #include <tjepa/tjepa.hpp>
@@ -30,7 +31,8 @@ inline const std::vector<std::string>& pretrain_log_columns() {
 }
 
 inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, const RunConfig& run,
-                                const WindowSource& src, const TaxelGraph& graph, bool quiet) {
+                                const WindowSource& src, const TaxelGraph& graph, bool quiet,
+                                const std::function<void(std::int64_t step)>& after_step = {}) {
   run.validate();
   const int B = run.batch;
   require<DataError>(src.size() >= B, "pre-training: ", src.size(), " windows, fewer than one batch of ", B);
@@ -38,9 +40,7 @@ inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, cons
                       " taxels, the model ", model.num_tokens(), " tokens");
   const MaskCollator collator(graph, run.masks());  // REFERENCE §3 defaults: 2 local + 2 global targets
   const TrainingSchedule schedule = run.schedule();
-  JepaStepConfig step_cfg;
-  step_cfg.drop_path = run.drop_path;
-  step_cfg.activity_weight = run.activity_weight;
+  const JepaStepConfig step_cfg = run.step();
   JepaWorkspace<float> w;
   WindowBatch batch;
   AlignedVector<float> rows;  // tokenizer input [B, N, m·τ]
@@ -70,6 +70,7 @@ inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, cons
     progress.update(s + 1, (s + 1) * B, extra);
     out.final_target_std = st.target_std;
     out.final_target_sample_std = st.target_sample_std;
+    if (after_step) after_step(s);
   }
   out.seconds = progress.elapsed();
   out.windows_per_second = out.seconds > 0 ? static_cast<double>(run.steps) * B / out.seconds : 0.0;

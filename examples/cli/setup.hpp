@@ -161,6 +161,10 @@ struct RunConfig {
   double target_ratio_lo = 0.10, target_ratio_hi = 0.18;
   int local_targets = 2, global_targets = 2;
   double activity_weight = 0.0;  // JepaStepConfig::activity_weight (the reference: 0, a plain mean)
+  // The objective's reference options (JepaStepConfig): "mse" or I-JEPA's "smooth_l1", targets
+  // re-normalized by a LayerNorm without affine, the predictor's positions from the context encoder.
+  std::string loss = "mse";
+  bool normalize_targets = false, predictor_pos_from_context = false;
   std::uint64_t seed = 0;
 
   nlohmann::json to_json() const {
@@ -170,7 +174,9 @@ struct RunConfig {
             {"ema_start", ema_start}, {"ema_end", ema_end}, {"drop_path", drop_path},
             {"tokenizer_bias_std", tokenizer_bias_std}, {"context_ratio", {context_ratio_lo, context_ratio_hi}},
             {"target_ratio", {target_ratio_lo, target_ratio_hi}}, {"local_targets", local_targets},
-            {"global_targets", global_targets}, {"activity_weight", activity_weight}, {"seed", seed}};
+            {"global_targets", global_targets}, {"activity_weight", activity_weight}, {"loss", loss},
+            {"normalize_targets", normalize_targets}, {"predictor_pos_from_context", predictor_pos_from_context},
+            {"seed", seed}};
   }
   // Overrides the fields the JSON names; an unknown key or a wrong type is an error.
   void update(const nlohmann::json& j, const std::string& source) {
@@ -202,6 +208,9 @@ struct RunConfig {
         else if (k == "local_targets") local_targets = v.get<int>();
         else if (k == "global_targets") global_targets = v.get<int>();
         else if (k == "activity_weight") activity_weight = v.get<double>();
+        else if (k == "loss") loss = v.get<std::string>();
+        else if (k == "normalize_targets") normalize_targets = v.get<bool>();
+        else if (k == "predictor_pos_from_context") predictor_pos_from_context = v.get<bool>();
         else if (k == "seed") seed = v.get<std::uint64_t>();
       } catch (const nlohmann::json::exception&) {
         fail<ConfigError>(source, ": key '", k, "' = ", v.dump(), " has the wrong type (expected like ",
@@ -243,6 +252,8 @@ struct RunConfig {
     require<ConfigError>(drop_path >= 0 && drop_path < 1, "config: drop_path = ", drop_path, ", expected in [0, 1)");
     require<ConfigError>(activity_weight >= 0 && std::isfinite(activity_weight), "config: activity_weight = ",
                          activity_weight, ", expected >= 0");
+    require<ConfigError>(loss == "mse" || loss == "smooth_l1", "config: loss = '", loss,
+                         "', expected 'mse' or 'smooth_l1'");
     const MaskConfig m = masks();
     detail::check_ratio_range(m.context_ratio, "context_ratio");
     detail::check_ratio_range(m.target_ratio, "target_ratio");
@@ -270,6 +281,16 @@ struct RunConfig {
     m.num_local = local_targets;
     m.num_global = global_targets;
     return m;
+  }
+  // The step's objective options (the rest of JepaStepConfig keeps the reference's values).
+  JepaStepConfig step() const {
+    JepaStepConfig c;
+    c.loss = loss == "smooth_l1" ? JepaLossKind::smooth_l1 : JepaLossKind::mse;
+    c.normalize_targets = normalize_targets;
+    c.predictor_pos_from_context = predictor_pos_from_context;
+    c.drop_path = drop_path;
+    c.activity_weight = activity_weight;
+    return c;
   }
   TrainingSchedule schedule() const {
     TrainingSchedule s;

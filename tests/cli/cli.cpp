@@ -311,6 +311,63 @@ TEST_CASE("run config: masks and activity weighting from JSON, round trip and ba
   CHECK(error_of({{"local_targets", 0}, {"global_targets", 0}}).find("at least one target") != std::string::npos);
   CHECK(error_of({{"activity_weight", -1.0}}).find("activity_weight") != std::string::npos);
   CHECK(error_of({{"target_ratio", "wide"}}).find("'target_ratio'") != std::string::npos);
+  CHECK(error_of({{"loss", "l1"}}).find("loss") != std::string::npos);
+  CHECK(error_of({{"normalize_targets", 1.5}}).find("'normalize_targets'") != std::string::npos);
+}
+
+TEST_CASE("run config: the objective's reference options reach the training step") {
+  RunConfig r;
+  const JepaStepConfig d = r.step();
+  CHECK(d.loss == JepaLossKind::mse);  // the reference's defaults
+  CHECK_FALSE(d.normalize_targets);
+  CHECK_FALSE(d.predictor_pos_from_context);
+  r.update({{"loss", "smooth_l1"}, {"normalize_targets", true}, {"predictor_pos_from_context", true},
+            {"drop_path", 0.1}, {"activity_weight", 2.0}},
+           "test");
+  r.validate();
+  const JepaStepConfig c = r.step();
+  CHECK(c.loss == JepaLossKind::smooth_l1);
+  CHECK(c.normalize_targets);
+  CHECK(c.predictor_pos_from_context);
+  CHECK(c.drop_path == 0.1);
+  CHECK(c.activity_weight == 2.0);
+  RunConfig back;
+  back.update(r.to_json(), "round trip");
+  CHECK(back.to_json() == r.to_json());
+}
+
+TEST_CASE("probe rows: repeats average to the mean with the sample standard deviation") {
+  std::vector<ProbeRow> runs(3);
+  const double u[3] = {1.0, 2.0, 4.0}, acc[3] = {0.5, 0.25, 0.75};
+  for (int i = 0; i < 3; ++i) {
+    runs[static_cast<std::size_t>(i)].metrics.force_rmse = {u[i], 2 * u[i], 0.5};
+    runs[static_cast<std::size_t>(i)].metrics.indenter_accuracy = acc[i];
+    runs[static_cast<std::size_t>(i)].metrics.windows = 10;
+    runs[static_cast<std::size_t>(i)].lr = 1e-3 * (i + 1);
+    runs[static_cast<std::size_t>(i)].seconds = 1.5;
+  }
+  const ProbeRow r = average_rows("avg", runs);
+  CHECK(r.metrics.force_rmse[0] == doctest::Approx(7.0 / 3));
+  CHECK(r.metrics.force_rmse[1] == doctest::Approx(14.0 / 3));
+  CHECK(r.metrics.force_rmse[2] == doctest::Approx(0.5));
+  // sample sd of {1, 2, 4}: sqrt(((4/3)^2 + (1/3)^2 + (5/3)^2) / 2) = sqrt(7/3)
+  CHECK(r.spread.force_rmse[0] == doctest::Approx(std::sqrt(7.0 / 3)));
+  CHECK(r.spread.force_rmse[1] == doctest::Approx(2 * std::sqrt(7.0 / 3)));
+  CHECK(r.spread.force_rmse[2] == doctest::Approx(0.0));
+  CHECK(r.metrics.indenter_accuracy == doctest::Approx(0.5));
+  CHECK(r.spread.indenter_accuracy == doctest::Approx(0.25));
+  CHECK(r.metrics.windows == 10);
+  CHECK(r.seconds == doctest::Approx(4.5));
+  CHECK(r.runs.size() == 3);
+  std::ostringstream out;
+  print_probe_table(out, {r});
+  CHECK(out.str().find("2.333 ± 1.528") != std::string::npos);
+  CHECK(out.str().find("50.0% ± 25.0") != std::string::npos);
+  CHECK(out.str().find("1e-03,2e-03,3e-03") != std::string::npos);
+  const auto j = probe_rows_json({r});
+  CHECK(j[0]["repeats"].size() == 3);
+  CHECK(j[0]["force_rmse_sd"][0].get<double>() == doctest::Approx(std::sqrt(7.0 / 3)));
+  CHECK_THROWS_WITH_AS(average_rows("none", {}), doctest::Contains("no probes"), ConfigError);
 }
 
 TEST_CASE("demo: the whole pipeline at toy size prints the table and writes its outputs") {
@@ -325,6 +382,7 @@ TEST_CASE("demo: the whole pipeline at toy size prints the table and writes its 
   o.test_windows = 16;
   o.probe.epochs = 1;
   o.probe.batch = 8;
+  o.repeats = 2;
   o.quiet = true;
   std::ostringstream out;
   REQUIRE(run_demo(o, out) == 0);
@@ -334,6 +392,11 @@ TEST_CASE("demo: the whole pipeline at toy size prints the table and writes its 
   const auto j = nlohmann::json::parse(read_text(t.path / "demo" / "results.json"));
   CHECK(j["results"].size() == 4);
   CHECK(j["seed"] == 0);
+  // (a): 2 probe seeds on one encoder; (b): 2 random initializations; (c): one run.
+  CHECK(j["results"][1]["repeats"].size() == 2);
+  CHECK(j["results"][2]["repeats"].size() == 2);
+  CHECK_FALSE(j["results"][3].contains("repeats"));
+  CHECK(j["probe"]["repeats"] == 2);
   for (const char* f : {"checkpoint.safetensors", "log.csv", "loss.svg", "results.json"})
     CHECK(fs::exists(t.path / "demo" / f));
   CHECK(count_files(t.path / "demo") == 4);

@@ -144,6 +144,8 @@ class FrozenFeatures {
   int tokens() const { return L_; }
   int dim() const { return d_; }
   int size() const { return static_cast<int>(x_.size() / (static_cast<std::size_t>(L_) * d_)); }
+  // All embeddings, [size, tokens, dim].
+  std::span<const T> embeddings() const { return x_; }
   ParamSet<T>* trainable() { return nullptr; }
 
   // x [B, L, d] of samples ids.
