@@ -12,7 +12,7 @@
 // Streaming inference: the frozen encoder (and a force/indenter probe on top) called at
 // control-loop rate over a ring buffer of the last τ frames of the 368-taxel Allegro hand.
 //
-// Each tick: one new frame arrives [N, m] → preprocessed in place → written into the ring
+// Each tick: one new frame arrives [N, m] → drift removed (DriftTracker::step) → preprocessed in place → written into the ring
 // [τ, N, m] → the window is copied out as tokenizer rows [N, m·τ] (oldest frame first) → tokenizer →
 // encoder (all N tokens) → probe → force (3) and indenter logits. Every buffer is made before the
 // loop and the modules' workspaces stop growing after the first tick, so the steady state
@@ -43,6 +43,7 @@
 #include <cstring>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -283,17 +284,22 @@ int main(int argc, char** argv) {
     const SimRecording stream = sim.record(std::max(ticks + warmup, 1000));
     std::unique_ptr<JepaModel<float>> model;
     Preprocessor pre;
+    std::optional<DriftTracker> drift;  // the rest readings follow idle taxels, one step per frame
     int tau = 10;
     if (!checkpoint.empty()) {
       cli::LoadedModel lm = cli::load_model(checkpoint);
       model = std::move(lm.model);
       pre = std::move(lm.pre);
+      drift = std::move(lm.drift);
       tau = lm.run.tau;
     } else {
       cli::RunConfig run;
       model = std::make_unique<JepaModel<float>>(run.model(N, m), 0);
       pre = cli::fit_preprocessor("magnetic", &baseline, std::span<const Recording>(&stream.recording, 1));
+      drift = DriftTracker(DriftTrackerConfig::magnetic());
+      drift->fit(baseline);
     }
+    if (drift) drift->reset();  // this sensor's session starts at its fitted rest readings
     require<ShapeError>(model->num_tokens() == N && model->config.in_dim == tau * m, "the checkpoint expects ",
                         model->num_tokens(), " taxels of ", model->config.in_dim, " values, the hand has ", N,
                         " taxels of ", tau * m);
@@ -325,6 +331,7 @@ int main(int argc, char** argv) {
       clock.start();
       float* slot = ring.data() + static_cast<std::size_t>(head) * N * m;
       std::copy_n(stream.recording.frame(k % stream.recording.frames()), static_cast<std::size_t>(N) * m, slot);
+      if (drift) drift->step(slot);
       pre.apply(slot, 1, N, 1, m);
       head = (head + 1) % tau;
       // window[n, a·τ + j] = ring[(head + j) mod τ, n, a]: oldest frame first, each taxel's

@@ -10,6 +10,7 @@
 //             (b) the same architecture with random weights, (c) an encoder trained end to end
 //
 // Every command writes its files through OutputFiles: on an error nothing it wrote is left.
+#include <array>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -138,6 +139,10 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
   for (std::size_t r = 0; r < recs.size(); ++r)
     require<ShapeError>(recs[r].taxels() == skin.size(), o.data.empty() ? "simulated" : o.data[r], ": ",
                         recs[r].taxels(), " taxels, the layout '", run.layout, "' has ", skin.size());
+  std::vector<Recording*> rec_ptrs;
+  for (auto& r : recs) rec_ptrs.push_back(&r);
+  const std::optional<DriftTracker> drift =
+      mode == "magnetic" ? track_drift(run, baseline ? &*baseline : nullptr, rec_ptrs) : std::nullopt;
   const Preprocessor pre = fit_preprocessor(mode, baseline ? &*baseline : nullptr, recs);
   const int axes = recs[0].axes();
   const WindowSource src(recs, WindowSpec{run.tau}, {}, pre);
@@ -152,7 +157,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
       << run.steps << " steps of " << run.batch << "\n";
   const PretrainOutcome r = pretrain(model, opt, run, src, skin.graph, o.quiet);
-  write_pretrain_outputs(dir, model, opt, run, pre, r, files);
+  write_pretrain_outputs(dir, model, opt, run, pre, r, files, drift ? &*drift : nullptr);
   files.commit();
   out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "
       << r.final_target_std << " (over samples " << r.final_target_sample_std << "), " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
@@ -292,8 +297,9 @@ void train_with_progress(ForceIndenterProbe<float>& probe, Features& features, c
 // A probe on the frozen encoder (tokenizer + encoder reading `params`). With more than one rate in
 // `lrs`, the probe's learning rate is chosen among them on a validation split of the training
 // windows (select_probe_lr), then the probe trains on all of them; otherwise cfg.lr. repeats > 1:
-// that many probes (seeds cfg.seed, cfg.seed + 1, ...; each with its own rate choice) on the same
-// embeddings, averaged (average_rows).
+// that many probes (seeds cfg.seed, cfg.seed + 1, ...) on the same embeddings, averaged
+// (average_rows); the rate is chosen by the first and kept by the others (it depends on the
+// embeddings, which they share; the sweep is most of a probe's cost).
 inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& params, const Tokenizer& tok,
                              const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
                              const WindowSource& test_src, const ProbeLabels& test, ProbeTrainConfig cfg,
@@ -317,7 +323,10 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
     c.seed = cfg.seed + static_cast<std::uint64_t>(r);
     const std::string label = repeats > 1 ? name + " #" + std::to_string(r + 1) : name;
     ProbeLrChoice choice{c.lr, {}};
-    if (lrs.size() > 1) {
+    if (r > 0 && lrs.size() > 1) {
+      choice = {runs.front().lr, {}};  // the rate is a property of the embeddings: chosen once
+      c.lr = choice.lr;
+    } else if (lrs.size() > 1) {
       ProgressLine sweep("  probe lr sweep " + label, static_cast<std::int64_t>(lrs.size()), quiet);
       choice = select_probe_lr(std::span<const float>(ftrain.embeddings()), enc.num_tokens(), enc.dim(), train, lrs,
                                c, heads, num_indenter_shapes);
@@ -402,6 +411,8 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
     require<ShapeError>(r->taxels() == model.num_tokens() && r->axes() * m.run.tau == model.config.in_dim,
                         r->source(), ": ", r->taxels(), " taxels x ", r->axes(), " axes; the checkpoint expects ",
                         model.num_tokens(), " taxels x ", model.config.in_dim / m.run.tau, " axes");
+  m.track(train_rec);
+  m.track(test_rec);
   const WindowSource train_src(train_rec, WindowSpec{m.run.tau}, train_lab, m.pre);
   const WindowSource test_src(test_rec, WindowSpec{m.run.tau}, test_lab, m.pre);
   const ProbeLabels train = ProbeLabels::from_source(
@@ -447,10 +458,11 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
   OutputFiles::check_new(o.out, o.force);
   LoadedModel m = load_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
-  const Recording rec = read_recording(o.data, o.axes);
+  Recording rec = read_recording(o.data, o.axes);
   require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.run.tau == model.config.in_dim, o.data,
                       ": ", rec.taxels(), " taxels x ", rec.axes(), " axes; the checkpoint expects ", model.num_tokens(),
                       " taxels x ", model.config.in_dim / m.run.tau, " axes");
+  m.track(rec);
   const WindowSource src(rec, WindowSpec{m.run.tau, o.stride}, {}, m.pre);
   std::vector<std::int64_t> ids(static_cast<std::size_t>(src.size()));
   for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = static_cast<std::int64_t>(i);
@@ -526,6 +538,13 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
       << " indenter(s) at once) + " << o.probe_frames << " labelled + " << o.test_frames
       << " held-out frames (one indenter) at 100 Hz ...\n" << std::flush;
   SimulatedData d = simulate(skin, o.seed, o.pretrain_frames, o.probe_frames, o.test_frames, o.pretrain_contacts);
+  // One session of one sensor: the drift tracker runs through the recordings in the order they were made.
+  const std::optional<DriftTracker> drift =
+      track_drift(o.run, &d.baseline, std::array<Recording*, 3>{&d.pretrain, &d.probe_train.recording, &d.test.recording});
+  if (drift)
+    out << "drift tracking: rest readings follow idle taxels (time constant " << drift->config().time_constant
+        << " frames, touched above " << drift->config().threshold << " x the noise of " << drift->noise()[0]
+        << " counts)\n";
   const Preprocessor pre = fit_preprocessor("magnetic", &d.baseline, std::span<const Recording>(&d.pretrain, 1));
   const WindowSpec spec{o.run.tau};
   const WindowSource pre_src(d.pretrain, spec, {}, pre);
@@ -563,7 +582,7 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
     pr.log.rows.push_back(std::vector<double>(pretrain_log_columns().size(), NAN));
   } else {
     pr = pretrain(model, opt, o.run, pre_src, skin.graph, o.quiet);
-    write_pretrain_outputs(dir, model, opt, o.run, pre, pr, files);
+    write_pretrain_outputs(dir, model, opt, o.run, pre, pr, files, drift ? &*drift : nullptr);
   }
   out << "pre-training: loss " << pr.log.rows.front()[1] << " -> " << pr.log.rows.back()[1]
       << ", target-embedding std " << pr.log.rows.front()[6] << " -> " << pr.final_target_std
@@ -581,14 +600,17 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
                               train, test_src, test, o.probe, o.run.heads, o.quiet, o.probe_lrs, o.repeats));
   // (b): as many random initializations (seeds other than the pre-trained one's) as (a) has probe
   // seeds, one probe each with (a)'s seeds; (c) starts from the first of them.
+  // The first initialization chooses the probe's rate; the others (the same distribution of
+  // random features) keep it.
   std::vector<ProbeRow> random_runs;
   for (int r = 0; r < o.repeats; ++r) {
     JepaModel<float> m(mc, o.seed + 1000 + static_cast<std::uint64_t>(r));
     ProbeTrainConfig c = o.probe;
     c.seed = o.probe.seed + static_cast<std::uint64_t>(r);
+    if (r > 0) c.lr = random_runs.front().lr;
     const std::string label = o.repeats > 1 ? "(b) random init #" + std::to_string(r + 1) : "(b) random init, frozen";
     random_runs.push_back(frozen_probe(label, m.target, m.tokenizer, m.encoder, probe_src, train, test_src, test, c,
-                                       o.run.heads, o.quiet, o.probe_lrs));
+                                       o.run.heads, o.quiet, r == 0 ? o.probe_lrs : std::vector<double>{}));
   }
   rows.push_back(o.repeats > 1 ? average_rows("(b) random init, frozen", std::move(random_runs))
                                : std::move(random_runs.front()));

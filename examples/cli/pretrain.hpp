@@ -80,10 +80,10 @@ inline PretrainOutcome pretrain(JepaModel<float>& model, AdamW<float>& opt, cons
 // Writes checkpoint.safetensors, log.csv and loss.svg into dir (registered with files).
 inline void write_pretrain_outputs(const std::filesystem::path& dir, JepaModel<float>& model, const AdamW<float>& opt,
                                    const RunConfig& run, const Preprocessor& pre, const PretrainOutcome& outcome,
-                                   OutputFiles& files) {
+                                   OutputFiles& files, const DriftTracker* drift = nullptr) {
   const auto parts = model.parts();
   save_checkpoint(files.add(dir / "checkpoint.safetensors"), std::span<const PrefixedParams<float>>(parts), &opt,
-                  checkpoint_state(run, model.config, pre, run.steps));
+                  checkpoint_state(run, model.config, pre, run.steps, drift));
   write_file_atomic(files.add(dir / "log.csv"), outcome.log.str());
   const std::vector<double> x = outcome.log.column(0);
   write_file_atomic(files.add(dir / "loss.svg"),

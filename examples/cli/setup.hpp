@@ -161,6 +161,11 @@ struct RunConfig {
   double target_ratio_lo = 0.10, target_ratio_hi = 0.18;
   int local_targets = 2, global_targets = 2;
   double activity_weight = 0.0;  // JepaStepConfig::activity_weight (the reference: 0, a plain mean)
+  // Data: DriftTracker's time constant in frames (200: 2 s at 100 Hz), for recordings with a
+  // no-contact baseline (the "magnetic" preprocessing); 0 = off, the reference's one fixed baseline.
+  // Off by default: on the demo it did not change how the pre-trained encoder compares with the
+  // random one (README, "The demo").
+  double drift_time_constant = 0.0;
   // The objective's reference options (JepaStepConfig): "mse" or I-JEPA's "smooth_l1", targets
   // re-normalized by a LayerNorm without affine, the predictor's positions from the context encoder.
   std::string loss = "mse";
@@ -174,7 +179,8 @@ struct RunConfig {
             {"ema_start", ema_start}, {"ema_end", ema_end}, {"drop_path", drop_path},
             {"tokenizer_bias_std", tokenizer_bias_std}, {"context_ratio", {context_ratio_lo, context_ratio_hi}},
             {"target_ratio", {target_ratio_lo, target_ratio_hi}}, {"local_targets", local_targets},
-            {"global_targets", global_targets}, {"activity_weight", activity_weight}, {"loss", loss},
+            {"global_targets", global_targets}, {"activity_weight", activity_weight},
+            {"drift_time_constant", drift_time_constant}, {"loss", loss},
             {"normalize_targets", normalize_targets}, {"predictor_pos_from_context", predictor_pos_from_context},
             {"seed", seed}};
   }
@@ -208,6 +214,7 @@ struct RunConfig {
         else if (k == "local_targets") local_targets = v.get<int>();
         else if (k == "global_targets") global_targets = v.get<int>();
         else if (k == "activity_weight") activity_weight = v.get<double>();
+        else if (k == "drift_time_constant") drift_time_constant = v.get<double>();
         else if (k == "loss") loss = v.get<std::string>();
         else if (k == "normalize_targets") normalize_targets = v.get<bool>();
         else if (k == "predictor_pos_from_context") predictor_pos_from_context = v.get<bool>();
@@ -252,6 +259,8 @@ struct RunConfig {
     require<ConfigError>(drop_path >= 0 && drop_path < 1, "config: drop_path = ", drop_path, ", expected in [0, 1)");
     require<ConfigError>(activity_weight >= 0 && std::isfinite(activity_weight), "config: activity_weight = ",
                          activity_weight, ", expected >= 0");
+    require<ConfigError>(drift_time_constant == 0 || (std::isfinite(drift_time_constant) && drift_time_constant >= 1),
+                         "config: drift_time_constant = ", drift_time_constant, ", expected 0 (off) or >= 1 frame");
     require<ConfigError>(loss == "mse" || loss == "smooth_l1", "config: loss = '", loss,
                          "', expected 'mse' or 'smooth_l1'");
     const MaskConfig m = masks();
@@ -323,6 +332,20 @@ inline SimulatedData simulate(const Skin& skin, std::uint64_t seed, int pretrain
   d.probe_train = sim.record(probe_frames);
   d.test = sim.record(test_frames);
   return d;
+}
+
+// The run's DriftTracker (none when drift_time_constant is 0 or there is no baseline), fitted on the
+// no-contact baseline, then run over recs in order: one continuous session of one sensor (the
+// tracker carries its state from one recording to the next).
+inline std::optional<DriftTracker> track_drift(const RunConfig& run, const Recording* baseline,
+                                               std::span<Recording* const> recs) {
+  if (run.drift_time_constant <= 0 || baseline == nullptr) return std::nullopt;
+  DriftTrackerConfig c = DriftTrackerConfig::magnetic();
+  c.time_constant = run.drift_time_constant;
+  DriftTracker tracker(c);
+  tracker.fit(*baseline);
+  for (Recording* r : recs) tracker.apply(*r);
+  return tracker;
 }
 
 // Preprocessing by name: "magnetic" (Xela: drop-outs, baseline, per-axis standardization; needs a
@@ -399,11 +422,13 @@ inline std::vector<std::int64_t> labelled_windows(const WindowSource& src, int m
 
 // Everything a checkpoint's metadata holds besides the tensors.
 inline CheckpointState checkpoint_state(const RunConfig& run, const JepaConfig& model, const Preprocessor& pre,
-                                        std::int64_t step) {
+                                        std::int64_t step, const DriftTracker* drift = nullptr) {
   CheckpointState s;
   s.step = step;
   s.config = {{"run", run.to_json()}, {"model", model.to_json()}};
   for (const NamedTensor& t : pre.state()) s.normalization.emplace(t.name, Tensor::from(t.values, t.shape));
+  if (drift)
+    for (const NamedTensor& t : drift->state()) s.normalization.emplace(t.name, Tensor::from(t.values, t.shape));
   return s;
 }
 
@@ -412,7 +437,15 @@ struct LoadedModel {
   RunConfig run;
   std::unique_ptr<JepaModel<float>> model;
   Preprocessor pre;
+  std::optional<DriftTracker> drift;  // when the run tracked drift: apply it to new recordings first
   std::int64_t step = 0;
+
+  // The checkpoint's drift tracking over a new recording (from the fitted rest reading).
+  void track(Recording& rec) {
+    if (!drift) return;
+    drift->reset();
+    drift->apply(rec);
+  }
 };
 
 inline LoadedModel load_model(const std::filesystem::path& path) {
@@ -445,6 +478,7 @@ inline LoadedModel load_model(const std::filesystem::path& path) {
     pre_state.push_back(std::move(nt));
   }
   m.pre = Preprocessor::from_state(pre_state);
+  if (DriftTracker::in_state(pre_state)) m.drift = DriftTracker::from_state(pre_state);
   m.step = st.step;
   return m;
 }

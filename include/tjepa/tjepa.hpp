@@ -16,6 +16,7 @@
 #include "tjepa/layout/inspire.hpp"
 #include "tjepa/layout/csv.hpp"
 
+#include "tjepa/data/drift_tracker.hpp"
 #include "tjepa/data/grouped_gather.hpp"
 #include "tjepa/data/labels.hpp"
 #include "tjepa/data/named_tensor.hpp"

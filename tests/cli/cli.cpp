@@ -161,6 +161,7 @@ TEST_CASE("pretrain, probe and embed on a tiny simulated skin") {
   std::ostringstream out;
   PretrainOptions po;
   po.overrides = tiny_run("grid");
+  po.overrides["drift_time_constant"] = 200;
   po.simulate_frames = 300;
   po.out = (t.path / "run").string();
   po.quiet = true;
@@ -179,6 +180,12 @@ TEST_CASE("pretrain, probe and embed on a tiny simulated skin") {
   CHECK(m.step == 3);
   CHECK(m.model->num_tokens() == 192);
   CHECK(m.pre.ready());
+  // Simulated data come with a no-contact baseline, and the run asked for drift tracking: the
+  // checkpoint carries the tracker (fitted rest readings and noise of the 192 taxels x 3 axes).
+  REQUIRE(m.drift.has_value());
+  CHECK(m.drift->taxels() == 192);
+  CHECK(m.drift->config().time_constant == m.run.drift_time_constant);
+  CHECK(m.drift->noise()[2] == doctest::Approx(SimConfig{}.noise_std).epsilon(0.15));
 
   // Running again into the same directory needs --force.
   CHECK_THROWS_AS(run_pretrain(po, out), FileError);
@@ -253,6 +260,23 @@ TEST_CASE("pretrain, probe and embed on a tiny simulated skin") {
     CHECK_THROWS_AS(run_embed(eo, eout), ShapeError);
     CHECK_FALSE(fs::exists(eo.out));
   }
+}
+
+TEST_CASE("pretrain: drift tracking off (drift_time_constant 0, the default) leaves no tracker in the checkpoint") {
+  TempDir t;
+  std::ostringstream out;
+  PretrainOptions po;
+  po.overrides = tiny_run("grid");
+  po.simulate_frames = 100;
+  po.out = (t.path / "run").string();
+  po.quiet = true;
+  REQUIRE(run_pretrain(po, out) == 0);
+  const LoadedModel m = load_model(t.path / "run" / "checkpoint.safetensors");
+  CHECK_FALSE(m.drift.has_value());
+  CHECK(m.run.drift_time_constant == 0);
+  RunConfig bad;
+  bad.update({{"drift_time_constant", 0.5}}, "test");
+  CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("drift_time_constant"), ConfigError);
 }
 
 TEST_CASE("pretrain: a failing run leaves no files behind") {

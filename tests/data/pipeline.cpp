@@ -426,6 +426,110 @@ TEST_SUITE("data") {
     CHECK_THROWS_WITH_AS(fresh.fit(zeros), doctest::Contains("no non-zero finite value"), tjepa::DataError);
   }
 
+  TEST_CASE("drift tracker: follows an idle taxel's drift, keeps a contact, passes drop-outs, round-trips") {
+    // 2 taxels x 2 axes. No-contact recording: rest 30000/31000 and 40000/41000, noise ±10 counts
+    // alternating (frame-to-frame differences of 20: σ = √(400 / 2) ≈ 14.1).
+    tjepa::AlignedVector<float> base_v;
+    for (int t = 0; t < 50; ++t) {
+      const float e = t % 2 ? 10.0f : -10.0f;
+      base_v.insert(base_v.end(), {30000 + e, 31000 - e, 40000 + e, 41000 + e});
+    }
+    tjepa::Recording base(50, 2, 2, std::move(base_v));
+    tjepa::DriftTracker tr(tjepa::DriftTrackerConfig{.time_constant = 20, .threshold = 6});
+    CHECK_THROWS_WITH_AS(tr.reset(), doctest::Contains("not fitted"), tjepa::ConfigError);
+    tr.fit(base);
+    CHECK(tr.fitted_rest()[0] == doctest::Approx(30000));
+    CHECK(tr.fitted_rest()[3] == doctest::Approx(41000));
+    CHECK(tr.noise()[0] == doctest::Approx(std::sqrt(200.0)).epsilon(1e-4));
+    // Taxel 0 drifts up by 1 count per frame for 400 frames (slower than the tracker follows);
+    // taxel 1 is pressed by +3000 counts on axis 1 during frames 200..299, then reads 0 (a drop-out)
+    // during frames 300..309.
+    const int T = 400;
+    tjepa::Recording rec(T, 2, 2);
+    for (int t = 0; t < T; ++t) {
+      rec.at(t, 0, 0) = 30000.0f + static_cast<float>(t);
+      rec.at(t, 0, 1) = 31000.0f + static_cast<float>(t);
+      const bool pressed = t >= 200 && t < 300, dropped = t >= 300 && t < 310;
+      rec.at(t, 1, 0) = dropped ? 0.0f : 40000.0f;
+      rec.at(t, 1, 1) = dropped ? 0.0f : 41000.0f + (pressed ? 3000.0f : 0.0f);
+    }
+    const tjepa::Recording raw = rec;
+    tjepa::DriftTracker copy = tr;
+    tr.apply(rec);
+    // The drift is gone up to the tracker's lag (time_constant x slope = 20 counts), far below the
+    // 399 counts it reached; the output stays in raw counts around the fitted rest reading.
+    CHECK(raw(T - 1, 0, 0) - 30000.0f == doctest::Approx(399));
+    CHECK(std::abs(rec(T - 1, 0, 0) - 30000.0f) < 25.0f);
+    CHECK(std::abs(rec(T - 1, 0, 1) - 31000.0f) < 25.0f);
+    CHECK(tr.rest()[0] == doctest::Approx(30000.0 + 399 - 20).epsilon(1e-3));
+    // The contact is kept whole: the rest reading freezes while the taxel is touched.
+    for (int t = 200; t < 300; ++t) CHECK(rec(t, 1, 1) == doctest::Approx(44000));
+    CHECK(tr.rest()[3] == doctest::Approx(41000));
+    // Drop-outs pass unchanged.
+    for (int t = 300; t < 310; ++t) CHECK(rec(t, 1, 0) == 0.0f);
+    // step() frame by frame equals apply().
+    tjepa::Recording again = raw;
+    for (int t = 0; t < T; ++t) copy.step(again.mutable_data() + static_cast<std::size_t>(t) * 4);
+    for (std::size_t k = 0; k < rec.size(); ++k) CHECK(again.values()[k] == rec.values()[k]);
+    // State round trip: the restored tracker continues exactly where this one is.
+    tjepa::DriftTracker back = tjepa::DriftTracker::from_state(tr.state());
+    tjepa::Recording a = raw, b = raw;
+    tr.apply(a);
+    back.apply(b);
+    for (std::size_t k = 0; k < a.size(); ++k) CHECK(a.values()[k] == b.values()[k]);
+    CHECK(tjepa::DriftTracker::in_state(tr.state()));
+    // reset() returns to the fitted rest reading.
+    tr.reset();
+    CHECK(tr.rest()[0] == tr.fitted_rest()[0]);
+    // Bad input names the problem.
+    auto st = tr.state();
+    st[2].values.pop_back();
+    CHECK_THROWS_WITH_AS(tjepa::DriftTracker::from_state(st), doctest::Contains("drift.rest0/rest/noise"),
+                         tjepa::FileError);
+    CHECK_THROWS_WITH_AS(tjepa::DriftTracker::from_state(std::vector<tjepa::NamedTensor>{}),
+                         doctest::Contains("drift.config"), tjepa::FileError);
+    tjepa::Recording wrong(3, 5, 2);
+    CHECK_THROWS_AS(tr.apply(wrong), tjepa::ShapeError);
+    CHECK_THROWS_WITH_AS(tr.fit(tjepa::Recording(1, 2, 2, 35000.0f)), doctest::Contains(">= 2 frames"),
+                         tjepa::DataError);
+    CHECK_THROWS_WITH_AS(tr.fit(tjepa::Recording(4, 2, 2, 0.0f)), doctest::Contains("no valid reading"),
+                         tjepa::DataError);
+    CHECK_THROWS_WITH_AS(tjepa::DriftTracker(tjepa::DriftTrackerConfig{.time_constant = 0.5}),
+                         doctest::Contains("time_constant"), tjepa::ConfigError);
+    CHECK_THROWS_WITH_AS(tjepa::DriftTracker(tjepa::DriftTrackerConfig{.threshold = -1}),
+                         doctest::Contains("threshold"), tjepa::ConfigError);
+  }
+
+  TEST_CASE("drift tracker: on the simulated skin it removes most of the drift of idle taxels") {
+    tjepa::SimConfig c;
+    c.drift_std = 60.0;
+    c.drift_time = 60.0;
+    c.dropout_rate = 0.0;
+    tjepa::SimulatedSkin sim(test_geometry(), c, 7);
+    const tjepa::Recording base = sim.record_baseline(300);
+    tjepa::Recording idle = sim.record_baseline(6000);
+    tjepa::DriftTracker tr(tjepa::DriftTrackerConfig::magnetic());
+    tr.fit(base);
+    CHECK(tr.noise()[2] == doctest::Approx(c.noise_std).epsilon(0.1));  // drift does not count as noise
+    const tjepa::Recording raw = idle;
+    tr.apply(idle);
+    // Mean square deviation from the fitted rest reading, over the last 5000 frames.
+    double before = 0, after = 0;
+    for (int t = 1000; t < 6000; ++t)
+      for (int n = 0; n < raw.taxels(); ++n)
+        for (int a = 0; a < 3; ++a) {
+          const double b0 = tr.fitted_rest()[static_cast<std::size_t>(n) * 3 + a];
+          before += (raw(t, n, a) - b0) * (raw(t, n, a) - b0);
+          after += (idle(t, n, a) - b0) * (idle(t, n, a) - b0);
+        }
+    // What is left is the sensor noise (10 counts) plus a small lag: well under half the drift.
+    const double per = 5000.0 * raw.taxels() * 3;
+    MESSAGE("drift rms before ", std::sqrt(before / per), " after ", std::sqrt(after / per));
+    CHECK(std::sqrt(before / per) > 40.0);
+    CHECK(std::sqrt(after / per) < 0.4 * std::sqrt(before / per));
+    CHECK(std::sqrt(after / per) < 20.0);
+  }
+
   TEST_CASE("recording: frame ranges share values and copies are copy-on-write") {
     tjepa::Recording r(10, 4, 3);
     for (int t = 0; t < 10; ++t) r.at(t, 1, 2) = static_cast<float>(t);
