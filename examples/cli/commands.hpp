@@ -391,8 +391,11 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   std::vector<FrameLabel> train_lab, test_lab;
   if (o.train_data.empty()) {
     require<ConfigError>(o.test_data.empty(), "--test-data needs --train-data too");
+    // The sensor the checkpoint was pre-trained on (seeded by its run's seed: the same offsets and
+    // gains, so its baseline applies), with new events from --simulate-seed.
     const Skin skin = load_skin(m.run.layout);
-    SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, o.simulate_seed);
+    SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, m.run.seed);
+    sim.reseed(o.simulate_seed);
     auto a = sim.record(o.simulate_train_frames);
     auto b = sim.record(o.simulate_test_frames);
     train_rec = std::move(a.recording);

@@ -426,6 +426,41 @@ TEST_SUITE("data") {
     CHECK_THROWS_WITH_AS(fresh.fit(zeros), doctest::Contains("no non-zero finite value"), tjepa::DataError);
   }
 
+  TEST_CASE("simulated skin: reseed draws new events on the same sensor, whose baseline still applies") {
+    tjepa::SimulatedSkin a(test_geometry(), tjepa::SimConfig{}, 3);
+    const tjepa::Recording base = a.record_baseline(300);
+    const tjepa::SimRecording first = a.record(400);
+    tjepa::SimulatedSkin b(test_geometry(), tjepa::SimConfig{}, 3);
+    b.reseed(11);
+    CHECK(b.offsets() == a.offsets());
+    const tjepa::SimRecording other = b.record(400);
+    bool differ = false;
+    for (std::size_t k = 0; k < other.recording.size(); ++k)
+      differ = differ || other.recording.values()[k] != first.recording.values()[k];
+    CHECK(differ);  // new events
+    tjepa::SimulatedSkin c(test_geometry(), tjepa::SimConfig{}, 3);
+    c.reseed(11);
+    const tjepa::SimRecording again = c.record(400);
+    CHECK(std::equal(again.recording.values().begin(), again.recording.values().end(),
+                     other.recording.values().begin()));  // deterministic
+    // The first sensor's no-contact baseline fits the reseeded recording, not another sensor's.
+    tjepa::PreprocessConfig cfg;
+    cfg.subtract_baseline = true;
+    tjepa::Preprocessor with_base(cfg);
+    with_base.fit_baseline(base);
+    auto median_abs = [&](const tjepa::Recording& r) {
+      std::vector<float> v;
+      const tjepa::Recording x = with_base.transformed(r);
+      for (float f : x.values())
+        if (f != 0.0f) v.push_back(std::abs(f));
+      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+      return v[v.size() / 2];
+    };
+    tjepa::SimulatedSkin d(test_geometry(), tjepa::SimConfig{}, 4);
+    CHECK(median_abs(other.recording) < 100.0f);
+    CHECK(median_abs(d.record(400).recording) > 500.0f);
+  }
+
   TEST_CASE("drift tracker: follows an idle taxel's drift, keeps a contact, passes drop-outs, round-trips") {
     // 2 taxels x 2 axes. No-contact recording: rest 30000/31000 and 40000/41000, noise ±10 counts
     // alternating (frame-to-frame differences of 20: σ = √(400 / 2) ≈ 14.1).

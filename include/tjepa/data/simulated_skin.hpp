@@ -230,6 +230,11 @@ class SimulatedSkin {
   SimulatedSkin(const TaxelLayout& layout, SimConfig config = {}, std::uint64_t seed = 0)
       : SimulatedSkin(SkinGeometry::from_layout(layout), std::move(config), seed) {}
 
+  // New random events (contacts, noise, drift steps, drop-outs) from `seed`, on the same sensor:
+  // the per-taxel offsets, gains and the drift's current state are kept. A probe's labelled data
+  // then come from the very sensor a model was pre-trained on (its baseline still applies).
+  void reseed(std::uint64_t seed) { rng_ = Rng(seed, 0x72657365ull /* "rese" */); }
+
   const SkinGeometry& geometry() const { return geo_; }
   const SimConfig& config() const { return cfg_; }
   int taxels() const { return geo_.size(); }
