@@ -61,7 +61,7 @@ struct SelfAttention {
     const int pairs = B * heads, threads = detail::max_threads();
     const int chunks = pairs >= 2 * threads ? 1 : std::max(1, std::min((2 * threads + pairs - 1) / pairs, Lq / 32));
     const int rows_per = (Lq + chunks - 1) / chunks;
-    AttentionWorkspace<T>* aws = ws.attention_per_thread();
+    AttentionWorkspace<T>* aws = ws.attention_per_thread(head_shape(L, q_from));
     TJEPA_OMP(omp parallel for schedule(dynamic) if (pairs * chunks > 1))
     for (int task = 0; task < pairs * chunks; ++task) {
       const int bh = task / chunks, b = bh / heads, h = bh % heads;
@@ -95,7 +95,7 @@ struct SelfAttention {
     proj.backward(ps, dy, att, datt, int(Mq), false);  // y = att · Wprojᵀ + b
     detail::parallel_fill(dqkv, dqkv + std::size_t(B) * L * 3 * d, T(0));
     const AttentionShape s = head_shape(L, q_from);
-    AttentionWorkspace<T>* aws = ws.attention_per_thread();
+    AttentionWorkspace<T>* aws = ws.attention_per_thread(s);
     TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
     for (int bh = 0; bh < B * heads; ++bh) {
       const int b = bh / heads, h = bh % heads;
@@ -140,7 +140,7 @@ struct CrossAttention {
     q.forward(ps, query, qbuf, B, ws.frozen());
     kv.forward(ps, x, kvbuf, B * L, ws.frozen());
     const AttentionShape s = shape(L);
-    AttentionWorkspace<T>* aws = ws.attention_per_thread();
+    AttentionWorkspace<T>* aws = ws.attention_per_thread(s);
     TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
     for (int b = 0; b < B; ++b) {
       const T* k = kvbuf + std::size_t(b) * L * 2 * d;
@@ -166,7 +166,7 @@ struct CrossAttention {
     std::fill(dq, dq + std::size_t(B) * d, T(0));
     std::fill(dkv, dkv + std::size_t(B) * L * 2 * d, T(0));
     const AttentionShape s = shape(L);
-    AttentionWorkspace<T>* aws = ws.attention_per_thread();
+    AttentionWorkspace<T>* aws = ws.attention_per_thread(s);
     TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
     for (int b = 0; b < B; ++b) {
       const std::size_t ko = std::size_t(b) * L * 2 * d;

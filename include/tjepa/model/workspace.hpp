@@ -52,9 +52,13 @@ struct Workspace {
   // One attention workspace per OpenMP thread.
   std::vector<AttentionWorkspace<T>> attention;
 
-  AttentionWorkspace<T>* attention_per_thread() {
+  // Every thread's workspace, each reserved for `shape` here, before the parallel loop: which
+  // thread runs which (dynamically scheduled) task varies from call to call, so a workspace
+  // left to grow on its thread's first task could allocate in any later call.
+  AttentionWorkspace<T>* attention_per_thread(const AttentionShape& shape) {
     const auto n = static_cast<std::size_t>(detail::max_threads());
     if (attention.size() < n) attention.resize(n);
+    for (auto& a : attention) a.reserve(shape);
     return attention.data();
   }
 };
