@@ -27,17 +27,19 @@ for t in 1 2; do
 done
 # The inference goal (issue 8): latency per control-loop tick, p99 against p50, and allocations.
 # Pinned to core 0 (here the virtio interrupts go to core 1: see `grep virtio /proc/interrupts`).
-# At 100 Hz under SCHED_FIFO (root only) as a robot's control loop runs, with the controls (an FMA
-# loop in registers and a 4 MiB memory sweep, timed the same way: the machine's own spread), and
-# back to back. make_results.py reads the raw outputs.
+# At 100 Hz under SCHED_FIFO (root only) as a robot's control loop runs, busy-waiting between ticks
+# (spin: the core stays awake and its caches warm) with the controls (an FMA loop in registers and
+# 1 MiB and 4 MiB memory sweeps, timed the same way: the machine's own spread); then sleeping
+# between ticks, and back to back. make_results.py reads the raw outputs.
 echo "tjepa_streaming" >&2
 rt=()
 if [ "$(id -u)" = 0 ]; then rt=(--realtime); fi
+rm -f "$out"/stream_*.txt
+stream() { OMP_NUM_THREADS=1 taskset -c 0 build/release/examples/tjepa_streaming --ticks 2000 "$@"; }
 for r in 1 2 3; do
-  OMP_NUM_THREADS=1 taskset -c 0 build/release/examples/tjepa_streaming --ticks 2000 --rate 100 "${rt[@]}" \
-    --controls > "$out/stream_rate100_$r.txt" || true
-  OMP_NUM_THREADS=1 taskset -c 0 build/release/examples/tjepa_streaming --ticks 2000 --rate 0 \
-    > "$out/stream_rate0_$r.txt" || true
+  stream --rate 100 "${rt[@]}" --spin --controls > "$out/stream_spin_$r.txt" || true
+  stream --rate 100 "${rt[@]}" > "$out/stream_sleep_$r.txt" || true
+  stream --rate 0 > "$out/stream_rate0_$r.txt" || true
 done
 /usr/bin/python3 bench/make_results.py "$out" > "$out/RESULTS.md"
 mv "$out/RESULTS.md" bench/RESULTS.md

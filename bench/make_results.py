@@ -89,30 +89,36 @@ def parse_stream(path):
     r["preempted"], r["ticks"], r["ratio_alone"] = (int(m.group(1)), int(m.group(2)), float(m.group(5))) if m else (0, 0, r["ratio"])
     m = re.search(r"allocations in steady state: (-?\d+)", text)
     r["allocations"] = int(m.group(1)) if m else None
-    for key, label in (("fma", "control, FMAs in registers"), ("memory", "control, 4 MiB memory sweeps")):
-        m = re.search(re.escape(label) + r": p50 \d+ us, p99 \d+ us, max \d+ us, p99/p50 ([\d.]+)", text)
-        r[key] = float(m.group(1)) if m else None
+    m = re.search(r"control, FMAs in registers: p50 \d+ us, p99 \d+ us, max \d+ us, p99/p50 ([\d.]+)", text)
+    r["fma"] = float(m.group(1)) if m else None
+    r["memory"] = {int(k): float(v) for k, v in
+                   re.findall(r"control, (\d+) KiB memory sweeps: p50 \d+ us, p99 \d+ us, max \d+ us, p99/p50 ([\d.]+)", text)}
     return r
 
 
+MODES = (("spin", "--rate 100 {rt}--spin --controls"), ("sleep", "--rate 100 {rt}(sleeping)"),
+         ("rate0", "--rate 0 (back to back)"))
 streams = {mode: [s for s in (parse_stream(p) for p in sorted(d.glob(f"stream_{mode}_*.txt"))) if s]
-           for mode in ("rate100", "rate0")}
+           for mode, _ in MODES}
+sizes = sorted({k for runs in streams.values() for s in runs for k in s["memory"]})
 if any(streams.values()):
-    realtime = "SCHED_FIFO" in "".join(p.read_text() for p in d.glob("stream_rate100_*.txt"))
+    realtime = "SCHED_FIFO" in "".join(p.read_text() for p in d.glob("stream_spin_*.txt"))
     print("\n## Inference latency\n")
     print("`OMP_NUM_THREADS=1 taskset -c 0 build/release/examples/tjepa_streaming --ticks 2000 <mode>`: the demo's "
           "encoder (d = 96, 4 blocks, 368 taxels, batch 1, weights packed once) and the attentive probe, one thread, "
           "pinned to core 0 (the virtio interrupts go to core 1 here). The controls time an FMA loop in registers "
-          "and a 4 MiB memory sweep, each as long as the median tick, the same way: the machine's own spread.\n")
-    print("| mode | p50 µs | p99 µs | p99/p50 | ticks preempted | p99/p50 of the others | FMA control p99/p50 "
-          "| memory control p99/p50 | allocations in steady state |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for mode, label in (("rate100", "--rate 100" + (" --realtime" if realtime else "") + " --controls"),
-                        ("rate0", "--rate 0 (back to back)")):
+          "and read-modify-write sweeps over 1 MiB (fits the 2 MiB L2) and 4 MiB buffers, each as long as the "
+          "median tick, the same way: the machine's own spread.\n")
+    print("| mode | p50 µs | p99 µs | p99/p50 | ticks preempted | p99/p50 of the others | FMA control p99/p50 | "
+          + "".join(f"{k} KiB sweep p99/p50 | " for k in sizes) + "allocations in steady state |")
+    print("|---|---|---|---|---|---|---|" + "---|" * len(sizes) + "---|")
+    for mode, label in MODES:
+        label = label.format(rt="--realtime " if realtime else "")
         for s in streams[mode]:
             f = lambda v: "" if v is None else f"{v:.3f}"
             print(f"| `{label}` | {s['p50']} | {s['p99']} | {s['ratio']:.3f} | {s['preempted']} of {s['ticks']} | "
-                  f"{s['ratio_alone']:.3f} | {f(s['fma'])} | {f(s['memory'])} | {s['allocations']} |")
+                  f"{s['ratio_alone']:.3f} | {f(s['fma'])} | " + "".join(f"{f(s['memory'].get(k))} | " for k in sizes)
+                  + f"{s['allocations']} |")
 
 
 # --- The goals (issue 8) ----------------------------------------------------------------------------
@@ -163,25 +169,47 @@ for t in (1, 2):
 a, b = ms("train_step/B8/L368", 1), ms("train_step/B8/L368", 2)
 goal("training step B8 L368: 2 threads ≥ 1.8× one thread", f"{fmt(a / b if a and b else None, '.2f')}×",
      bool(a and b) and a / b >= 1.8)
-all_runs = streams["rate100"] + streams["rate0"]
+all_runs = [s for runs in streams.values() for s in runs]
+latency_note = None
 if all_runs:
     allocs = [s["allocations"] for s in all_runs]
     goal("inference: zero allocations in steady state", f"{max(allocs)} (largest of {len(allocs)} runs)",
          all(a == 0 for a in allocs))
-    loop = streams["rate100"] or streams["rate0"]
+    loop = streams["spin"] or streams["sleep"] or streams["rate0"]
+    median = lambda v: sorted(v)[len(v) // 2] if v else None
     ratios = sorted(s["ratio"] for s in loop)
-    med = ratios[len(ratios) // 2]
-    fma = sorted(s["fma"] for s in loop if s["fma"] is not None)
+    med = median(ratios)
+    fma = median([s["fma"] for s in loop if s["fma"] is not None])
+    mem = {k: median([s["memory"][k] for s in loop if k in s["memory"]]) for k in sizes}
+    controls = "".join([f"; FMA control {fma:.3f}" if fma else ""] + [f", {k} KiB sweep {v:.3f}" for k, v in mem.items()])
+    others = "".join(f"; {mode}: {median([s['ratio'] for s in streams[mode]]):.3f}"
+                     for mode, _ in MODES if streams[mode] and streams[mode] is not loop)
     goal("inference at 100 Hz: p99 within 10% of p50 (median of the runs)",
-         f"{med:.3f} (runs: {', '.join(f'{r:.3f}' for r in ratios)}"
-         + (f"; FMA control {fma[0]:.3f}-{fma[-1]:.3f}" if fma else "") + ")", med <= 1.10)
-
+         f"{med:.3f} (runs: {', '.join(f'{r:.3f}' for r in ratios)}{controls}, medians{others})", med <= 1.10)
+    if med > 1.10 and mem:
+        worst = max(mem.values())
+        latency_note = (
+            f"**Why the latency goal is not met here.** In the same runs, loops that do fixed work of the tick's "
+            f"length, timed the same way, spread as follows (median p99/p50): FMAs in registers {fma:.3f}, "
+            + ", ".join(f"a {k} KiB memory sweep {v:.3f}" for k, v in mem.items())
+            + f"; the encoder's tick {med:.3f}. "
+            + ("The tick spreads no more than the memory sweeps do, even the one that fits in L2: "
+               "on this virtual machine any work that touches memory varies that much from tick to tick, "
+               "so the 10% goal is the machine's to meet before it is the encoder's. "
+               if med <= worst + 0.05 else
+               "The tick spreads more than the memory sweeps: part of the distance is the encoder's. ")
+            + "`tjepa_streaming --stages` times each stage of every tick: in the slowest 1% of ticks every stage "
+              "is slower in proportion (bench/HISTORY.md), not one stage. What it would take: a machine "
+              "without neighbours on its memory system (bare metal, an isolated core), where the controls "
+              "themselves stay within 10%.")
 print("\n## Goals (issue 8)\n")
 print("Computed from the tables above by bench/make_results.py.\n")
 print("| goal | measured | |")
 print("|---|---|---|")
 for name, value, ok in goals:
     print(f"| {name} | {value} | {ok} |")
+if latency_note:
+    print("\n" + latency_note)
 print("\nAttention memory is O(L·d) by construction: the forward and backward run over query and key "
       "tiles with an online softmax and keep only the per-row log-sum-exp, never an L×L matrix "
       "(include/tjepa/model/kernels/attention.hpp).")
