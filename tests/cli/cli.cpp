@@ -65,7 +65,7 @@ nlohmann::json tiny_run(const std::string& layout) {
 
 TEST_SUITE("cli") {
 
-TEST_CASE("layout: summary of the built-in Allegro hand, as text and JSON, and an SVG") {
+TEST_CASE("layout: summary of the built-in Allegro hand / as text and JSON / and an SVG") {
   TempDir t;
   std::ostringstream out;
   LayoutOptions o;
@@ -156,7 +156,7 @@ TEST_CASE("layout: a CSV layout gets grid edges inside groups and bridges betwee
   CHECK_THROWS_AS(run_layout(o, out), ConfigError);
 }
 
-TEST_CASE("pretrain, probe and embed on a tiny simulated skin") {
+TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
   TempDir t;
   std::ostringstream out;
   PretrainOptions po;
@@ -262,7 +262,7 @@ TEST_CASE("pretrain, probe and embed on a tiny simulated skin") {
   }
 }
 
-TEST_CASE("pretrain: drift tracking off (drift_time_constant 0, the default) leaves no tracker in the checkpoint") {
+TEST_CASE("pretrain: drift tracking off (drift_time_constant 0 / the default) leaves no tracker in the checkpoint") {
   TempDir t;
   std::ostringstream out;
   PretrainOptions po;
@@ -300,7 +300,7 @@ TEST_CASE("pretrain: a failing run leaves no files behind") {
   }
 }
 
-TEST_CASE("run config: masks and activity weighting from JSON, round trip and bad values named") {
+TEST_CASE("run config: masks and activity weighting from JSON / round trip and bad values named") {
   RunConfig r;
   r.update({{"local_targets", 0}, {"global_targets", 4}, {"target_ratio", {0.05, 0.08}},
             {"context_ratio", {0.6, 0.7}}, {"activity_weight", 0.5}},

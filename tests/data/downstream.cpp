@@ -51,7 +51,7 @@ TEST_CASE("softmax cross-entropy: value and gradient") {
                   DataError);
 }
 
-TEST_CASE("metrics: RMSE per column, accuracy, majority") {
+TEST_CASE("metrics: RMSE per column / accuracy / majority") {
   const std::vector<float> pred{1, 2, 9, 3, 4, 9};  // [2, 2] with row stride 3
   const std::vector<float> target{0, 2, 3, 0};
   const auto r = rmse_per_column(pred.data(), 3, target.data(), 2, 2);
@@ -193,7 +193,7 @@ TEST_CASE("select_probe_lr: the rate whose probe does best on a held-out split w
   CHECK_THROWS_AS(select_probe_lr(std::span<const float>(v).first(10), L, d, lab, lrs, cfg, 3, 4), ShapeError);
 }
 
-TEST_CASE("end to end: the encoder trains with the probe; embeddings match the inference path") {
+TEST_CASE("end to end: the encoder trains with the probe / embeddings match the inference path") {
   const Skin skin = layouts::grid_skin({.rows = 4, .cols = 4, .pitch = 4.0, .group_rows = 2, .group_cols = 2});
   SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, 3);
   const Recording base = sim.record_baseline(100);

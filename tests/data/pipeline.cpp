@@ -428,7 +428,7 @@ TEST_SUITE("data") {
     CHECK_THROWS_WITH_AS(fresh.fit(zeros), doctest::Contains("no non-zero finite value"), tjepa::DataError);
   }
 
-  TEST_CASE("simulated skin: reseed draws new events on the same sensor, whose baseline still applies") {
+  TEST_CASE("simulated skin: reseed draws new events on the same sensor / whose baseline still applies") {
     tjepa::SimulatedSkin a(test_geometry(), tjepa::SimConfig{}, 3);
     const tjepa::Recording base = a.record_baseline(300);
     const tjepa::SimRecording first = a.record(400);
@@ -463,7 +463,7 @@ TEST_SUITE("data") {
     CHECK(median_abs(d.record(400).recording) > 500.0f);
   }
 
-  TEST_CASE("drift tracker: follows an idle taxel's drift, keeps a contact, passes drop-outs, round-trips") {
+  TEST_CASE("drift tracker: follows an idle taxel's drift / keeps a contact / passes drop-outs / round-trips") {
     // 2 taxels x 2 axes. No-contact recording: rest 30000/31000 and 40000/41000, noise ±10 counts
     // alternating (frame-to-frame differences of 20: σ = √(400 / 2) ≈ 14.1).
     tjepa::AlignedVector<float> base_v;

@@ -479,7 +479,7 @@ TEST_SUITE("nn") {
     CHECK_FALSE(a.infos()[a.id("norm.weight").index].decay);
   }
 
-  TEST_CASE("Inference (row-tiled MLP) - frozen packed weights: the training forward's outputs, bit for bit") {
+  TEST_CASE("Inference (row-tiled MLP) - frozen packed weights: the training forward's outputs / bit for bit") {
     ParamSet<float> ps;
     const int N = 53, d = 48, B = 2;
     Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
@@ -510,7 +510,7 @@ TEST_SUITE("nn") {
     CHECK(infer != train);
   }
 
-  TEST_CASE("StageClock: an inference call marks its stages in order, changes no output, allocates nothing") {
+  TEST_CASE("StageClock: an inference call marks its stages in order / changes no output / allocates nothing") {
     ParamSet<float> ps;
     const int N = 21, d = 24, B = 1;
     Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});

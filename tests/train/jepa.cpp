@@ -224,7 +224,7 @@ TEST_SUITE("train") {
     }
   }
 
-  TEST_CASE("activity weighting: equal activity is the plain mean, contact tokens weigh more") {
+  TEST_CASE("activity weighting: equal activity is the plain mean / contact tokens weigh more") {
     auto model = random_model(31);
     JepaWorkspace<double> w;
     JepaStepConfig plain, weighted;
