@@ -89,6 +89,10 @@ int main(int argc, char** argv) {
   probe->add_option("--test-data", pb.test_data, "held-out recording");
   probe->add_option("--test-labels", pb.test_labels, "held-out labels");
   probe->add_option("--simulate-seed", pb.simulate_seed, "seed of the simulated labelled data")->capture_default_str();
+  probe->add_option("--simulate-train-frames", pb.simulate_train_frames, "simulated labelled frames to train on")
+      ->capture_default_str()->check(CLI::Range(1, 1 << 30));
+  probe->add_option("--simulate-test-frames", pb.simulate_test_frames, "simulated held-out frames")
+      ->capture_default_str()->check(CLI::Range(1, 1 << 30));
   probe->add_option("--max-windows", pb.max_windows, "labelled windows per split (0: all)")->capture_default_str();
   probe->add_option("--epochs", pb.probe.epochs, "probe epochs")->capture_default_str();
   probe->add_option("--batch", pb.probe.batch, "probe batch")->capture_default_str();
