@@ -151,8 +151,9 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
   const std::filesystem::path dir = o.out;
   OutputFiles::check_new(dir / "checkpoint.safetensors", o.force);
   files.make_dir(dir);
-  JepaModel<float> model(run.model(skin.size(), axes), run.seed);
-  AdamW<float> opt(model.trainable());
+  const auto owned = run.new_model(skin.graph, axes, run.seed);
+  JepaModel<float>& model = *owned;
+  AdamW<float> opt(model.trainable(), run.adamw());
   out << "pre-training on " << src.size() << " windows (" << skin.size() << " taxels, tau " << run.tau << "), "
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
       << run.steps << " steps of " << run.batch << "\n";
@@ -299,11 +300,13 @@ void train_with_progress(ForceIndenterProbe<float>& probe, Features& features, c
 // windows (select_probe_lr), then the probe trains on all of them; otherwise cfg.lr. repeats > 1:
 // that many probes (seeds cfg.seed, cfg.seed + 1, ...) on the same embeddings, averaged
 // (average_rows); the rate is chosen by the first and kept by the others (it depends on the
-// embeddings, which they share; the sweep is most of a probe's cost).
+// embeddings, which they share; the sweep is most of a probe's cost). center_tokens: each token's
+// resting embedding is removed first (center_token_embeddings, fitted on the training windows).
 inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& params, const Tokenizer& tok,
                              const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
                              const WindowSource& test_src, const ProbeLabels& test, ProbeTrainConfig cfg,
-                             int heads, bool quiet, const std::vector<double>& lrs = {}, int repeats = 1) {
+                             int heads, bool quiet, const std::vector<double>& lrs = {}, int repeats = 1,
+                             bool center_tokens = true) {
   require<ConfigError>(repeats >= 1, "frozen_probe: repeats = ", repeats, ", expected >= 1");
   ProgressLine embed_progress("  embed " + name, train.size() + test.size(), quiet);
   const auto t0 = std::chrono::steady_clock::now();
@@ -314,6 +317,10 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
     embed_progress.update(train.size() + d, train.size() + d, "");
   });
   const double embed_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (center_tokens) {
+    const std::span<float> test_span(emb_test);
+    center_token_embeddings<float>(emb_train, std::span<const std::span<float>>(&test_span, 1), enc.num_tokens(), enc.dim());
+  }
   FrozenFeatures<float> ftrain(std::move(emb_train), enc.num_tokens(), enc.dim());
   FrozenFeatures<float> ftest(std::move(emb_test), enc.num_tokens(), enc.dim());
   std::vector<ProbeRow> runs;
@@ -375,6 +382,7 @@ struct ProbeOptions {
   ProbeTrainConfig probe{.epochs = 60, .batch = 32, .lr = 1e-3};  // the demo's (10 epochs left it at the mean)
   std::vector<double> probe_lrs{3e-4, 1e-3, 3e-3};  // swept on a validation split (one rate: no sweep)
   int repeats = 1;                         // probes with seeds seed, seed + 1, ... averaged
+  bool center_tokens = true;               // center_token_embeddings before the probe
   std::string out;                         // results JSON ("" = none)
   bool force = false;
   bool quiet = false;
@@ -431,7 +439,7 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes),
                              frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
                                           train_src, train, test_src, test, o.probe, m.run.heads, o.quiet,
-                                          o.probe_lrs, o.repeats)};
+                                          o.probe_lrs, o.repeats, o.center_tokens)};
   print_probe_table(out, rows);
   if (!o.out.empty()) {
     OutputFiles files;
@@ -516,6 +524,9 @@ struct DemoOptions {
   // Frozen probes per row, averaged: (a) with this many probe seeds, (b) with as many random
   // initializations. One probe's result moves by as much as the gap between (a) and (b).
   int repeats = 3;
+  // Frozen probes read each token's embedding minus its mean over the training windows (plus the
+  // mean over tokens): center_token_embeddings. The same for (a) and (b).
+  bool center_tokens = true;
   bool end_to_end = true;
   // (c)'s epochs; 0: the probes' (the same budget). Each end-to-end step runs the encoder forward
   // and backward (about 30x a frozen probe step), so the default caps it at half the probes' 60.
@@ -570,10 +581,10 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
     o.run = loaded->run;
     o.run.steps = steps;
   }
-  const JepaConfig mc = o.run.model(skin.size(), d.pretrain.axes());
-  JepaModel<float> fresh(mc, o.seed);
-  JepaModel<float>& model = loaded ? *loaded->model : fresh;
-  AdamW<float> opt(model.trainable());
+  const int axes = d.pretrain.axes();
+  const auto fresh = o.run.new_model(skin.graph, axes, o.seed);
+  JepaModel<float>& model = loaded ? *loaded->model : *fresh;
+  AdamW<float> opt(model.trainable(), o.run.adamw());
   out << "model: encoder d=" << o.run.dim << ", " << o.run.depth << " blocks, " << o.run.heads << " heads ("
       << model.context.numel() << " parameters); predictor " << o.run.predictor_depth << " blocks ("
       << model.predictor_params.numel() << ")\n";
@@ -599,35 +610,39 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
       << " held-out windows (>= " << o.min_contact << " of " << o.run.tau << " frames in contact); "
       << o.probe.epochs << " epochs of batch " << o.probe.batch << "; frozen probes' lr chosen among "
       << nlohmann::json(o.probe_lrs).dump() << " on a validation split, end to end lr " << o.probe.lr
-      << "; frozen rows average " << o.repeats << " probe(s)" << (o.repeats > 1 ? " (mean ± sd)" : "") << "\n"
+      << "; frozen rows average " << o.repeats << " probe(s)" << (o.repeats > 1 ? " (mean ± sd)" : "")
+      << (o.center_tokens ? ", each token's training mean removed" : "") << "\n"
       << std::flush;
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes)};
   rows.push_back(frozen_probe("(a) pre-trained, frozen", model.target, model.tokenizer, model.encoder, probe_src,
-                              train, test_src, test, o.probe, o.run.heads, o.quiet, o.probe_lrs, o.repeats));
+                              train, test_src, test, o.probe, o.run.heads, o.quiet, o.probe_lrs, o.repeats,
+                              o.center_tokens));
   // (b): as many random initializations (seeds other than the pre-trained one's) as (a) has probe
   // seeds, one probe each with (a)'s seeds; (c) starts from the first of them.
   // The first initialization chooses the probe's rate; the others (the same distribution of
   // random features) keep it.
   std::vector<ProbeRow> random_runs;
   for (int r = 0; r < o.repeats; ++r) {
-    JepaModel<float> m(mc, o.seed + 1000 + static_cast<std::uint64_t>(r));
+    const auto random_model = o.run.new_model(skin.graph, axes, o.seed + 1000 + static_cast<std::uint64_t>(r));
+    JepaModel<float>& m = *random_model;
     ProbeTrainConfig c = o.probe;
     c.seed = o.probe.seed + static_cast<std::uint64_t>(r);
     if (r > 0) c.lr = random_runs.front().lr;
     const std::string label = o.repeats > 1 ? "(b) random init #" + std::to_string(r + 1) : "(b) random init, frozen";
     random_runs.push_back(frozen_probe(label, m.target, m.tokenizer, m.encoder, probe_src, train, test_src, test, c,
-                                       o.run.heads, o.quiet, r == 0 ? o.probe_lrs : std::vector<double>{}));
+                                       o.run.heads, o.quiet, r == 0 ? o.probe_lrs : std::vector<double>{}, 1,
+                                       o.center_tokens));
   }
   rows.push_back(o.repeats > 1 ? average_rows("(b) random init, frozen", std::move(random_runs))
                                : std::move(random_runs.front()));
-  JepaModel<float> random_model(mc, o.seed + 1000);
+  const auto random_model = o.run.new_model(skin.graph, axes, o.seed + 1000);
   if (o.end_to_end) {
     ProbeTrainConfig e2e = o.probe;
     if (o.end_to_end_epochs > 0) e2e.epochs = o.end_to_end_epochs;
     const std::string name = e2e.epochs == o.probe.epochs
                                  ? "(c) end to end, same labels"
                                  : "(c) end to end, " + std::to_string(e2e.epochs) + " epochs";
-    rows.push_back(end_to_end_probe(name, random_model.context, random_model.tokenizer, random_model.encoder,
+    rows.push_back(end_to_end_probe(name, random_model->context, random_model->tokenizer, random_model->encoder,
                                     probe_src, train, test_src, test, e2e, o.run.heads, o.quiet));
   }
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
@@ -637,7 +652,7 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   nlohmann::json results = {{"seed", o.seed},
                             {"run", o.run.to_json()},
                             {"probe", {{"epochs", o.probe.epochs}, {"batch", o.probe.batch}, {"lr", o.probe.lr},
-                                       {"repeats", o.repeats},
+                                       {"repeats", o.repeats}, {"center_tokens", o.center_tokens},
                                        {"train_windows", train.size()}, {"test_windows", test.size()}}},
                             {"pretrain_seconds", pr.seconds},
                             {"pretrain_windows_per_s", pr.windows_per_second},

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <tuple>
@@ -151,11 +152,17 @@ struct RunConfig {
   int steps = 600, batch = 32, warmup_steps = 60;
   double lr = 1e-3, start_lr = 1e-4, final_lr = 1e-5;
   double wd_start = 0.04, wd_end = 0.4;
+  // AdamW's moment decays (the reference: 0.9, 0.999).
+  double beta1 = 0.9, beta2 = 0.999;
   // A short run: the target encoder (what the probes read) must follow the context encoder within
   // a few hundred steps; the reference's 0.996 suits 500 epochs (its EMA lags ~250 steps).
   double ema_start = 0.99, ema_end = 1.0;
   double drop_path = 0.0;
   double tokenizer_bias_std = 1.0;  // JepaConfig::tokenizer_bias_std (the reference: 0)
+  // The position table's start (init only): 0 = the reference's N(0, 0.02²); k > 0 = the graph's k
+  // smallest Laplacian eigenvectors, RMS position_scale (graph_positions, spectral_positions.hpp).
+  int position_eigenvectors = 0;
+  double position_scale = 1.0;
   // Masks (MaskConfig; the reference's defaults): per-batch context and target ratios, targets per sample.
   double context_ratio_lo = 0.5, context_ratio_hi = 0.9;
   double target_ratio_lo = 0.10, target_ratio_hi = 0.18;
@@ -170,18 +177,23 @@ struct RunConfig {
   // re-normalized by a LayerNorm without affine, the predictor's positions from the context encoder.
   std::string loss = "mse";
   bool normalize_targets = false, predictor_pos_from_context = false;
+  bool standardize_targets = false;  // JepaStepConfig::standardize_targets (not in the reference)
   std::uint64_t seed = 0;
 
   nlohmann::json to_json() const {
     return {{"layout", layout}, {"tau", tau}, {"dim", dim}, {"depth", depth}, {"heads", heads},
             {"predictor_depth", predictor_depth}, {"steps", steps}, {"batch", batch}, {"warmup_steps", warmup_steps},
             {"lr", lr}, {"start_lr", start_lr}, {"final_lr", final_lr}, {"wd_start", wd_start}, {"wd_end", wd_end},
+            {"beta1", beta1}, {"beta2", beta2},
             {"ema_start", ema_start}, {"ema_end", ema_end}, {"drop_path", drop_path},
-            {"tokenizer_bias_std", tokenizer_bias_std}, {"context_ratio", {context_ratio_lo, context_ratio_hi}},
+            {"tokenizer_bias_std", tokenizer_bias_std},
+            {"position_eigenvectors", position_eigenvectors}, {"position_scale", position_scale},
+            {"context_ratio", {context_ratio_lo, context_ratio_hi}},
             {"target_ratio", {target_ratio_lo, target_ratio_hi}}, {"local_targets", local_targets},
             {"global_targets", global_targets}, {"activity_weight", activity_weight},
             {"drift_time_constant", drift_time_constant}, {"loss", loss},
             {"normalize_targets", normalize_targets}, {"predictor_pos_from_context", predictor_pos_from_context},
+            {"standardize_targets", standardize_targets},
             {"seed", seed}};
   }
   // Overrides the fields the JSON names; an unknown key or a wrong type is an error.
@@ -205,10 +217,14 @@ struct RunConfig {
         else if (k == "final_lr") final_lr = v.get<double>();
         else if (k == "wd_start") wd_start = v.get<double>();
         else if (k == "wd_end") wd_end = v.get<double>();
+        else if (k == "beta1") beta1 = v.get<double>();
+        else if (k == "beta2") beta2 = v.get<double>();
         else if (k == "ema_start") ema_start = v.get<double>();
         else if (k == "ema_end") ema_end = v.get<double>();
         else if (k == "drop_path") drop_path = v.get<double>();
         else if (k == "tokenizer_bias_std") tokenizer_bias_std = v.get<double>();
+        else if (k == "position_eigenvectors") position_eigenvectors = v.get<int>();
+        else if (k == "position_scale") position_scale = v.get<double>();
         else if (k == "context_ratio") std::tie(context_ratio_lo, context_ratio_hi) = v.get<std::pair<double, double>>();
         else if (k == "target_ratio") std::tie(target_ratio_lo, target_ratio_hi) = v.get<std::pair<double, double>>();
         else if (k == "local_targets") local_targets = v.get<int>();
@@ -217,6 +233,7 @@ struct RunConfig {
         else if (k == "drift_time_constant") drift_time_constant = v.get<double>();
         else if (k == "loss") loss = v.get<std::string>();
         else if (k == "normalize_targets") normalize_targets = v.get<bool>();
+        else if (k == "standardize_targets") standardize_targets = v.get<bool>();
         else if (k == "predictor_pos_from_context") predictor_pos_from_context = v.get<bool>();
         else if (k == "seed") seed = v.get<std::uint64_t>();
       } catch (const nlohmann::json::exception&) {
@@ -252,10 +269,16 @@ struct RunConfig {
     require<ConfigError>(warmup_steps >= 0 && warmup_steps <= steps, "config: warmup_steps = ", warmup_steps,
                          ", expected in [0, steps]");
     require<ConfigError>(lr > 0 && start_lr > 0 && final_lr > 0, "config: learning rates must be > 0");
+    require<ConfigError>(beta1 >= 0 && beta1 < 1 && beta2 >= 0 && beta2 < 1, "config: beta1/beta2 = ", beta1, "/",
+                         beta2, ", expected in [0, 1)");
     require<ConfigError>(ema_start >= 0 && ema_start <= 1 && ema_end >= 0 && ema_end <= 1,
                          "config: ema_start/ema_end = ", ema_start, "/", ema_end, ", expected in [0, 1]");
     require<ConfigError>(tokenizer_bias_std >= 0, "config: tokenizer_bias_std = ", tokenizer_bias_std,
                          ", expected >= 0");
+    require<ConfigError>(position_eigenvectors >= 0, "config: position_eigenvectors = ", position_eigenvectors,
+                         ", expected >= 0 (0: the reference's random table)");
+    require<ConfigError>(position_scale > 0 && std::isfinite(position_scale), "config: position_scale = ",
+                         position_scale, ", expected > 0");
     require<ConfigError>(drop_path >= 0 && drop_path < 1, "config: drop_path = ", drop_path, ", expected in [0, 1)");
     require<ConfigError>(activity_weight >= 0 && std::isfinite(activity_weight), "config: activity_weight = ",
                          activity_weight, ", expected >= 0");
@@ -283,6 +306,16 @@ struct RunConfig {
     c.tokenizer_bias_std = tokenizer_bias_std;
     return c;
   }
+  // A new model of this run over `graph` (its tokens), initialized from `init_seed`.
+  std::unique_ptr<JepaModel<float>> new_model(const TaxelGraph& graph, int axes, std::uint64_t init_seed) const {
+    auto m = std::make_unique<JepaModel<float>>(model(graph.num_nodes(), axes), init_seed);
+    if (position_eigenvectors > 0) {
+      require<ConfigError>(position_eigenvectors <= graph.num_nodes(), "config: position_eigenvectors = ",
+                           position_eigenvectors, ", expected at most the ", graph.num_nodes(), " tokens");
+      m->set_positions(graph_positions(graph, dim, position_eigenvectors, position_scale, init_seed));
+    }
+    return m;
+  }
   MaskConfig masks() const {
     MaskConfig m;
     m.context_ratio = {context_ratio_lo, context_ratio_hi};
@@ -291,11 +324,13 @@ struct RunConfig {
     m.num_global = global_targets;
     return m;
   }
+  AdamWConfig adamw() const { return AdamWConfig{beta1, beta2, 1e-8}; }
   // The step's objective options (the rest of JepaStepConfig keeps the reference's values).
   JepaStepConfig step() const {
     JepaStepConfig c;
     c.loss = loss == "smooth_l1" ? JepaLossKind::smooth_l1 : JepaLossKind::mse;
     c.normalize_targets = normalize_targets;
+    c.standardize_targets = standardize_targets;
     c.predictor_pos_from_context = predictor_pos_from_context;
     c.drop_path = drop_path;
     c.activity_weight = activity_weight;

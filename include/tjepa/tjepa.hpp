@@ -38,6 +38,7 @@
 #include "tjepa/graph/block_grouping.hpp"
 #include "tjepa/graph/grow_grouping.hpp"
 #include "tjepa/graph/colors.hpp"
+#include "tjepa/graph/spectral_positions.hpp"
 #include "tjepa/graph/svg.hpp"
 
 #include "tjepa/masks/collator.hpp"

@@ -155,6 +155,41 @@ TEST_CASE("train_probe: learns an encoded force and class (frozen features)") {
   CHECK(std::equal(p.params.values().begin(), p.params.values().end(), q.params.values().begin()));
 }
 
+TEST_CASE("center_token_embeddings: one shared resting embedding / differences between windows kept") {
+  Rng rng(12);
+  const int S = 5, T2 = 3, L = 4, d = 6;
+  const std::size_t per = std::size_t(L) * d;
+  std::vector<float> train(S * per), test(T2 * per);
+  // Token n's embedding: a large per-token offset (its position) plus a window-dependent part.
+  std::vector<float> offset(per);
+  for (auto& v : offset) v = static_cast<float>(5 * rng.normal());
+  for (std::size_t i = 0; i < train.size(); ++i) train[i] = offset[i % per] + static_cast<float>(rng.normal());
+  for (std::size_t i = 0; i < test.size(); ++i) test[i] = offset[i % per] + static_cast<float>(rng.normal());
+  const std::vector<float> train0 = train, test0 = test;
+  const std::span<float> test_span(test);
+  center_token_embeddings<float>(train, std::span<const std::span<float>>(&test_span, 1), L, d);
+  // Every token's training mean is now the same vector: the mean over tokens of the old means.
+  std::vector<double> shared(d, 0.0);
+  for (int s = 0; s < S; ++s)
+    for (std::size_t i = 0; i < per; ++i) shared[i % d] += double(train0[s * per + i]) / (S * L);
+  for (int n = 0; n < L; ++n)
+    for (int c = 0; c < d; ++c) {
+      double m = 0;
+      for (int s = 0; s < S; ++s) m += train[s * per + n * d + c];
+      CHECK(m / S == doctest::Approx(shared[c]).epsilon(1e-5));
+    }
+  // Each value moved by its token's shift, the same in the training and the held-out windows.
+  for (std::size_t i = 0; i < per; ++i) {
+    const float shift = train[i] - train0[i];
+    for (int s = 1; s < S; ++s) CHECK(train[s * per + i] - train0[s * per + i] == doctest::Approx(shift).epsilon(1e-5));
+    for (int s = 0; s < T2; ++s) CHECK(test[s * per + i] - test0[s * per + i] == doctest::Approx(shift).epsilon(1e-5));
+  }
+  std::vector<float> bad(per + 1);
+  CHECK_THROWS_WITH_AS(center_token_embeddings<float>(bad, {}, L, d), doctest::Contains("tokens*dim = 4*6"), ShapeError);
+  std::vector<float> none;
+  CHECK_THROWS_AS(center_token_embeddings<float>(none, {}, L, d), ShapeError);
+}
+
 TEST_CASE("select_probe_lr: the rate whose probe does best on a held-out split wins") {
   const int S = 160, L = 1, d = 12;
   const auto [v, lab] = encoded_features(S, d, 9, 0.5f, 100);

@@ -168,6 +168,7 @@ TEST_SUITE("train") {
       cfg.predictor_pos_from_context = true;
     }
     SUBCASE("activity-weighted MSE, lambda = 2") { cfg.activity_weight = 2.0; }
+    SUBCASE("MSE against targets standardized per token over the batch") { cfg.standardize_targets = true; }
     JepaWorkspace<double> w;
     const std::uint64_t noise = 77;
     auto loss = [&] { return jepa_loss(model, x.data(), 2, masks, w, cfg, noise, false).loss; };
@@ -222,6 +223,45 @@ TEST_SUITE("train") {
       CHECK(l1 == doctest::Approx(l0).epsilon(1e-14));
       for (std::size_t i = 0; i < g0.size(); ++i) CHECK(g1[i] == doctest::Approx(g0[i]).epsilon(1e-14));
     }
+  }
+
+  TEST_CASE("standardize_columns: zero mean and unit variance per column / blind to a column's offset and scale") {
+    Rng rng(8);
+    const std::size_t M = 7, D = 1100;  // D spans three of the kernel's column chunks
+    std::vector<double> x(M * D);
+    for (auto& v : x) v = rng.normal();
+    std::vector<double> shifted = x;
+    for (std::size_t j = 0; j < D; ++j) {
+      const double offset = rng.uniform(-50.0, 50.0), scale = rng.uniform(0.5, 3.0);
+      for (std::size_t m = 0; m < M; ++m) shifted[m * D + j] = offset + scale * x[m * D + j];
+    }
+    standardize_columns(x.data(), M, D, 0.0);
+    standardize_columns(shifted.data(), M, D, 0.0);
+    for (std::size_t j = 0; j < D; ++j) {
+      double s1 = 0, s2 = 0;
+      for (std::size_t m = 0; m < M; ++m) s1 += x[m * D + j], s2 += x[m * D + j] * x[m * D + j];
+      CHECK(s1 / M == doctest::Approx(0.0).scale(1.0).epsilon(1e-12));
+      CHECK(s2 / M == doctest::Approx(1.0).epsilon(1e-12));
+      for (std::size_t m = 0; m < M; ++m) CHECK(shifted[m * D + j] == doctest::Approx(x[m * D + j]).epsilon(1e-9));
+    }
+    // In the loss: a position-only encoder (the same target embedding at a token for every
+    // sample) leaves nothing to predict but eps-scaled zeros, and B = 1 is refused.
+    auto model = random_model(4);
+    JepaWorkspace<double> w;
+    JepaStepConfig cfg;
+    cfg.drop_path = 0.0;
+    cfg.standardize_targets = true;
+    const auto x2 = tiny_input(5);
+    std::vector<double> same(x2.begin(), x2.begin() + static_cast<std::ptrdiff_t>(x2.size() / 2));
+    same.insert(same.end(), same.begin(), same.end());
+    jepa_loss(model, same.data(), 2, tiny_masks(), w, cfg, 1, false);
+    for (std::size_t i = 0; i < 2 * std::size_t(model.num_tokens()) * model.dim(); ++i) CHECK(std::abs(w.h[i]) < 1e-6);
+    MaskBatch one = tiny_masks();  // sample 0's context and targets alone
+    one.B = 1;
+    one.context.resize(static_cast<std::size_t>(one.K));
+    for (TargetSet& t : one.targets) t.indices.resize(static_cast<std::size_t>(t.size));
+    CHECK_THROWS_WITH_AS(jepa_loss(model, x2.data(), 1, one, w, cfg, 1, false), doctest::Contains("at least 2 samples"),
+                         ConfigError);
   }
 
   TEST_CASE("activity weighting: equal activity is the plain mean / contact tokens weigh more") {
@@ -408,6 +448,31 @@ TEST_SUITE("train") {
     CHECK(std::ranges::equal(a.context.value_span(w), reference.context.value_span(w)));
     c.tokenizer_bias_std = -1.0;
     CHECK_THROWS_AS(JepaModel<float>(c, 5), ConfigError);
+  }
+
+  TEST_CASE("set_positions writes the context and target position tables and nothing else") {
+    const JepaConfig c = tiny_config();
+    JepaModel<float> m(c, 5);
+    const JepaModel<float> reference(c, 5);
+    const int N = m.num_tokens(), d = m.dim();
+    // A path graph over the tokens: graph_positions' rows, as the demo starts its table.
+    std::vector<Edge> edges;
+    for (int i = 0; i + 1 < N; ++i) edges.push_back({i, i + 1, 1.0});
+    const std::vector<double> rows = graph_positions(TaxelGraph(N, edges), d, std::min(N, 4), 0.7, 1);
+    m.set_positions(rows);
+    for (const ParamSet<float>* ps : {&m.context, &m.target}) {
+      const auto e = ps->value_span(m.encoder.pos_embed());
+      REQUIRE(e.size() == rows.size());
+      for (std::size_t i = 0; i < rows.size(); ++i) CHECK(e[i] == static_cast<float>(rows[i]));
+    }
+    const auto& w = m.tokenizer.maps.front().proj.weight;
+    CHECK(std::ranges::equal(m.context.value_span(w), reference.context.value_span(w)));
+    CHECK_THROWS_WITH_AS(m.set_positions(std::vector<double>(3, 0.0)), doctest::Contains("expected N·d"), ShapeError);
+    std::vector<double> bad = rows;
+    bad[5] = NAN;
+    CHECK_THROWS_WITH_AS(m.set_positions(bad), doctest::Contains("value 5"), DataError);
+    // Nothing was written by the rejected calls.
+    CHECK(m.context.value_span(m.encoder.pos_embed())[5] == static_cast<float>(rows[5]));
   }
 
   TEST_CASE("save then load then continue: the loss curve is bitwise that of an uninterrupted run") {

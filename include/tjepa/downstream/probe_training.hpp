@@ -163,6 +163,44 @@ class FrozenFeatures {
   int L_, d_;
 };
 
+// Each token's resting embedding, removed from frozen features before a probe: with μ_n the mean of
+// token n's embedding over the training windows and μ̄ the mean of μ_n over tokens,
+//   x[s, n, :] ← x[s, n, :] − μ_n + μ̄          for every window s of `train` and of each `other`
+// (statistics from `train` only). What every window shows at a token (its position, the "no
+// contact" embedding of an idle taxel) becomes one vector shared by all tokens, which the probe's
+// softmax and its pooled value ignore; what the windows differ in is kept at its own scale. Without
+// it, the attentive probe must learn from a few hundred labelled windows to look past per-token
+// offsets: on the simulated Allegro hand a random encoder whose position rows have RMS 1 (graph
+// positions) gave force RMSE 1.47 N against 0.97 N with the reference's RMS 0.02 rows, and a
+// pre-trained encoder whose rows had grown stayed at the training mean.
+template <class T>
+void center_token_embeddings(std::span<T> train, std::span<const std::span<T>> others, int tokens, int dim) {
+  require<ShapeError>(tokens > 0 && dim > 0, "center_token_embeddings: tokens = ", tokens, ", dim = ", dim,
+                      ", expected > 0");
+  const std::size_t per = static_cast<std::size_t>(tokens) * dim;
+  require<ShapeError>(!train.empty() && train.size() % per == 0, "center_token_embeddings: ", train.size(),
+                      " training values, expected a positive multiple of tokens*dim = ", tokens, "*", dim);
+  for (const auto& o : others)
+    require<ShapeError>(o.size() % per == 0, "center_token_embeddings: ", o.size(),
+                        " values, expected a multiple of tokens*dim = ", tokens, "*", dim);
+  const std::size_t S = train.size() / per;
+  std::vector<double> mean(per, 0.0), shared(static_cast<std::size_t>(dim), 0.0);
+  for (std::size_t s = 0; s < S; ++s)
+    for (std::size_t i = 0; i < per; ++i) mean[i] += static_cast<double>(train[s * per + i]);
+  for (std::size_t i = 0; i < per; ++i) {
+    mean[i] /= static_cast<double>(S);
+    shared[i % static_cast<std::size_t>(dim)] += mean[i] / tokens;
+  }
+  std::vector<T> shift(per);  // μ̄ − μ_n
+  for (std::size_t i = 0; i < per; ++i) shift[i] = static_cast<T>(shared[i % static_cast<std::size_t>(dim)] - mean[i]);
+  auto apply = [&](std::span<T> x) {
+    for (std::size_t s = 0; s < x.size() / per; ++s)
+      for (std::size_t i = 0; i < per; ++i) x[s * per + i] += shift[i];
+  };
+  for (const auto& o : others) apply(o);
+  apply(train);
+}
+
 // A tokenizer + encoder over the windows of a source, trained with the probe (end to end).
 // Sample s is window windows[s] of the source. Windows are float, so T is float.
 template <class T>

@@ -6,8 +6,10 @@
 //   predictor  the predictor: trained
 // Checkpoint prefixes are the reference module's attribute names: "context_encoder.",
 // "target_encoder.", "predictor." (tensor names inside follow the reference PyTorch model).
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -112,6 +114,18 @@ class JepaModel {
     }
     init_params(predictor_params, seed ^ 0x7072656469637472ull);  // "predictr": an unrelated stream
     target = context;
+  }
+
+  // Overwrites the position table, e_i of the context and of the target encoder, with rows
+  // [N, d] (row-major), e.g. graph_positions(graph, d, k, scale, seed). Init only: call it before
+  // training; the rows then train as the reference's table does.
+  void set_positions(std::span<const double> rows) {
+    const std::size_t n = static_cast<std::size_t>(num_tokens()) * dim();
+    require<ShapeError>(rows.size() == n, "JepaModel::set_positions: ", rows.size(), " values, expected N·d = ",
+                        num_tokens(), "·", dim());
+    for (std::size_t i = 0; i < n; ++i)
+      require<DataError>(std::isfinite(rows[i]), "JepaModel::set_positions: value ", i, " is ", rows[i]);
+    for (ParamSet<T>* ps : {&context, &target}) std::copy(rows.begin(), rows.end(), ps->value(encoder.pos_embed()));
   }
 
   int num_tokens() const { return config.encoder.num_tokens; }

@@ -8,6 +8,7 @@
 // embedding dimension, as PyTorch's reduction="mean". The option that goes with smooth_l1 in
 // I-JEPA, re-normalizing the targets by a LayerNorm without affine (F.layer_norm(h, (d,)),
 // eps 1e-5), is normalize_rows.
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 
@@ -38,6 +39,33 @@ void normalize_rows(T* x, std::size_t M, int d, double eps = target_norm_eps) {
     var /= d;
     const double rs = 1.0 / std::sqrt(var + eps);
     for (int c = 0; c < d; ++c) r[c] = static_cast<T>((r[c] - mu) * rs);
+  }
+}
+
+// x[:, j] ← (x[:, j] − mean) / sqrt(var + eps) for x [M, D], each column over its M rows (biased
+// variance), in place. For the targets h [B, N·d] (JepaStepConfig::standardize_targets), each
+// token's each dimension over the batch: whatever a token's embedding holds for every sample (its
+// position) is removed, and what is left is what differs between samples.
+template <class T>
+void standardize_columns(T* x, std::size_t M, std::size_t D, double eps = target_norm_eps) {
+  constexpr std::size_t chunk = 512;
+  const auto chunks = static_cast<std::ptrdiff_t>((D + chunk - 1) / chunk);
+  TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
+  for (std::ptrdiff_t c = 0; c < chunks; ++c) {
+    const std::size_t j0 = static_cast<std::size_t>(c) * chunk, n = std::min(chunk, D - j0);
+    double mean[chunk] = {}, var[chunk] = {};
+    for (std::size_t m = 0; m < M; ++m)
+      for (std::size_t j = 0; j < n; ++j) mean[j] += static_cast<double>(x[m * D + j0 + j]);
+    for (std::size_t j = 0; j < n; ++j) mean[j] /= static_cast<double>(M);
+    for (std::size_t m = 0; m < M; ++m)
+      for (std::size_t j = 0; j < n; ++j) {
+        const double v = static_cast<double>(x[m * D + j0 + j]) - mean[j];
+        var[j] += v * v;
+      }
+    for (std::size_t j = 0; j < n; ++j) var[j] = 1.0 / std::sqrt(var[j] / static_cast<double>(M) + eps);
+    for (std::size_t m = 0; m < M; ++m)
+      for (std::size_t j = 0; j < n; ++j)
+        x[m * D + j0 + j] = static_cast<T>((static_cast<double>(x[m * D + j0 + j]) - mean[j]) * var[j]);
   }
 }
 
