@@ -106,8 +106,8 @@ int main(int argc, char** argv) {
   probe->add_option("--out", pb.out, "write the results as JSON here");
   probe->add_flag("--force", pb.force, "overwrite --out");
   probe->add_flag("--quiet", pb.quiet, "no progress line");
-  probe->add_flag("--no-centering", [&pb](std::int64_t) { pb.center_tokens = false; },
-                  "the probe reads the raw embeddings (default: each token's training mean removed)");
+  probe->add_flag("--center-tokens", pb.center_tokens,
+                  "the probe reads each token's embedding minus its training mean (center_token_embeddings)");
 
   EmbedOptions eo;
   auto* embed = app.add_subcommand("embed", "Frozen encoder over a recording's windows -> embeddings .npy [W, N, d]");
@@ -155,8 +155,8 @@ int main(int argc, char** argv) {
   demo->add_option("--end-to-end-epochs", dm.end_to_end_epochs, "epochs of (c) (0: as the probes)")->capture_default_str();
   demo->add_option("--checkpoint", dm.checkpoint, "skip pre-training and probe this demo checkpoint");
   demo->add_flag("--no-end-to-end", [&dm](std::int64_t) { dm.end_to_end = false; }, "skip (c)");
-  demo->add_flag("--no-centering", [&dm](std::int64_t) { dm.center_tokens = false; },
-                 "frozen probes read the raw embeddings (default: each token's training mean removed)");
+  demo->add_flag("--center-tokens", dm.center_tokens,
+                 "frozen probes read each token's embedding minus its training mean (center_token_embeddings)");
   demo->add_flag("--quiet", dm.quiet, "no progress line");
 
   try {

@@ -337,6 +337,37 @@ TEST_CASE("run config: masks and activity weighting from JSON / round trip and b
   CHECK(error_of({{"target_ratio", "wide"}}).find("'target_ratio'") != std::string::npos);
   CHECK(error_of({{"loss", "l1"}}).find("loss") != std::string::npos);
   CHECK(error_of({{"normalize_targets", 1.5}}).find("'normalize_targets'") != std::string::npos);
+  CHECK(error_of({{"beta2", 1.0}}).find("beta1/beta2") != std::string::npos);
+  CHECK(error_of({{"position_eigenvectors", -1}}).find("position_eigenvectors") != std::string::npos);
+  CHECK(error_of({{"position_scale", 0.0}}).find("position_scale") != std::string::npos);
+}
+
+TEST_CASE("run config: graph positions / AdamW betas / standardized targets reach the model and the step") {
+  const Skin skin = layouts::allegro_xela();
+  RunConfig r;
+  r.dim = 12;
+  r.heads = 2;
+  r.depth = 1;
+  r.predictor_depth = 1;
+  // The defaults are the reference's: a random table, β = (0.9, 0.999), plain targets.
+  const auto plain = r.new_model(skin.graph, 3, 4);
+  CHECK(r.adamw().beta1 == 0.9);
+  CHECK(r.adamw().beta2 == 0.999);
+  CHECK_FALSE(r.step().standardize_targets);
+  const auto same = r.new_model(skin.graph, 3, 4);
+  CHECK(std::ranges::equal(plain->context.values(), same->context.values()));
+  r.update({{"position_eigenvectors", 16}, {"position_scale", 0.5}, {"beta2", 0.99}, {"standardize_targets", true}},
+           "test");
+  r.validate();
+  CHECK(r.adamw().beta2 == 0.99);
+  CHECK(r.step().standardize_targets);
+  const auto graph = r.new_model(skin.graph, 3, 4);
+  const std::vector<double> rows = graph_positions(skin.graph, 12, 16, 0.5, 4);
+  const auto e = graph->target.value_span(graph->encoder.pos_embed());
+  REQUIRE(e.size() == rows.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) CHECK(e[i] == static_cast<float>(rows[i]));
+  r.position_eigenvectors = 400;
+  CHECK_THROWS_WITH_AS(r.new_model(skin.graph, 3, 4), doctest::Contains("368 tokens"), ConfigError);
 }
 
 TEST_CASE("run config: the objective's reference options reach the training step") {
