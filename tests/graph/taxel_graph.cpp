@@ -7,6 +7,8 @@
 #include <doctest/doctest.h>
 
 #include <tjepa/tjepa.hpp>
+// Named here as well, so each module this file tests is traceable.
+#include <tjepa/graph/spectral_positions.hpp>
 
 #include <cmath>
 #include <cstdint>
