@@ -583,7 +583,7 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
     o.run.steps = steps;
   }
   const int axes = d.pretrain.axes();
-  const auto fresh = o.run.new_model(skin.graph, axes, o.seed);
+  const auto fresh = loaded ? nullptr : o.run.new_model(skin.graph, axes, o.seed);
   JepaModel<float>& model = loaded ? *loaded->model : *fresh;
   AdamW<float> opt(model.trainable(), o.run.adamw());
   out << "model: encoder d=" << o.run.dim << ", " << o.run.depth << " blocks, " << o.run.heads << " heads ("
@@ -636,8 +636,8 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   }
   rows.push_back(o.repeats > 1 ? average_rows("(b) random init, frozen", std::move(random_runs))
                                : std::move(random_runs.front()));
-  const auto random_model = o.run.new_model(skin.graph, axes, o.seed + 1000);
   if (o.end_to_end) {
+    const auto random_model = o.run.new_model(skin.graph, axes, o.seed + 1000);
     ProbeTrainConfig e2e = o.probe;
     if (o.end_to_end_epochs > 0) e2e.epochs = o.end_to_end_epochs;
     const std::string name = e2e.epochs == o.probe.epochs
