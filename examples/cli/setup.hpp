@@ -152,7 +152,7 @@ struct RunConfig {
   int steps = 600, batch = 32, warmup_steps = 60;
   double lr = 1e-3, start_lr = 1e-4, final_lr = 1e-5;
   double wd_start = 0.04, wd_end = 0.4;
-  // AdamW's moment decays (the reference: 0.9, 0.999).
+  // AdamW's moment decays (the reference: 0.9, 0.999; the demo uses beta2 0.99).
   double beta1 = 0.9, beta2 = 0.999;
   // A short run: the target encoder (what the probes read) must follow the context encoder within
   // a few hundred steps; the reference's 0.996 suits 500 epochs (its EMA lags ~250 steps).
@@ -170,8 +170,8 @@ struct RunConfig {
   double activity_weight = 0.0;  // JepaStepConfig::activity_weight (the reference: 0, a plain mean)
   // Data: DriftTracker's time constant in frames (200: 2 s at 100 Hz), for recordings with a
   // no-contact baseline (the "magnetic" preprocessing); 0 = off, the reference's one fixed baseline.
-  // Off by default: on the demo it did not change how the pre-trained encoder compares with the
-  // random one (README, "The demo").
+  // Off by default here (the reference's preprocessing); the demo turns it on together with beta2
+  // 0.99 (demo_run_config in commands.hpp says why).
   double drift_time_constant = 0.0;
   // The objective's reference options (JepaStepConfig): "mse" or I-JEPA's "smooth_l1", targets
   // re-normalized by a LayerNorm without affine, the predictor's positions from the context encoder.

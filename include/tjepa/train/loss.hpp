@@ -53,19 +53,19 @@ void standardize_columns(T* x, std::size_t M, std::size_t D, double eps = target
   TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
   for (std::ptrdiff_t c = 0; c < chunks; ++c) {
     const std::size_t j0 = static_cast<std::size_t>(c) * chunk, n = std::min(chunk, D - j0);
-    double mean[chunk] = {}, var[chunk] = {};
+    double mean[chunk] = {}, inv_std[chunk] = {};
     for (std::size_t m = 0; m < M; ++m)
       for (std::size_t j = 0; j < n; ++j) mean[j] += static_cast<double>(x[m * D + j0 + j]);
     for (std::size_t j = 0; j < n; ++j) mean[j] /= static_cast<double>(M);
     for (std::size_t m = 0; m < M; ++m)
       for (std::size_t j = 0; j < n; ++j) {
         const double v = static_cast<double>(x[m * D + j0 + j]) - mean[j];
-        var[j] += v * v;
+        inv_std[j] += v * v;  // the sum of squares, then 1/std
       }
-    for (std::size_t j = 0; j < n; ++j) var[j] = 1.0 / std::sqrt(var[j] / static_cast<double>(M) + eps);
+    for (std::size_t j = 0; j < n; ++j) inv_std[j] = 1.0 / std::sqrt(inv_std[j] / static_cast<double>(M) + eps);
     for (std::size_t m = 0; m < M; ++m)
       for (std::size_t j = 0; j < n; ++j)
-        x[m * D + j0 + j] = static_cast<T>((static_cast<double>(x[m * D + j0 + j]) - mean[j]) * var[j]);
+        x[m * D + j0 + j] = static_cast<T>((static_cast<double>(x[m * D + j0 + j]) - mean[j]) * inv_std[j]);
   }
 }
 
