@@ -15,7 +15,7 @@ cmake --build --preset release --target tjepa_bench tjepa_streaming -j "$(nproc)
 
 out=build/compare
 mkdir -p "$out"
-filter='BM_EncoderForward/|BM_EncoderForwardBackward/.*/0/|BM_AttentionForward/|BM_AttentionForwardBackward/'
+filter='BM_FmaPeak|BM_EncoderForward/|BM_EncoderForwardBackward/.*/0/|BM_AttentionForward/|BM_AttentionForwardBackward/'
 for t in 1 2; do
   echo "tjepa, $t thread(s)" >&2
   OMP_NUM_THREADS=$t OMP_PROC_BIND=false build/release/bench/tjepa_bench --benchmark_filter="$filter" \
