@@ -5,7 +5,7 @@
 #include <tjepa/data/grouped_gather.hpp>
 #include <tjepa/data/npy.hpp>
 #include <tjepa/data/preprocessor.hpp>
-#include <tjepa/data/simulated_skin.hpp>
+#include <tjepa/sim/simulated_skin.hpp>
 #include <tjepa/data/window_source.hpp>
 #include <tjepa/layout/allegro_xela.hpp>
 #include <tjepa/layout/inspire.hpp>

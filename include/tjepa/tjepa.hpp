@@ -23,11 +23,12 @@
 #include "tjepa/data/npy.hpp"
 #include "tjepa/data/preprocessor.hpp"
 #include "tjepa/data/recording.hpp"
-#include "tjepa/data/simulated_dataset.hpp"
-#include "tjepa/data/simulated_skin.hpp"
 #include "tjepa/data/text_reader.hpp"
 #include "tjepa/data/window.hpp"
 #include "tjepa/data/window_source.hpp"
+
+#include "tjepa/sim/simulated_dataset.hpp"
+#include "tjepa/sim/simulated_skin.hpp"
 
 #include "tjepa/graph/taxel_graph.hpp"
 #include "tjepa/graph/skin.hpp"

@@ -10,7 +10,7 @@
 
 #include "tjepa/core/error.hpp"
 #include "tjepa/data/preprocessor.hpp"
-#include "tjepa/data/simulated_skin.hpp"
+#include "tjepa/sim/simulated_skin.hpp"
 #include "tjepa/data/window.hpp"
 #include "tjepa/data/window_source.hpp"
 #include "tjepa/layout/taxel_layout.hpp"
