@@ -42,12 +42,11 @@ void BM_JepaTrainStep(benchmark::State& state) {
   tjepa::JepaModel<float> model(tjepa::JepaConfig::reference(N, 30, 3), 1);
   tjepa::AdamW<float> opt(model.trainable());
   const auto schedule = tjepa::TrainingSchedule::reference(500, 100, 30);
-  tjepa::JepaWorkspace<float> ws;
   tjepa::Rng rng(2);
   std::vector<float> x(static_cast<std::size_t>(B) * N * 30);
   for (auto& v : x) v = static_cast<float>(rng.normal());
   const tjepa::MaskBatch masks = collator.sample(B, 3, 0);
-  const tjepa::JepaStepConfig cfg;  // drop-path 0.3, as the reference
+  tjepa::JepaStep<float> step(model, tjepa::JepaStepConfig{});  // drop-path 0.3, as the reference
   // FLOPs of one step with these masks.
   const double d = 192, K = masks.K;
   double flops = block_flops(double(B) * N, N, d) * 12;  // target encoder, forward only
@@ -55,7 +54,7 @@ void BM_JepaTrainStep(benchmark::State& state) {
   for (const auto& t : masks.targets) flops += 3 * block_flops(double(B) * (K + t.size), K + t.size, d) * 4;
   std::int64_t s = 0;
   for (auto _ : state) {
-    auto st = tjepa::jepa_train_step(model, opt, schedule, s, x.data(), B, masks, ws, cfg, std::uint64_t(s));
+    auto st = step.train(opt, schedule, s, x.data(), B, masks, std::uint64_t(s));
     benchmark::DoNotOptimize(st.loss);
     ++s;
   }

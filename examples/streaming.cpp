@@ -174,7 +174,7 @@ struct FmaControl {
     for (int r = 0; r < reps; ++r)
       for (int i = 0; i < 8; ++i) a[i] = xsimd::fma(a[i], m, c);
     float s = 0;
-    for (int i = 0; i < 8; ++i) s += tjepa::detail::hsum<float>(a[i]);
+    for (int i = 0; i < 8; ++i) s += xsimd::hadd(a[i]);
     return s;
   }
 };
@@ -191,7 +191,7 @@ struct MemoryControl {
         acc += v;
         (v * one).store_aligned(buffer.data() + i);
       }
-    return tjepa::detail::hsum<float>(acc);
+    return xsimd::hadd(acc);
   }
 };
 template <class Control>
@@ -293,14 +293,13 @@ int main(int argc, char** argv) {
     std::optional<DriftTracker> drift;  // the rest readings follow idle taxels, one step per frame
     int tau = 10;
     if (!checkpoint.empty()) {
-      cli::LoadedModel lm = cli::load_model(checkpoint);
+      TrainedModel lm = load_trained_model(checkpoint);
       model = std::move(lm.model);
       pre = std::move(lm.pre);
       drift = std::move(lm.drift);
-      tau = lm.run.tau;
+      tau = lm.config.tau;
     } else {
-      cli::RunConfig run;
-      model = std::make_unique<JepaModel<float>>(run.model(N, m), 0);
+      model = std::make_unique<JepaModel<float>>(TrainConfig{}.model(N, m), 0);
       pre = cli::fit_preprocessor("magnetic", &baseline, std::span<const Recording>(&stream.recording, 1));
       drift = DriftTracker(DriftTrackerConfig::magnetic());
       drift->fit(baseline);

@@ -22,7 +22,7 @@
 
 namespace {
 
-// --<flag> VALUE sets key in the JSON of RunConfig overrides.
+// --<flag> VALUE sets key in the JSON of TrainConfig overrides.
 template <class T>
 void run_override(CLI::App* app, const std::string& flag, const std::string& key, nlohmann::json& j,
                   const std::string& help) {

@@ -104,8 +104,8 @@ inline int run_layout(const LayoutOptions& o, std::ostream& out) {
 // tjepa pretrain
 
 struct PretrainOptions {
-  std::string config;                 // JSON file with RunConfig keys ("" = defaults)
-  nlohmann::json overrides = nlohmann::json::object();  // command-line overrides of RunConfig keys
+  std::string config;                 // JSON file with TrainConfig keys ("" = defaults)
+  nlohmann::json overrides = nlohmann::json::object();  // command-line overrides of TrainConfig keys
   std::vector<std::string> data;      // recordings (.npy [T, N, m] or text); empty: simulated
   std::string baseline;               // no-contact recording (preprocessing "magnetic")
   std::string preprocess = "";        // magnetic | standardize | none ("" = magnetic if a baseline, else standardize)
@@ -118,7 +118,7 @@ struct PretrainOptions {
 };
 
 inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
-  RunConfig run = o.config.empty() ? RunConfig{} : RunConfig::from_file(o.config);
+  TrainConfig run = o.config.empty() ? TrainConfig{} : TrainConfig::from_file(o.config);
   run.update(o.overrides, "command line");
   run.validate();
   const Skin skin = load_skin(run.layout);
@@ -151,17 +151,18 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
   const std::filesystem::path dir = o.out;
   OutputFiles::check_new(dir / "checkpoint.safetensors", o.force);
   files.make_dir(dir);
-  const auto owned = run.new_model(skin.graph, axes, run.seed);
+  const auto owned = make_jepa_model(run, skin.graph, axes, run.seed);
   JepaModel<float>& model = *owned;
-  AdamW<float> opt(model.trainable(), run.adamw());
+  Trainer<float> trainer(model, src, skin.graph, run);
+  trainer.extras = data_state(pre, drift ? &*drift : nullptr);
   out << "pre-training on " << src.size() << " windows (" << skin.size() << " taxels, tau " << run.tau << "), "
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
       << run.steps << " steps of " << run.batch << "\n";
-  const PretrainOutcome r = pretrain(model, opt, run, src, skin.graph, o.quiet);
-  write_pretrain_outputs(dir, model, opt, run, pre, r, files, drift ? &*drift : nullptr);
+  const PretrainOutcome r = pretrain(trainer, o.quiet);
+  write_pretrain_outputs(dir, trainer, r, files);
   files.commit();
   out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "
-      << r.final_target_std << " (over samples " << r.final_target_sample_std << "), " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
+      << r.log.rows.back()[6] << " (over samples " << r.log.rows.back()[9] << "), " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
       << "\nwrote " << (dir / "checkpoint.safetensors").string() << ", log.csv, loss.svg\n";
   return 0;
 }
@@ -393,7 +394,7 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
                        "', expected target or context");
   if (!o.out.empty()) OutputFiles::check_new(o.out, o.force);
-  LoadedModel m = load_model(o.checkpoint);
+  TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
   Recording train_rec, test_rec;
   std::vector<FrameLabel> train_lab, test_lab;
@@ -401,8 +402,8 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
     require<ConfigError>(o.test_data.empty(), "--test-data needs --train-data too");
     // The sensor the checkpoint was pre-trained on (seeded by its run's seed: the same offsets and
     // gains, so its baseline applies), with new events from --simulate-seed.
-    const Skin skin = load_skin(m.run.layout);
-    SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, m.run.seed);
+    const Skin skin = load_skin(m.config.layout);
+    SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, m.config.seed);
     sim.reseed(o.simulate_seed);
     auto a = sim.record(o.simulate_train_frames);
     auto b = sim.record(o.simulate_test_frames);
@@ -419,13 +420,13 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
     test_lab = read_frame_labels(o.test_labels, test_rec.frames());
   }
   for (const Recording* r : {&train_rec, &test_rec})
-    require<ShapeError>(r->taxels() == model.num_tokens() && r->axes() * m.run.tau == model.config.in_dim,
+    require<ShapeError>(r->taxels() == model.num_tokens() && r->axes() * m.config.tau == model.config.in_dim,
                         r->source(), ": ", r->taxels(), " taxels x ", r->axes(), " axes; the checkpoint expects ",
-                        model.num_tokens(), " taxels x ", model.config.in_dim / m.run.tau, " axes");
+                        model.num_tokens(), " taxels x ", model.config.in_dim / m.config.tau, " axes");
   m.track(train_rec);
   m.track(test_rec);
-  const WindowSource train_src(train_rec, WindowSpec{m.run.tau}, train_lab, m.pre);
-  const WindowSource test_src(test_rec, WindowSpec{m.run.tau}, test_lab, m.pre);
+  const WindowSource train_src(train_rec, WindowSpec{m.config.tau}, train_lab, m.pre);
+  const WindowSource test_src(test_rec, WindowSpec{m.config.tau}, test_lab, m.pre);
   const ProbeLabels train = ProbeLabels::from_source(
       train_src, labelled_windows(train_src, o.min_contact, o.max_windows, o.probe.seed));
   const ProbeLabels test = ProbeLabels::from_source(
@@ -438,7 +439,7 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   const ParamSet<float>& ps = o.encoder == "target" ? model.target : model.context;
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes),
                              frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
-                                          train_src, train, test_src, test, o.probe, m.run.heads, o.quiet,
+                                          train_src, train, test_src, test, o.probe, m.config.heads, o.quiet,
                                           o.probe_lrs, o.repeats, o.center_tokens)};
   print_probe_table(out, rows);
   if (!o.out.empty()) {
@@ -467,14 +468,14 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
   require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
                        "', expected target or context");
   OutputFiles::check_new(o.out, o.force);
-  LoadedModel m = load_model(o.checkpoint);
+  TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
   Recording rec = read_recording(o.data, o.axes);
-  require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.run.tau == model.config.in_dim, o.data,
+  require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.config.tau == model.config.in_dim, o.data,
                       ": ", rec.taxels(), " taxels x ", rec.axes(), " axes; the checkpoint expects ", model.num_tokens(),
-                      " taxels x ", model.config.in_dim / m.run.tau, " axes");
+                      " taxels x ", model.config.in_dim / m.config.tau, " axes");
   m.track(rec);
-  const WindowSource src(rec, WindowSpec{m.run.tau, o.stride}, {}, m.pre);
+  const WindowSource src(rec, WindowSpec{m.config.tau, o.stride}, {}, m.pre);
   std::vector<std::int64_t> ids(static_cast<std::size_t>(src.size()));
   for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = static_cast<std::int64_t>(i);
   ProgressLine bar("embed", src.size(), o.quiet);
@@ -485,29 +486,17 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
             {src.size(), model.num_tokens(), model.dim()});
   files.commit();
   out << "wrote " << o.out << ": [" << src.size() << ", " << model.num_tokens() << ", " << model.dim()
-      << "] embeddings of windows of " << m.run.tau << " frames\n";
+      << "] embeddings of windows of " << m.config.tau << " frames\n";
   return 0;
 }
 
 // ---------------------------------------------------------------------------------------------
 // tjepa demo
 
-// The demo's pre-training: RunConfig's defaults, run for 1500 steps (8 epochs of the 6000
-// unlabelled windows: what the 10-minute budget allows on 2 cores) with 4 global targets.
-// Why (README, "The demo"): for the first ~500 steps every run predicts the shared "no contact"
-// embedding of the idle taxels, and its embeddings spread less over samples; they spread again
-// between steps 550 and 800. Runs of 600 steps lost to the random encoder in 11 of 12 cells.
-// Two more keys differ from `tjepa pretrain`'s defaults, each for a measured reason (README, "The
-// demo"; the demo issue's notes):
-// - drift_time_constant 200 (DriftTracker, 2 s at 100 Hz): without it an idle taxel's window is
-//   mostly its own slow drift, which no context predicts; pre-training learns to drop it, and a
-//   ridge read-out of the embeddings shows contact detail dropped with it;
-// - beta2 0.99: with the reference's 0.999, AdamW's second moment keeps the step-0 gradients (norm
-//   4.2 against 0.006-0.009 later) for most of a 1500-step run and the encoder hardly moves.
-// At seeds 0, 1 and 2 the pre-trained encoder's probes then reach a lower mean force RMSE than the
-// random encoder's; with either key alone, or with neither, they did not at every seed.
-inline RunConfig demo_run_config() {
-  RunConfig r;
+// The demo's pre-training: TrainConfig's defaults for 1500 steps with 4 global targets, drift
+// tracking (200 frames) and AdamW's beta2 at 0.99 (docs/findings.md says why each).
+inline TrainConfig demo_run_config() {
+  TrainConfig r;
   r.steps = 1500;
   r.warmup_steps = 150;
   r.local_targets = 0;
@@ -520,7 +509,7 @@ inline RunConfig demo_run_config() {
 struct DemoOptions {
   std::uint64_t seed = 0;
   std::string out = "runs/demo";
-  RunConfig run = demo_run_config();  // model and pre-training (run.seed is set from seed)
+  TrainConfig run = demo_run_config();  // model and pre-training (run.seed is set from seed)
   int pretrain_frames = 60000;     // unlabelled
   int pretrain_contacts = 1;       // indenters touching at once in the unlabelled data
   int probe_frames = 20000;        // labelled, probe training
@@ -561,7 +550,7 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   OutputFiles::check_new(dir / "checkpoint.safetensors", o.force);
   const Skin skin = layouts::allegro_xela();
   out << "tjepa " << version_string << " demo, seed " << o.seed << ": Allegro hand, " << skin.size() << " taxels in "
-      << skin.layout.num_groups() << " pads, " << skin.graph.num_edges() << " edges; " << detail::max_threads()
+      << skin.layout.num_groups() << " pads, " << skin.graph.num_edges() << " edges; " << max_threads()
       << " thread(s)\n";
   out << "simulating " << o.pretrain_frames << " unlabelled (up to " << o.pretrain_contacts
       << " indenter(s) at once) + " << o.probe_frames << " labelled + " << o.test_frames
@@ -586,37 +575,36 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
 
   OutputFiles files;
   files.make_dir(dir);
-  std::optional<LoadedModel> loaded;
+  std::optional<TrainedModel> loaded;
   if (!o.checkpoint.empty()) {
-    loaded = load_model(o.checkpoint);
-    const int steps = o.run.steps;
-    o.run = loaded->run;
-    o.run.steps = steps;
+    loaded = load_trained_model(o.checkpoint);
+    o.run = loaded->config;
   }
   const int axes = d.pretrain.axes();
-  const auto fresh = loaded ? nullptr : o.run.new_model(skin.graph, axes, o.seed);
+  const auto fresh = loaded ? nullptr : make_jepa_model(o.run, skin.graph, axes, o.seed);
   JepaModel<float>& model = loaded ? *loaded->model : *fresh;
-  AdamW<float> opt(model.trainable(), o.run.adamw());
   out << "model: encoder d=" << o.run.dim << ", " << o.run.depth << " blocks, " << o.run.heads << " heads ("
       << model.context.numel() << " parameters); predictor " << o.run.predictor_depth << " blocks ("
       << model.predictor_params.numel() << ")\n";
   out << "pre-training: " << pre_src.size() << " unlabelled windows, " << o.run.steps << " steps of " << o.run.batch
       << ", lr " << o.run.lr << ", AdamW betas " << o.run.beta1 << "/" << o.run.beta2 << ", masks: "
-      << o.run.local_targets << " local + " << o.run.global_targets
-      << " global targets of " << o.run.target_ratio_lo << "-" << o.run.target_ratio_hi << " of the taxels, context "
-      << o.run.context_ratio_lo << "-" << o.run.context_ratio_hi << "\n"
+      << o.run.local_targets << " local + " << o.run.global_targets << " global targets of "
+      << o.run.target_ratio[0] << "-" << o.run.target_ratio[1] << " of the taxels, context "
+      << o.run.context_ratio[0] << "-" << o.run.context_ratio[1] << "\n"
       << std::flush;
   PretrainOutcome pr;
   if (loaded) {
     out << "(skipped: using the pre-trained encoder of " << o.checkpoint << ")\n";
     pr.log.rows.push_back(std::vector<double>(pretrain_log_columns().size(), NAN));
   } else {
-    pr = pretrain(model, opt, o.run, pre_src, skin.graph, o.quiet);
-    write_pretrain_outputs(dir, model, opt, o.run, pre, pr, files, drift ? &*drift : nullptr);
+    Trainer<float> trainer(model, pre_src, skin.graph, o.run);
+    trainer.extras = data_state(pre, drift ? &*drift : nullptr);
+    pr = pretrain(trainer, o.quiet);
+    write_pretrain_outputs(dir, trainer, pr, files);
   }
   out << "pre-training: loss " << pr.log.rows.front()[1] << " -> " << pr.log.rows.back()[1]
-      << ", target-embedding std " << pr.log.rows.front()[6] << " -> " << pr.final_target_std
-      << " (over samples " << pr.log.rows.front()[9] << " -> " << pr.final_target_sample_std << "), "
+      << ", target-embedding std " << pr.log.rows.front()[6] << " -> " << pr.log.rows.back()[6]
+      << " (over samples " << pr.log.rows.front()[9] << " -> " << pr.log.rows.back()[9] << "), "
       << pr.windows_per_second << " windows/s, " << format_duration(pr.seconds) << "\n";
 
   out << "probes: " << train.size() << " labelled training windows, " << test.size()
@@ -636,7 +624,7 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   // random features) keep it.
   std::vector<ProbeRow> random_runs;
   for (int r = 0; r < o.repeats; ++r) {
-    const auto random_model = o.run.new_model(skin.graph, axes, o.seed + 1000 + static_cast<std::uint64_t>(r));
+    const auto random_model = make_jepa_model(o.run, skin.graph, axes, o.seed + 1000 + static_cast<std::uint64_t>(r));
     JepaModel<float>& m = *random_model;
     ProbeTrainConfig c = o.probe;
     c.seed = o.probe.seed + static_cast<std::uint64_t>(r);
@@ -649,7 +637,7 @@ inline int run_demo(DemoOptions o, std::ostream& out) {
   rows.push_back(o.repeats > 1 ? average_rows("(b) random init, frozen", std::move(random_runs))
                                : std::move(random_runs.front()));
   if (o.end_to_end) {
-    const auto random_model = o.run.new_model(skin.graph, axes, o.seed + 1000);
+    const auto random_model = make_jepa_model(o.run, skin.graph, axes, o.seed + 1000);
     ProbeTrainConfig e2e = o.probe;
     if (o.end_to_end_epochs > 0) e2e.epochs = o.end_to_end_epochs;
     const std::string name = e2e.epochs == o.probe.epochs

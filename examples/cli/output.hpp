@@ -169,7 +169,7 @@ inline std::string curve_svg(const std::vector<double>& x, const std::vector<Cur
   o.precision(5);
   o << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << W << "\" height=\"" << H << "\" viewBox=\"0 0 " << W
     << ' ' << H << "\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
-  o << "<text x=\"" << W / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">" << detail::xml_escape(title)
+  o << "<text x=\"" << W / 2 << "\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">" << xml_escape(title)
     << "</text>\n";
   o << "<rect x=\"" << ml << "\" y=\"" << mt << "\" width=\"" << W - ml - mr << "\" height=\"" << H - mt - mb
     << "\" fill=\"none\" stroke=\"#444\"/>\n";
@@ -186,7 +186,7 @@ inline std::string curve_svg(const std::vector<double>& x, const std::vector<Cur
       << "</text>\n";
   }
   o << "<text x=\"" << ml + (W - ml - mr) / 2 << "\" y=\"" << H - 10 << "\" text-anchor=\"middle\">"
-    << detail::xml_escape(x_label) << (logy ? " (log y)" : "") << "</text>\n";
+    << xml_escape(x_label) << (logy ? " (log y)" : "") << "</text>\n";
   for (std::size_t s = 0; s < series.size(); ++s) {
     const auto& c = series[s];
     o << "<polyline fill=\"none\" stroke=\"" << c.color << "\" stroke-width=\"1.5\" points=\"";
@@ -196,7 +196,7 @@ inline std::string curve_svg(const std::vector<double>& x, const std::vector<Cur
     const double ly = mt + 16 + 18.0 * static_cast<double>(s);
     o << "<line x1=\"" << W - mr + 10 << "\" x2=\"" << W - mr + 30 << "\" y1=\"" << ly - 4 << "\" y2=\"" << ly - 4
       << "\" stroke=\"" << c.color << "\" stroke-width=\"2\"/><text x=\"" << W - mr + 36 << "\" y=\"" << ly << "\">"
-      << detail::xml_escape(c.name) << "</text>\n";
+      << xml_escape(c.name) << "</text>\n";
   }
   o << "</svg>\n";
   return o.str();

@@ -7,6 +7,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/core/atomic_write.hpp"
+#include "tjepa/core/json.hpp"
 
 #include "tjepa/layout/taxel_layout.hpp"
 #include "tjepa/layout/grid_pad.hpp"
@@ -39,6 +40,7 @@
 #include "tjepa/graph/block_grouping.hpp"
 #include "tjepa/graph/grow_grouping.hpp"
 #include "tjepa/graph/colors.hpp"
+#include "tjepa/graph/skin_from_coordinates.hpp"
 #include "tjepa/graph/spectral_positions.hpp"
 #include "tjepa/graph/svg.hpp"
 
@@ -86,6 +88,8 @@
 #include "tjepa/train/jepa_model.hpp"
 #include "tjepa/train/jepa_step.hpp"
 #include "tjepa/train/loss.hpp"
+#include "tjepa/train/config.hpp"
+#include "tjepa/train/trained_model.hpp"
 #include "tjepa/train/trainer.hpp"
 
 #include "tjepa/downstream/cross_entropy.hpp"

@@ -175,8 +175,8 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
   CHECK(count_files(t.path / "run") == 3);  // no temporaries left
 
   // The checkpoint restores the run's config, the model and the fitted preprocessing.
-  const LoadedModel m = load_model(ck);
-  CHECK(m.run.dim == 8);
+  const TrainedModel m = load_trained_model(ck);
+  CHECK(m.config.dim == 8);
   CHECK(m.step == 3);
   CHECK(m.model->num_tokens() == 192);
   CHECK(m.pre.ready());
@@ -184,7 +184,7 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
   // checkpoint carries the tracker (fitted rest readings and noise of the 192 taxels x 3 axes).
   REQUIRE(m.drift.has_value());
   CHECK(m.drift->taxels() == 192);
-  CHECK(m.drift->config().time_constant == m.run.drift_time_constant);
+  CHECK(m.drift->config().time_constant == m.config.drift_time_constant);
   CHECK(m.drift->noise()[2] == doctest::Approx(SimConfig{}.noise_std).epsilon(0.15));
 
   // Running again into the same directory needs --force.
@@ -271,10 +271,10 @@ TEST_CASE("pretrain: drift tracking off (drift_time_constant 0 / the default) le
   po.out = (t.path / "run").string();
   po.quiet = true;
   REQUIRE(run_pretrain(po, out) == 0);
-  const LoadedModel m = load_model(t.path / "run" / "checkpoint.safetensors");
+  const TrainedModel m = load_trained_model(t.path / "run" / "checkpoint.safetensors");
   CHECK_FALSE(m.drift.has_value());
-  CHECK(m.run.drift_time_constant == 0);
-  RunConfig bad;
+  CHECK(m.config.drift_time_constant == 0);
+  TrainConfig bad;
   bad.update({{"drift_time_constant", 0.5}}, "test");
   CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("drift_time_constant"), ConfigError);
 }
@@ -300,17 +300,17 @@ TEST_CASE("pretrain: a failing run leaves no files behind") {
   }
 }
 
-TEST_CASE("run config: masks and activity weighting from JSON / round trip and bad values named") {
-  RunConfig r;
+TEST_CASE("run config: masks from JSON / round trip and bad values named") {
+  TrainConfig r;
   r.update({{"local_targets", 0}, {"global_targets", 4}, {"target_ratio", {0.05, 0.08}},
-            {"context_ratio", {0.6, 0.7}}, {"activity_weight", 0.5}},
+            {"context_ratio", {0.6, 0.7}}},
            "test");
   const MaskConfig m = r.masks();
   CHECK(m.num_local == 0);
   CHECK(m.num_global == 4);
   CHECK(m.target_ratio == RatioRange{0.05, 0.08});
   CHECK(m.context_ratio == RatioRange{0.6, 0.7});
-  RunConfig back;
+  TrainConfig back;
   back.update(r.to_json(), "round trip");
   CHECK(back.to_json() == r.to_json());
   // The collator samples what the config says: 4 global targets of 5-8% of the 368 taxels.
@@ -322,7 +322,7 @@ TEST_CASE("run config: masks and activity weighting from JSON / round trip and b
     CHECK(ts.size <= 29);
   }
   auto error_of = [](const nlohmann::json& j) {
-    RunConfig c;
+    TrainConfig c;
     try {
       c.update(j, "cfg");
       c.validate();
@@ -333,51 +333,52 @@ TEST_CASE("run config: masks and activity weighting from JSON / round trip and b
   };
   CHECK(error_of({{"target_ratio", {0.3, 0.2}}}).find("target_ratio") != std::string::npos);
   CHECK(error_of({{"local_targets", 0}, {"global_targets", 0}}).find("at least one target") != std::string::npos);
-  CHECK(error_of({{"activity_weight", -1.0}}).find("activity_weight") != std::string::npos);
   CHECK(error_of({{"target_ratio", "wide"}}).find("'target_ratio'") != std::string::npos);
   CHECK(error_of({{"loss", "l1"}}).find("loss") != std::string::npos);
   CHECK(error_of({{"normalize_targets", 1.5}}).find("'normalize_targets'") != std::string::npos);
-  CHECK(error_of({{"beta2", 1.0}}).find("beta1/beta2") != std::string::npos);
+  CHECK(error_of({{"beta2", 1.0}}).find("beta2") != std::string::npos);
+  CHECK(error_of({{"tau", 0}}).find("tau") != std::string::npos);
+  CHECK(error_of({{"heads", 0}}).find("heads") != std::string::npos);
   CHECK(error_of({{"position_eigenvectors", -1}}).find("position_eigenvectors") != std::string::npos);
   CHECK(error_of({{"position_scale", 0.0}}).find("position_scale") != std::string::npos);
 }
 
 TEST_CASE("run config: graph positions / AdamW betas / standardized targets reach the model and the step") {
   const Skin skin = layouts::allegro_xela();
-  RunConfig r;
+  TrainConfig r;
   r.dim = 12;
   r.heads = 2;
   r.depth = 1;
   r.predictor_depth = 1;
   // The defaults are the reference's: a random table, β = (0.9, 0.999), plain targets.
-  const auto plain = r.new_model(skin.graph, 3, 4);
+  const auto plain = make_jepa_model(r, skin.graph, 3, 4);
   CHECK(r.adamw().beta1 == 0.9);
   CHECK(r.adamw().beta2 == 0.999);
   CHECK_FALSE(r.step().standardize_targets);
-  const auto same = r.new_model(skin.graph, 3, 4);
+  const auto same = make_jepa_model(r, skin.graph, 3, 4);
   CHECK(std::ranges::equal(plain->context.values(), same->context.values()));
   r.update({{"position_eigenvectors", 16}, {"position_scale", 0.5}, {"beta2", 0.99}, {"standardize_targets", true}},
            "test");
   r.validate();
   CHECK(r.adamw().beta2 == 0.99);
   CHECK(r.step().standardize_targets);
-  const auto graph = r.new_model(skin.graph, 3, 4);
+  const auto graph = make_jepa_model(r, skin.graph, 3, 4);
   const std::vector<double> rows = graph_positions(skin.graph, 12, 16, 0.5, 4);
   const auto e = graph->target.value_span(graph->encoder.pos_embed());
   REQUIRE(e.size() == rows.size());
   for (std::size_t i = 0; i < rows.size(); ++i) CHECK(e[i] == static_cast<float>(rows[i]));
   r.position_eigenvectors = 400;
-  CHECK_THROWS_WITH_AS(r.new_model(skin.graph, 3, 4), doctest::Contains("368 tokens"), ConfigError);
+  CHECK_THROWS_WITH_AS(make_jepa_model(r, skin.graph, 3, 4), doctest::Contains("368 tokens"), ConfigError);
 }
 
 TEST_CASE("run config: the objective's reference options reach the training step") {
-  RunConfig r;
+  TrainConfig r;
   const JepaStepConfig d = r.step();
   CHECK(d.loss == JepaLossKind::mse);  // the reference's defaults
   CHECK_FALSE(d.normalize_targets);
   CHECK_FALSE(d.predictor_pos_from_context);
   r.update({{"loss", "smooth_l1"}, {"normalize_targets", true}, {"predictor_pos_from_context", true},
-            {"drop_path", 0.1}, {"activity_weight", 2.0}},
+            {"drop_path", 0.1}},
            "test");
   r.validate();
   const JepaStepConfig c = r.step();
@@ -385,8 +386,7 @@ TEST_CASE("run config: the objective's reference options reach the training step
   CHECK(c.normalize_targets);
   CHECK(c.predictor_pos_from_context);
   CHECK(c.drop_path == 0.1);
-  CHECK(c.activity_weight == 2.0);
-  RunConfig back;
+  TrainConfig back;
   back.update(r.to_json(), "round trip");
   CHECK(back.to_json() == r.to_json());
 }

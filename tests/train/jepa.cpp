@@ -108,13 +108,11 @@ WindowSource blob_source(int frames, std::uint64_t seed) {
   return WindowSource(Recording(frames, N, m, std::move(v), "blobs"), WindowSpec{2});
 }
 
-MaskCollator blob_collator() {
+TaxelGraph blob_graph() {
   layouts::GridSkinOptions o;
   o.rows = o.cols = 6;
   o.group_rows = o.group_cols = 3;
-  MaskConfig mc;
-  mc.min_context_tokens = 6;
-  return MaskCollator(layouts::grid_skin(o).graph, mc);
+  return layouts::grid_skin(o).graph;
 }
 
 JepaConfig blob_config() {
@@ -126,15 +124,20 @@ JepaConfig blob_config() {
   return c;
 }
 
-// The reference schedule shortened: batches of 16, one warm-up epoch, a higher peak rate.
-TrainerConfig blob_trainer_config(int epochs, std::uint64_t seed) {
-  TrainerConfig tc;
-  tc.epochs = epochs;
-  tc.batch_size = 16;
-  tc.warmup_epochs = 1;
-  tc.ref_lr = 1e-3;
+// The reference's schedule shortened: batches of 16, `warmup` warm-up steps, a higher peak rate;
+// the model keys match blob_config().
+TrainConfig blob_trainer_config(std::int64_t steps, std::int64_t warmup, std::uint64_t seed) {
+  TrainConfig tc;
+  tc.tau = 2;
+  tc.dim = 16, tc.depth = 2, tc.heads = 2, tc.predictor_depth = 1;
+  tc.min_context_tokens = 6;
+  tc.steps = steps;
+  tc.warmup_steps = warmup;
+  tc.batch = 16;
+  tc.lr = 1e-3, tc.start_lr = 1e-5, tc.final_lr = 1e-6;
+  tc.ema_start = 0.994;
   tc.seed = seed;
-  tc.step.drop_path = 0.0;
+  tc.drop_path = 0.0;
   return tc;
 }
 
@@ -167,15 +170,14 @@ TEST_SUITE("train") {
       cfg.normalize_targets = true;
       cfg.predictor_pos_from_context = true;
     }
-    SUBCASE("activity-weighted MSE, lambda = 2") { cfg.activity_weight = 2.0; }
     SUBCASE("MSE against targets standardized per token over the batch") { cfg.standardize_targets = true; }
-    JepaWorkspace<double> w;
+    JepaStep<double> step(model, cfg);
     const std::uint64_t noise = 77;
-    auto loss = [&] { return jepa_loss(model, x.data(), 2, masks, w, cfg, noise, false).loss; };
+    auto loss = [&] { return step.forward(x.data(), 2, masks, noise).loss; };
     const auto target_before = model.target;
-    model.context.zero_grad();
-    model.predictor_params.zero_grad();
-    const double l = jepa_loss(model, x.data(), 2, masks, w, cfg, noise, true).loss;
+    step.zero_grad();
+    const double l = step.forward(x.data(), 2, masks, noise).loss;
+    step.backward();
     CHECK(l == doctest::Approx(loss()).epsilon(1e-13));
     CHECK(l > 0);
     test::check_param_gradients(model.context, loss);
@@ -247,54 +249,34 @@ TEST_SUITE("train") {
     // In the loss: a position-only encoder (the same target embedding at a token for every
     // sample) leaves nothing to predict but eps-scaled zeros, and B = 1 is refused.
     auto model = random_model(4);
-    JepaWorkspace<double> w;
     JepaStepConfig cfg;
     cfg.drop_path = 0.0;
     cfg.standardize_targets = true;
+    JepaStep<double> step(model, cfg);
+    const auto& w = step.workspace();
     const auto x2 = tiny_input(5);
     std::vector<double> same(x2.begin(), x2.begin() + static_cast<std::ptrdiff_t>(x2.size() / 2));
     same.insert(same.end(), same.begin(), same.end());
-    jepa_loss(model, same.data(), 2, tiny_masks(), w, cfg, 1, false);
+    step.forward(same.data(), 2, tiny_masks(), 1);
     for (std::size_t i = 0; i < 2 * std::size_t(model.num_tokens()) * model.dim(); ++i) CHECK(std::abs(w.h[i]) < 1e-6);
     MaskBatch one = tiny_masks();  // sample 0's context and targets alone
     one.B = 1;
     one.context.resize(static_cast<std::size_t>(one.K));
     for (TargetSet& t : one.targets) t.indices.resize(static_cast<std::size_t>(t.size));
-    CHECK_THROWS_WITH_AS(jepa_loss(model, x2.data(), 1, one, w, cfg, 1, false), doctest::Contains("at least 2 samples"),
+    CHECK_THROWS_WITH_AS(step.forward(x2.data(), 1, one, 1), doctest::Contains("at least 2 samples"),
                          ConfigError);
-  }
-
-  TEST_CASE("activity weighting: equal activity is the plain mean / contact tokens weigh more") {
-    auto model = random_model(31);
-    JepaWorkspace<double> w;
-    JepaStepConfig plain, weighted;
-    plain.drop_path = weighted.drop_path = 0.0;
-    weighted.activity_weight = 3.0;
-    // Every token's input row with the same mean square: all weights equal.
-    std::vector<double> x(2 * 9 * 4);
-    for (std::size_t i = 0; i < x.size(); ++i) x[i] = (i % 2 ? 0.7 : -0.7);
-    const double l0 = jepa_loss(model, x.data(), 2, tiny_masks(), w, plain, 1, false).loss;
-    CHECK(jepa_loss(model, x.data(), 2, tiny_masks(), w, weighted, 1, false).loss == doctest::Approx(l0).epsilon(1e-12));
-    // Sample 0's token 3 (in two targets) in contact, the rest idle: its weight is 1 + λ·a/ā.
-    std::fill(x.begin(), x.end(), 0.0);
-    for (int k = 0; k < 4; ++k) x[3 * 4 + k] = 2.0;
-    std::vector<double> tw;
-    detail::activity_weights(x.data(), 18, 4, 3.0, tw);
-    CHECK(tw[3] == doctest::Approx(1 + 3.0 * 18));
-    CHECK(tw[0] == 1.0);
-    CHECK(tw[9 + 3] == 1.0);
   }
 
   TEST_CASE("two backward passes accumulate twice the gradient") {
     auto model = random_model(11, 1);
     const auto x = tiny_input(14);
-    JepaWorkspace<double> w;
-    JepaStepConfig cfg;
-    model.context.zero_grad();
-    model.predictor_params.zero_grad();
-    (void)jepa_loss(model, x.data(), 2, tiny_masks(), w, cfg, 5, true);
+    JepaStep<double> step(model, JepaStepConfig{});
+    step.zero_grad();
+    step.forward(x.data(), 2, tiny_masks(), 5);
+    step.backward();
     const auto once = model.context;
-    (void)jepa_loss(model, x.data(), 2, tiny_masks(), w, cfg, 5, true);
+    step.forward(x.data(), 2, tiny_masks(), 5);
+    step.backward();
     for (std::size_t i = 0; i < once.grads().size(); ++i)
       CHECK(model.context.grads()[i] == doctest::Approx(2 * once.grads()[i]).epsilon(1e-12));
   }
@@ -305,8 +287,8 @@ TEST_SUITE("train") {
     const MaskBatch masks = tiny_masks();
     JepaStepConfig cfg;
     cfg.drop_path = 0.0;
-    JepaWorkspace<double> w;
-    const auto r = jepa_loss(model, x.data(), 2, masks, w, cfg, 1, false);
+    JepaStep<double> step(model, cfg);
+    const auto r = step.forward(x.data(), 2, masks, 1);
     // Each target on its own, the way the reference's formula reads.
     const int B = 2, N = 9, d = 8;
     Workspace<double> ws;
@@ -369,11 +351,10 @@ TEST_SUITE("train") {
     const auto x = tiny_input(33);
     AdamW<double> opt(model.trainable());
     const auto schedule = TrainingSchedule::reference(10, 4, 2);
-    JepaWorkspace<double> w;
-    JepaStepConfig cfg;
+    JepaStep<double> step(model, JepaStepConfig{});
     const auto context0 = model.context;
     const auto target0 = model.target;
-    const auto st = jepa_train_step(model, opt, schedule, 5, x.data(), 2, tiny_masks(), w, cfg, 9);
+    const auto st = step.train(opt, schedule, 5, x.data(), 2, tiny_masks(), 9);
     CHECK(st.step == 5);
     CHECK(st.lr == doctest::Approx(schedule.lr(6)).epsilon(1e-15));
     CHECK(st.weight_decay == doctest::Approx(schedule.wd(6)).epsilon(1e-15));
@@ -398,9 +379,9 @@ TEST_SUITE("train") {
     x[7] = std::numeric_limits<double>::quiet_NaN();
     AdamW<double> opt(model.trainable());
     const auto schedule = TrainingSchedule::reference(10, 4, 2);
-    JepaWorkspace<double> w;
+    JepaStep<double> step(model, JepaStepConfig{});
     const auto before = model;
-    CHECK_THROWS_WITH_AS(jepa_train_step(model, opt, schedule, 0, x.data(), 2, tiny_masks(), w, JepaStepConfig{}, 1),
+    CHECK_THROWS_WITH_AS(step.train(opt, schedule, 0, x.data(), 2, tiny_masks(), 1),
                          doctest::Contains("JEPA step 0: the loss is nan"), NumericError);
     CHECK(opt.steps() == 0);
     for (auto [a, b] : {std::pair{&model.context, &before.context}, std::pair{&model.target, &before.target},
@@ -409,7 +390,10 @@ TEST_SUITE("train") {
     // Masks that do not fit the model are rejected.
     MaskBatch bad = tiny_masks();
     bad.context[3] = 9;
-    CHECK_THROWS_AS(jepa_loss(model, x.data(), 2, bad, w, JepaStepConfig{}, 1), ShapeError);
+    CHECK_THROWS_AS(step.forward(x.data(), 2, bad, 1), ShapeError);
+    // backward needs a forward pass to differentiate.
+    JepaStep<double> fresh(model, JepaStepConfig{});
+    CHECK_THROWS_WITH_AS(fresh.backward(), doctest::Contains("no forward pass"), ConfigError);
   }
 
   TEST_CASE("windows reach the tokenizer axis-major as the reference's patch embedding reads them") {
@@ -477,27 +461,31 @@ TEST_SUITE("train") {
 
   TEST_CASE("save then load then continue: the loss curve is bitwise that of an uninterrupted run") {
     const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
-    const auto collator = blob_collator();
-    TrainerConfig tc = blob_trainer_config(3, 5);
-    tc.step.drop_path = 0.1;  // exercises the checkpointed noise generator
+    const auto graph = blob_graph();
+    TrainConfig tc = blob_trainer_config(18, 6, 5);
+    tc.drop_path = 0.1;  // exercises the per-step noise seeds
     TempPath ckpt("resume");
-    tc.checkpoint = ckpt.path;
-    tc.checkpoint_every = 4;  // steps 4 and 8 land mid-epoch
+    auto arm = [&](Trainer<float>& t) {
+      t.checkpoint = ckpt.path;
+      t.checkpoint_every = 4;  // steps 4 and 8 land mid-epoch
+    };
 
     JepaModel<float> straight_model(blob_config(), 7);
-    Trainer<float> straight(straight_model, source, collator, tc);
+    Trainer<float> straight(straight_model, source, graph, tc);
     CHECK(straight.total_steps() == 18);
     std::vector<double> straight_loss;
     for (const auto& st : straight.run()) straight_loss.push_back(st.loss);
 
     JepaModel<float> first_model(blob_config(), 7);
-    Trainer<float> first(first_model, source, collator, tc);
+    Trainer<float> first(first_model, source, graph, tc);
+    arm(first);
     const auto head = first.run(10);  // checkpoints after steps 4 and 8
     REQUIRE(head.size() == 10);
     for (int s = 0; s < 10; ++s) CHECK(head[s].loss == straight_loss[s]);
 
     JepaModel<float> resumed_model(blob_config(), 12345);  // a different init: everything must come from the file
-    Trainer<float> resumed(resumed_model, source, collator, tc);
+    Trainer<float> resumed(resumed_model, source, graph, tc);
+    arm(resumed);
     resumed.resume(ckpt.path);
     CHECK(resumed.step() == 8);
     // The per-taxel tokenizer weight is stored as the reference's Conv1d weight [d, m, τ].
@@ -515,22 +503,20 @@ TEST_SUITE("train") {
       CHECK(std::memcmp(a->values().data(), b->values().data(), a->values().size_bytes()) == 0);
 
     // A run with another shape or schedule refuses the checkpoint.
-    TrainerConfig other = tc;
-    other.epochs = 4;
+    TrainConfig other = tc;
+    other.steps = 24;
     JepaModel<float> m2(blob_config(), 1);
-    Trainer<float> t2(m2, source, collator, other);
-    CHECK_THROWS_WITH_AS(t2.resume(ckpt.path), doctest::Contains("was written with trainer"), ConfigError);
+    Trainer<float> t2(m2, source, graph, other);
+    CHECK_THROWS_WITH_AS(t2.resume(ckpt.path), doctest::Contains("was written with train.steps = 18"), ConfigError);
   }
 
   TEST_CASE("a NaN stops the trainer with NumericError and leaves the last checkpoint intact") {
     const auto source = blob_source(100, 2);
-    const auto collator = blob_collator();
-    TrainerConfig tc = blob_trainer_config(2, 0);
-    TempPath ckpt("nan");
-    tc.checkpoint = ckpt.path;
-    tc.checkpoint_every = 2;
     JepaModel<float> model(blob_config(), 3);
-    Trainer<float> trainer(model, source, collator, tc);
+    Trainer<float> trainer(model, source, blob_graph(), blob_trainer_config(6, 3, 0));
+    TempPath ckpt("nan");
+    trainer.checkpoint = ckpt.path;
+    trainer.checkpoint_every = 2;
     (void)trainer.run(2);
     REQUIRE(std::filesystem::exists(ckpt.path));
     const auto good = load_safetensors(ckpt.path);
@@ -544,11 +530,9 @@ TEST_SUITE("train") {
 
   TEST_CASE("on a small synthetic set the loss falls and the target embeddings do not collapse") {
     const auto source = blob_source(1200, 3);  // 600 windows: 37 batches of 16 per epoch
-    const auto collator = blob_collator();
-    TrainerConfig tc = blob_trainer_config(8, 11);
-    tc.log_every = 100;
     JepaModel<float> model(blob_config(), 13);
-    Trainer<float> trainer(model, source, collator, tc);
+    Trainer<float> trainer(model, source, blob_graph(), blob_trainer_config(8 * 37, 37, 11));
+    trainer.log_every = 100;
     std::ostringstream log;
     trainer.log = &log;
     const auto stats = trainer.run();

@@ -55,8 +55,7 @@ struct SvgOptions {
   double radius = 0.0;             // taxel radius in mm; 0: 0.4 x the shortest edge
 };
 
-namespace detail {
-
+// s with &, <, >, " and ' escaped for XML text and attributes.
 inline std::string xml_escape(std::string_view s) {
   std::string out;
   for (char c : s) {
@@ -70,6 +69,9 @@ inline std::string xml_escape(std::string_view s) {
   }
   return out;
 }
+
+namespace detail {
+
 
 inline std::string fmt(double v) {
   char buf[32];
@@ -194,7 +196,7 @@ inline std::string svg_string(const TaxelLayout& l, const TaxelGraph* graph, con
          "\" font-family=\"sans-serif\">\n";
   out += "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
   if (!o.title.empty())
-    out += "<text x=\"" + detail::fmt(margin) + "\" y=\"20\" font-size=\"16\">" + detail::xml_escape(o.title) + "</text>\n";
+    out += "<text x=\"" + detail::fmt(margin) + "\" y=\"20\" font-size=\"16\">" + xml_escape(o.title) + "</text>\n";
   if (graph && o.draw_edges) {
     out += "<g class=\"edges\" stroke-linecap=\"round\">\n";
     for (const Edge& e : graph->edges()) {
@@ -211,7 +213,7 @@ inline std::string svg_string(const TaxelLayout& l, const TaxelGraph* graph, con
   for (int i = 0; i < n; ++i)
     out += "<circle cx=\"" + X(pos[2 * i]) + "\" cy=\"" + Y(pos[2 * i + 1]) + "\" r=\"" + rad + "\" fill=\"" +
            fill[i] + "\"><title>taxel " + std::to_string(l.ids[i]) + " (" +
-           detail::xml_escape(l.group_names[l.group[i]]) + ")</title></circle>\n";
+           xml_escape(l.group_names[l.group[i]]) + ")</title></circle>\n";
   out += "</g>\n";
   for (std::size_t h = 0; h < o.highlights.size(); ++h) {
     const auto& hl = o.highlights[h];
@@ -231,7 +233,7 @@ inline std::string svg_string(const TaxelLayout& l, const TaxelGraph* graph, con
       cx /= static_cast<double>(t.size());
       cy /= static_cast<double>(t.size());
       out += "<text x=\"" + X(cx) + "\" y=\"" + Y(cy) + "\" stroke=\"white\" stroke-width=\"3\" paint-order=\"stroke\">" +
-             detail::xml_escape(l.group_names[g]) + "</text>\n";
+             xml_escape(l.group_names[g]) + "</text>\n";
     }
     out += "</g>\n";
   }
@@ -242,14 +244,14 @@ inline std::string svg_string(const TaxelLayout& l, const TaxelGraph* graph, con
     for (const auto& [colour, label] : legend) {
       out += "<circle cx=\"" + detail::fmt(lx + 6) + "\" cy=\"" + detail::fmt(ly) + "\" r=\"6\" fill=\"" + colour +
              "\" stroke=\"#333\" stroke-width=\"0.5\"/><text x=\"" + detail::fmt(lx + 18) + "\" y=\"" +
-             detail::fmt(ly + 4) + "\">" + detail::xml_escape(label) + "</text>\n";
+             detail::fmt(ly + 4) + "\">" + xml_escape(label) + "</text>\n";
       ly += 20;
     }
     for (const auto& hl : o.highlights) {
       if (hl.label.empty()) continue;
       out += "<circle cx=\"" + detail::fmt(lx + 6) + "\" cy=\"" + detail::fmt(ly) + "\" r=\"6\" fill=\"none\" stroke=\"" +
              hl.color + "\" stroke-width=\"2\"/><text x=\"" + detail::fmt(lx + 18) + "\" y=\"" + detail::fmt(ly + 4) +
-             "\">" + detail::xml_escape(hl.label) + "</text>\n";
+             "\">" + xml_escape(hl.label) + "</text>\n";
       ly += 20;
     }
     out += "</g>\n";

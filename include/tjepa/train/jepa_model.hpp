@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/json.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/model/encoder.hpp"
 #include "tjepa/model/init.hpp"
@@ -35,11 +36,9 @@ struct JepaConfig {
   EncoderConfig encoder;        // encoder.num_tokens = N
   PredictorConfig predictor;    // in_dim = encoder.dim; dim = encoder.dim (position rows are shared)
   // Std of the tokenizer's initial bias (the reference: 0). With a zero bias, LayerNorm(W·x) does
-  // not see the scale of x, so an idle taxel's noise becomes a token as loud as a contact, and on
-  // sparse contact data little gradient breaks that symmetry (measured on the simulated Allegro
-  // hand: bias RMS 0.004 after 300 steps). A bias well above W·noise (W ~ N(0, 0.02²)) maps idle
-  // taxels to one "no contact" token and lets the token's direction carry the contact's
-  // amplitude. Init only: checkpoints are unaffected.
+  // not see the scale of x, so an idle taxel's noise becomes a token as loud as a contact; a bias
+  // well above W·noise maps idle taxels to one "no contact" token and lets a token's direction
+  // carry the contact's amplitude. Init only: checkpoints are unaffected.
   double tokenizer_bias_std = 0.0;
 
   // The reference (REFERENCE §4): ViT-Tiny encoder, 4-block predictor of width 192.
@@ -52,6 +51,16 @@ struct JepaConfig {
   }
 
   void validate() const {
+    auto check_width = [](const char* part, int dim, int depth, int heads, double mlp_ratio) {
+      require<ConfigError>(dim > 0 && depth > 0 && heads > 0 && dim % heads == 0 && mlp_ratio > 0 &&
+                               std::isfinite(mlp_ratio),
+                           "JepaConfig: ", part, " dim = ", dim, ", depth = ", depth, ", heads = ", heads,
+                           ", mlp_ratio = ", mlp_ratio, ", expected positive, with heads dividing dim");
+    };
+    require<ConfigError>(encoder.num_tokens > 0, "JepaConfig: encoder.num_tokens = ", encoder.num_tokens,
+                         ", expected > 0");
+    check_width("encoder", encoder.dim, encoder.depth, encoder.heads, encoder.mlp_ratio);
+    check_width("predictor", predictor.dim, predictor.depth, predictor.heads, predictor.mlp_ratio);
     require<ConfigError>(in_dim > 0, "JepaConfig: in_dim = ", in_dim, ", expected > 0");
     require<ConfigError>(tokenizer_bias_std >= 0 && std::isfinite(tokenizer_bias_std),
                          "JepaConfig: tokenizer_bias_std = ", tokenizer_bias_std, ", expected >= 0");
@@ -65,6 +74,39 @@ struct JepaConfig {
     require<ConfigError>(predictor.dim == encoder.dim, "JepaConfig: predictor.dim = ", predictor.dim,
                          ", expected encoder.dim = ", encoder.dim,
                          " (the predictor adds the encoder's position rows in its own width)");
+  }
+
+  // The inverse of to_json; a missing key or a wrong type throws E naming `where` and the key,
+  // and the result is validated.
+  template <class E = ConfigError>
+  static JepaConfig from_json(const nlohmann::json& j, const std::string& where) {
+    JepaConfig c;
+    json_read<E>(j, "in_dim", c.in_dim, where);
+    json_read<E>(j, "axes", c.axes, where);
+    json_read<E>(j, "group_size", c.group_size, where);
+    json_read<E>(j, "tokenizer_bias_std", c.tokenizer_bias_std, where);
+    const auto e = json_get<nlohmann::json, E>(j, "encoder", where), p = json_get<nlohmann::json, E>(j, "predictor", where);
+    const std::string we = where + ": encoder", wp = where + ": predictor";
+    json_read<E>(e, "num_tokens", c.encoder.num_tokens, we);
+    json_read<E>(e, "dim", c.encoder.dim, we);
+    json_read<E>(e, "depth", c.encoder.depth, we);
+    json_read<E>(e, "heads", c.encoder.heads, we);
+    json_read<E>(e, "mlp_ratio", c.encoder.mlp_ratio, we);
+    json_read<E>(e, "bias", c.encoder.bias, we);
+    json_read<E>(e, "eps", c.encoder.eps, we);
+    json_read<E>(p, "in_dim", c.predictor.in_dim, wp);
+    json_read<E>(p, "dim", c.predictor.dim, wp);
+    json_read<E>(p, "depth", c.predictor.depth, wp);
+    json_read<E>(p, "heads", c.predictor.heads, wp);
+    json_read<E>(p, "mlp_ratio", c.predictor.mlp_ratio, wp);
+    json_read<E>(p, "bias", c.predictor.bias, wp);
+    json_read<E>(p, "eps", c.predictor.eps, wp);
+    try {
+      c.validate();
+    } catch (const Error& err) {
+      fail<E>(where, ": ", err.what());
+    }
+    return c;
   }
 
   nlohmann::json to_json() const {

@@ -11,6 +11,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <functional>
+#include <span>
 
 #include "tjepa/model/detail/parallel.hpp"
 #include "tjepa/optim/detail/deterministic_sum.hpp"
@@ -100,6 +102,29 @@ double regression_loss(const T* pred, const T* target, T* dpred, std::size_t n, 
     }
   }
   return sum * inv_n;
+}
+
+// The loss seam of JepaStep: the regression loss of one target, given its predictions and targets
+// [rows, d] (row-major), returns the loss and writes ∂loss/∂pred into dpred (overwritten). The
+// step averages the targets' losses (and scales their gradients) itself.
+template <class T>
+using JepaLoss = std::function<double(std::span<const T> pred, std::span<const T> target, std::size_t rows, int d,
+                                      std::span<T> dpred)>;
+
+// The built-in losses as JepaLoss callables: mean over rows·d of ℓ(pred − target).
+template <class T>
+JepaLoss<T> jepa_loss_of(JepaLossKind kind) {
+  return [kind](std::span<const T> pred, std::span<const T> target, std::size_t, int, std::span<T> dpred) {
+    return regression_loss(pred.data(), target.data(), dpred.data(), pred.size(), kind);
+  };
+}
+template <class T>
+JepaLoss<T> mse_loss() {
+  return jepa_loss_of<T>(JepaLossKind::mse);
+}
+template <class T>
+JepaLoss<T> smooth_l1_loss() {
+  return jepa_loss_of<T>(JepaLossKind::smooth_l1);
 }
 
 }  // namespace tjepa
