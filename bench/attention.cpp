@@ -8,10 +8,6 @@
 // Batch = a loop over samples, parallel over samples with OpenMP when available (one workspace per
 // thread).
 // g++ 12 false positives inside its AVX-512 intrinsics as inlined into Eigen's GEMM (baseline).
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 
 #include <benchmark/benchmark.h>
 

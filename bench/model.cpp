@@ -8,11 +8,6 @@
 // convention); backward GEMMs 2× forward. LayerNorm, GELU and adds are not counted.
 // Reference points (PyTorch, REFERENCE issue 8): encoder forward L = 368, batch 1: 62 ms;
 // training step batch 8, L = 368: 1368 ms.
-#if defined(__GNUC__) && !defined(__clang__)
-// g++ 12's AVX-512 intrinsics: a false (maybe-)uninitialized once Eigen is inlined (GCC bug 105593).
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <benchmark/benchmark.h>
 
 #include <vector>

@@ -6,10 +6,6 @@
 // 24 d² (qkv 6d², proj 2d², fc1 8d², fc2 8d²) + 4 L d (QKᵀ and PV) forward; forward + backward
 // = 3× forward. Target encoder: forward on N tokens; context encoder: 3× on K tokens; predictor:
 // 3× on K + t tokens for each of the 4 targets. Tokenizer, norms and the optimizer are not counted.
-// g++ 12 reports a false maybe-uninitialized inside its AVX-512 intrinsics (GCC bug 105593).
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
 #include <benchmark/benchmark.h>
 
 #include <cstdint>

@@ -3,10 +3,6 @@
 // its team each time), so this program is single-threaded by construction.
 // GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
 // false positive in a system header that -Werror would otherwise turn into an error.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #undef _OPENMP
 
 // Streaming inference: the frozen encoder (and a force/indenter probe on top) called at

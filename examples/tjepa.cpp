@@ -1,12 +1,6 @@
 // The `tjepa` command: layout / pretrain / probe / embed / demo. `tjepa demo` is the README's
 // main job. The subcommands live in cli/commands.hpp; this file only parses the command line.
 // Any error is one line on stderr ("tjepa: error: ...") and a non-zero exit.
-// GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
-// false positive in a system header that -Werror would otherwise turn into an error.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <CLI/CLI.hpp>
 
 #include <cstdio>

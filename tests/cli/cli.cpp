@@ -3,10 +3,6 @@
 // command leaves none behind), the numbers it reports, and one-line errors for bad input.
 // GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
 // false positive in a system header that -Werror would otherwise turn into an error.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <doctest/doctest.h>
 
 #include "../../examples/cli/commands.hpp"

@@ -3,10 +3,6 @@
 // probe training that learns a task whose answer is in the features (frozen and end to end).
 // GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
 // false positive in a system header that -Werror would otherwise turn into an error.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <doctest/doctest.h>
 
 #include <tjepa/downstream/embed.hpp>

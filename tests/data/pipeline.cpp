@@ -1,12 +1,6 @@
 // The simulated skin's physics and labels, the drift tracker (data/drift_tracker.hpp), the
 // preprocessor, windowing, batches and the grouped gather, and the grouped gather feeding the
 // grouped tokenizer.
-// g++ 12 reports a false (maybe-)uninitialized inside its AVX-512 intrinsics once Eigen's double
-// kernels are inlined (GCC bug 105593); see tests/model/modules.cpp.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <doctest/doctest.h>
 
 #include <tjepa/data/drift_tracker.hpp>

@@ -1,9 +1,3 @@
-// g++ 12 reports a false (maybe-)uninitialized inside its AVX-512 intrinsics once Eigen's double
-// kernels are inlined (GCC bug 105593; laplacian_eigenmaps); see tests/model/modules.cpp.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <doctest/doctest.h>
 
 #include <tjepa/tjepa.hpp>

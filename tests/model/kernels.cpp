@@ -1,12 +1,6 @@
 // nn suite, kernels: each fast kernel against its scalar reference on sizes that are not
 // multiples of the SIMD width, central-difference gradient checks in double, and accumulation
 // (two backward passes give exactly twice the gradient).
-#if defined(__GNUC__) && !defined(__clang__)
-// g++ 12's AVX-512 intrinsics: a false (maybe-)uninitialized once Eigen's double kernels are
-// inlined (GCC bug 105593); the state that counts is the one where the header is first read.
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <doctest/doctest.h>
 
 #include <tjepa/tjepa.hpp>

@@ -1,11 +1,6 @@
 // nn suite, modules: gradient checks of every module and of a 2-block encoder and predictor end
 // to end, accumulation, and the allocation-free inference path.
-// g++ 12 reports a false (maybe-)uninitialized inside its own AVX-512 intrinsics once Eigen's
-// double kernels are inlined (GCC bug 105593). The state that counts is the one in force where
-// the intrinsics header is first read, so the pragma comes before every include.
 #if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
 // The replaced operator delete calls free on what the replaced operator new got from malloc.
 #pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 #endif

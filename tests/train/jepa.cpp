@@ -1,12 +1,6 @@
 // The JEPA step end to end on a tiny model in double: the full loss against central differences
 // for every trainable parameter, tiling against one predictor pass per target, the optimizer step
 // with EMA, and the NaN stop.
-// g++ 12 reports a false (maybe-)uninitialized inside its AVX-512 intrinsics once Eigen's double
-// kernels are inlined (GCC bug 105593); see tests/model/modules.cpp.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <doctest/doctest.h>
 
 #include <tjepa/tjepa.hpp>

@@ -4,7 +4,7 @@
 #include <cstddef>
 #include <vector>
 
-#include <xsimd/xsimd.hpp>
+#include "tjepa/core/detail/vendor.hpp"
 
 namespace tjepa {
 

@@ -1,7 +1,7 @@
 #pragma once
 // Eigen aliases. tjepa stores every tensor row-major ([rows, cols] with cols contiguous), like
 // PyTorch, so a [B, L, d] buffer is a [B*L, d] matrix without copies.
-#include <Eigen/Core>
+#include "tjepa/core/detail/vendor.hpp"
 
 namespace tjepa {
 

@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "tjepa/core/detail/vendor.hpp"
 #include <Eigen/Eigenvalues>
 
 #include "tjepa/core/error.hpp"

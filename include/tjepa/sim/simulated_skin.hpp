@@ -51,6 +51,7 @@
 #include <string>
 #include <vector>
 
+#include "tjepa/core/detail/vendor.hpp"
 #include <Eigen/Eigenvalues>
 
 #include "tjepa/core/error.hpp"

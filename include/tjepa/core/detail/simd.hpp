@@ -5,7 +5,7 @@
 // vectors, then a scalar tail, so any length works.
 #include <cstddef>
 
-#include <xsimd/xsimd.hpp>
+#include "tjepa/core/detail/vendor.hpp"
 
 namespace tjepa::detail {
 

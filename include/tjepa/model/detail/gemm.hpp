@@ -9,7 +9,7 @@
 #include <algorithm>
 #include <cstddef>
 
-#include <Eigen/Core>
+#include "tjepa/core/detail/vendor.hpp"
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/model/detail/parallel.hpp"

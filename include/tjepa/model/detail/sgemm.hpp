@@ -16,7 +16,7 @@
 #include <cstddef>
 #include <utility>
 
-#include <xsimd/xsimd.hpp>
+#include "tjepa/core/detail/vendor.hpp"
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/model/detail/parallel.hpp"

@@ -9,7 +9,7 @@
 #include <limits>
 #include <type_traits>
 
-#include <xsimd/xsimd.hpp>
+#include "tjepa/core/detail/vendor.hpp"
 
 #include "tjepa/core/detail/simd.hpp"
 
