@@ -73,6 +73,8 @@ int main(int argc, char** argv) {
   pretrain->add_option("--out", po.out, "output directory")->capture_default_str();
   pretrain->add_flag("--force", po.force, "overwrite an existing checkpoint");
   pretrain->add_flag("--quiet", po.quiet, "no progress line");
+  pretrain->add_option("--resume", po.resume, "continue the run of this checkpoint (same data and config)");
+  pretrain->add_option("--stop-after", po.stop_after, "stop and save after this many steps of the schedule");
 
   ProbeOptions pb;
   auto* probe = app.add_subcommand("probe", "Train and evaluate an attentive probe (force, indenter) on a frozen checkpoint");

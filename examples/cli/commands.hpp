@@ -115,10 +115,14 @@ struct PretrainOptions {
   std::string out = "runs/pretrain";
   bool force = false;
   bool quiet = false;
+  std::string resume;                 // continue the run of this checkpoint (its config, then overrides)
+  std::int64_t stop_after = -1;       // stop (and save) after this many steps of the schedule (< 0: at its end)
 };
 
 inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
-  TrainConfig run = o.config.empty() ? TrainConfig{} : TrainConfig::from_file(o.config);
+  TrainConfig run = !o.config.empty()   ? TrainConfig::from_file(o.config)
+                    : !o.resume.empty() ? load_trained_model(o.resume).config
+                                        : TrainConfig{};
   run.update(o.overrides, "command line");
   run.validate();
   const Skin skin = load_skin(run.layout);
@@ -155,10 +159,13 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
   JepaModel<float>& model = *owned;
   Trainer<float> trainer(model, src, skin.graph, run);
   trainer.extras = data_state(pre, drift ? &*drift : nullptr);
+  if (!o.resume.empty()) trainer.resume(o.resume);
+  require<ConfigError>(o.stop_after < 0 || o.stop_after > trainer.step(), "--stop-after ", o.stop_after,
+                       ", expected a step after the run's current ", trainer.step());
   out << "pre-training on " << src.size() << " windows (" << skin.size() << " taxels, tau " << run.tau << "), "
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
       << run.steps << " steps of " << run.batch << "\n";
-  const PretrainOutcome r = pretrain(trainer, o.quiet);
+  const PretrainOutcome r = pretrain(trainer, o.quiet, o.stop_after);
   write_pretrain_outputs(dir, trainer, r, files);
   files.commit();
   out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "

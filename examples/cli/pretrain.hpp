@@ -1,6 +1,7 @@
 #pragma once
 // Pre-training for `tjepa pretrain` and `tjepa demo`: the library's Trainer, with a progress line
 // and one log row per step. This file only prints; the Trainer does the work.
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -24,8 +25,8 @@ inline const std::vector<std::string>& pretrain_log_columns() {
   return c;
 }
 
-// Runs the trainer to the end of its schedule, printing progress unless quiet.
-inline PretrainOutcome pretrain(Trainer<float>& trainer, bool quiet) {
+// Runs the trainer until step stop_after (< 0: the end of its schedule), printing progress unless quiet.
+inline PretrainOutcome pretrain(Trainer<float>& trainer, bool quiet, std::int64_t stop_after = -1) {
   const int B = trainer.config().batch;
   PretrainOutcome out;
   out.log.header = pretrain_log_columns();
@@ -41,7 +42,7 @@ inline PretrainOutcome pretrain(Trainer<float>& trainer, bool quiet) {
                   st.target_sample_std);
     progress.update(st.step + 1, (st.step + 1 - first) * B, extra);
   };
-  trainer.run();
+  trainer.run(stop_after < 0 ? -1 : std::max<std::int64_t>(0, stop_after - first));
   trainer.on_step = nullptr;
   out.seconds = progress.elapsed();
   out.windows_per_second =

@@ -258,6 +258,129 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
   }
 }
 
+TEST_CASE("resume across programs: tjepa pretrain to a user Trainer and back give the uninterrupted loss curve bitwise") {
+  TempDir t;
+  std::ostringstream out;
+  PretrainOptions po;
+  po.overrides = tiny_run("grid");
+  po.overrides["steps"] = 6;
+  po.overrides["drop_path"] = 0.1;  // the per-step noise seeds must match too
+  po.simulate_frames = 300;
+  po.quiet = true;
+  auto losses = [](const fs::path& log) {  // the loss column of a log.csv, as written
+    std::vector<std::string> v;
+    std::istringstream in(read_text(log));
+    std::string line;
+    std::getline(in, line);
+    while (std::getline(in, line)) v.push_back(line.substr(line.find(',') + 1, line.find(',', line.find(',') + 1) - line.find(',') - 1));
+    return v;
+  };
+  po.out = (t.path / "straight").string();
+  REQUIRE(run_pretrain(po, out) == 0);
+  const auto straight = losses(t.path / "straight" / "log.csv");
+  REQUIRE(straight.size() == 6);
+
+  // The user's program: the same simulated sensor, preprocessing and config, through the library only.
+  TrainConfig cfg = TrainConfig::from_json(po.overrides, "test");
+  const Skin skin = layouts::grid_skin();
+  SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, cfg.seed);
+  const Recording baseline = sim.record_baseline(300);
+  const Recording rec = sim.record(300, 1).recording;
+  Preprocessor pre(PreprocessConfig::magnetic());
+  pre.fit_baseline(baseline);
+  pre.fit(std::span<const Recording>(&rec, 1));
+  const WindowSource src(rec, WindowSpec{cfg.tau}, {}, pre);
+  auto to_text = [](double v) {  // as CsvTable writes a number
+    CsvTable c;
+    c.header = {"v"};
+    c.rows = {{v}};
+    const std::string s = c.str();
+    return s.substr(2, s.size() - 3);
+  };
+
+  SUBCASE("pretrain --stop-after 3, then a user Trainer resumes") {
+    po.out = (t.path / "half").string();
+    po.stop_after = 3;
+    REQUIRE(run_pretrain(po, out) == 0);
+    auto model = make_jepa_model(cfg, skin.graph, 3, 12345);  // everything must come from the file
+    Trainer<float> trainer(*model, src, skin.graph, cfg);
+    trainer.resume(t.path / "half" / "checkpoint.safetensors");
+    CHECK(trainer.step() == 3);
+    const auto tail = trainer.run();
+    REQUIRE(tail.size() == 3);
+    for (int s = 0; s < 3; ++s) CHECK(to_text(tail[s].loss) == straight[3 + s]);
+    // Bitwise: the parameters equal those of the uninterrupted run's final checkpoint.
+    const TrainedModel done = load_trained_model(t.path / "straight" / "checkpoint.safetensors");
+    for (auto [a, b] : {std::pair{&model->context, &done.model->context}, std::pair{&model->target, &done.model->target},
+                        std::pair{&model->predictor_params, &done.model->predictor_params}})
+      CHECK(std::equal(a->values().begin(), a->values().end(), b->values().begin()));
+  }
+  SUBCASE("a user Trainer stops at 3, then pretrain --resume continues") {
+    auto model = make_jepa_model(cfg, skin.graph, 3, cfg.seed);
+    Trainer<float> trainer(*model, src, skin.graph, cfg);
+    trainer.extras = data_state(pre);
+    const auto head = trainer.run(3);
+    for (int s = 0; s < 3; ++s) CHECK(to_text(head[s].loss) == straight[s]);
+    trainer.save(t.path / "user.safetensors");
+    po.out = (t.path / "continued").string();
+    po.overrides = nlohmann::json::object();
+    po.resume = (t.path / "user.safetensors").string();
+    REQUIRE(run_pretrain(po, out) == 0);
+    const auto tail = losses(t.path / "continued" / "log.csv");
+    REQUIRE(tail.size() == 3);
+    for (int s = 0; s < 3; ++s) CHECK(tail[s] == straight[3 + s]);
+    // Bitwise: every tensor (parameters and AdamW moments) equals the uninterrupted run's.
+    const auto a = load_safetensors(t.path / "continued" / "checkpoint.safetensors");
+    const auto b = load_safetensors(t.path / "straight" / "checkpoint.safetensors");
+    CHECK(a.names() == b.names());
+    for (const auto& name : b.names()) CHECK(a.at(name).data == b.at(name).data);
+  }
+}
+
+TEST_CASE("checkpoint metadata that no run could have throws FileError naming the key") {
+  TempDir t;
+  JepaConfig mc = TrainConfig{}.model(4, 1);
+  mc.encoder.dim = 8, mc.encoder.heads = 2, mc.encoder.depth = 1;
+  mc.predictor.in_dim = mc.predictor.dim = 8, mc.predictor.heads = 2, mc.predictor.depth = 1;
+  JepaModel<float> model(mc, 0);
+  const auto parts = model.parts();
+  auto write = [&](const nlohmann::json& config) {
+    CheckpointState st;
+    st.config = config;
+    const fs::path p = t.path / "bad.safetensors";
+    save_checkpoint(p, std::span<const PrefixedParams<float>>(parts), static_cast<const AdamW<float>*>(nullptr), st);
+    return p;
+  };
+  TrainConfig tc;
+  tc.dim = 8, tc.heads = 2, tc.depth = 1, tc.predictor_depth = 1;
+  auto error_of = [&](const nlohmann::json& config) {
+    try {
+      load_trained_model(write(config));
+    } catch (const FileError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no FileError");
+  };
+  const nlohmann::json good = run_metadata(tc, mc);
+  CHECK_NOTHROW(load_trained_model(write(good)));
+  nlohmann::json j = good;
+  j["train"]["tau"] = 0;  // once a SIGFPE in in_dim % tau
+  CHECK(error_of(j).find("tau") != std::string::npos);
+  j = good;
+  j["model"].erase("encoder");
+  CHECK(error_of(j).find("missing key 'encoder'") != std::string::npos);
+  j = good;
+  j["model"]["encoder"]["dim"] = "eight";
+  CHECK(error_of(j).find("'dim'") != std::string::npos);
+  j = good;
+  j["model"]["encoder"] = nlohmann::json::array();
+  CHECK(error_of(j).find("encoder") != std::string::npos);
+  j = good;
+  j["model"]["encoder"]["heads"] = 0;
+  CHECK(error_of(j).find("heads") != std::string::npos);
+  CHECK(error_of(nlohmann::json::array()).find("metadata 'config'") != std::string::npos);
+}
+
 TEST_CASE("pretrain: drift tracking off (drift_time_constant 0 / the default) leaves no tracker in the checkpoint") {
   TempDir t;
   std::ostringstream out;
