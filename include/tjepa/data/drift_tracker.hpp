@@ -4,12 +4,8 @@
 //
 // Why: the Preprocessor subtracts one baseline measured once (REFERENCE §1). A magnetic taxel's
 // rest reading wanders afterwards by tens of counts, independently per taxel. After per-axis
-// standardization that wander is the largest variation of every idle taxel (the median taxel
-// window of the simulated skin, whose drift is an Ornstein–Uhlenbeck process of 30 counts, has an
-// RMS of 0.63 std with drift and 0.42 with this tracker; 0.38 without any drift), and most taxels
-// are idle in every window. It cannot be predicted from the other taxels. In the demo's
-// pre-training (seed 0) the target embeddings' spread over samples grew from 0.068 to 0.279 with
-// the drift and fell from 0.062 to 0.044 with the tracker. Touch controllers re-zero the same way:
+// standardization that wander is the largest variation of an idle taxel, and most taxels are
+// idle in most windows; no other taxel predicts it. Touch controllers re-zero the same way:
 // a baseline that follows the reading while the taxel is untouched and freezes while it is touched.
 //
 // Per taxel n and axis a, with b_{n,a} the tracked rest reading (initially the fitted mean of a
