@@ -1,11 +1,12 @@
 // The `tjepa` command's subcommands, run in-process on tiny inputs: layout, pretrain, probe,
 // embed, demo. Each checks what the command promises: the files it writes (and that a failing
 // command leaves none behind), the numbers it reports, and one-line errors for bad input.
-// GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
-// false positive in a system header that -Werror would otherwise turn into an error.
+// The layout-CSV cases read a skin through graph/skin_from_coordinates.hpp (edges inferred from
+// the coordinates); it is named here so each module these tests cover is traceable.
 #include <doctest/doctest.h>
 
 #include "../../examples/cli/commands.hpp"
+#include <tjepa/graph/skin_from_coordinates.hpp>
 
 #include <algorithm>
 #include <cmath>
