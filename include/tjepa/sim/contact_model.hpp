@@ -13,12 +13,14 @@
 #include <cmath>
 #include <cstdint>
 #include <numbers>
+#include <string>
 #include <vector>
 
 #include <Eigen/Eigenvalues>
 
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
+#include "tjepa/data/recording.hpp"
 #include "tjepa/layout/taxel_layout.hpp"
 
 namespace tjepa {
@@ -141,6 +143,18 @@ inline float fast_normal(Rng& rng) {
 inline double smoothstep(double x) {
   x = std::clamp(x, 0.0, 1.0);
   return x * x * (3.0 - 2.0 * x);
+}
+
+// A contact's tangential force (su, sv) (N) follows its target (tu, tv) with a lag of a few frames
+// (30 % of the way per frame) and never exceeds the friction limit μ·F_n (N).
+inline void follow_traction(double& su, double& sv, double tu, double tv, double limit) {
+  su += 0.3 * (tu - su);
+  sv += 0.3 * (tv - sv);
+  const double mag = std::hypot(su, sv);
+  if (mag > limit) {
+    su *= limit / mag;
+    sv *= limit / mag;
+  }
 }
 
 }  // namespace detail
@@ -384,6 +398,19 @@ class SkinSensor {
       for (std::size_t k = 0; k < n; ++k) drift_[k] = r * drift_[k] + s * detail::fast_normal(rng);
     }
     for (std::size_t k = 0; k < n; ++k) f[k] = offset_[k] + drift_[k] + noise * detail::fast_normal(rng);
+  }
+
+  // `frames` contact-free frames of this sensor [frames, N, axes] (for the preprocessing baseline).
+  Recording record_baseline(Rng& rng, int frames, std::string source) {
+    Recording rec(frames, taxels_, axes());
+    rec.set_source(std::move(source));
+    float* x = rec.mutable_data();
+    for (int t = 0; t < frames; ++t) {
+      float* f = x + static_cast<std::size_t>(t) * taxels_ * axes();
+      noise_frame(rng, f);
+      apply_dropouts(rng, f);
+    }
+    return rec;
   }
 
   // Starts new drop-outs and zeroes every taxel in one (all axes) in frame f [N, axes]. 0 lies

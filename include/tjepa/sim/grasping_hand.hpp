@@ -193,15 +193,7 @@ class SimulatedHand {
   // A contact-free recording of the same sensor (for fitting the preprocessing baseline).
   Recording record_baseline(int frames) {
     require<ConfigError>(frames >= 0, "SimulatedHand::record_baseline: frames = ", frames, ", expected >= 0");
-    Recording rec(frames, taxels(), axes());
-    rec.set_source("simulated hand (no contact)");
-    float* x = rec.mutable_data();
-    for (int t = 0; t < frames; ++t) {
-      float* f = x + static_cast<std::size_t>(t) * taxels() * axes();
-      sensor_.noise_frame(rng_, f);
-      sensor_.apply_dropouts(rng_, f);
-    }
-    return rec;
+    return sensor_.record_baseline(rng_, frames, "simulated hand (no contact)");
   }
 
   // `frames` frames of grasping play and their labels. Successive calls continue the same episode
@@ -234,7 +226,6 @@ class SimulatedHand {
   static constexpr int kThumbTip = 0, kIndexTip = 3, kMiddleTip = 7, kRingTip = 11, kPalm0 = 15;
   static constexpr double kDeg = std::numbers::pi / 180.0;
   static constexpr double kMaxLever = 12.0;  // mm
-  static constexpr double kShearLag = 0.3;   // of the way to the target per frame
 
   // One pad's contact with the object, for the whole episode.
   struct Grip {
@@ -633,13 +624,7 @@ class SimulatedHand {
           tv += cfg_.motion_traction * e.mu * c.normal * mv / len;
         }
       }
-      g.shear_u += kShearLag * (tu - g.shear_u);
-      g.shear_v += kShearLag * (tv - g.shear_v);
-      const double mag = std::hypot(g.shear_u, g.shear_v), limit = e.mu * c.normal;
-      if (mag > limit) {
-        g.shear_u *= limit / mag;
-        g.shear_v *= limit / mag;
-      }
+      detail::follow_traction(g.shear_u, g.shear_v, tu, tv, e.mu * c.normal);
       c.shear_u = g.shear_u;
       c.shear_v = g.shear_v;
       g.u_prev = c.u;
@@ -656,14 +641,9 @@ class SimulatedHand {
     if (k < t.ramp) fn = t.peak * detail::smoothstep((k + 1.0) / t.ramp);
     else if (k < t.ramp + t.hold) fn = t.peak;
     else fn = t.peak * (1.0 - detail::smoothstep((k - t.ramp - t.hold + 1.0) / (t.release + 1.0)));
-    t.shear_u += kShearLag * (t.frac * fn * std::cos(t.dir) - t.shear_u);
-    t.shear_v += kShearLag * (t.frac * fn * std::sin(t.dir) - t.shear_v);
+    detail::follow_traction(t.shear_u, t.shear_v, t.frac * fn * std::cos(t.dir), t.frac * fn * std::sin(t.dir),
+                            cfg_.touch_friction * fn);
     if (fn < cfg_.contact_threshold) return;
-    const double mag = std::hypot(t.shear_u, t.shear_v), limit = cfg_.touch_friction * fn;
-    if (mag > limit) {
-      t.shear_u *= limit / mag;
-      t.shear_v *= limit / mag;
-    }
     Contact c;
     c.state = t.shape;
     c.state.normal = fn;

@@ -191,15 +191,7 @@ class SimulatedSkin {
   // A contact-free recording of the same sensor (for fitting the preprocessing baseline).
   Recording record_baseline(int frames) {
     require<ConfigError>(frames >= 0, "SimulatedSkin::record_baseline: frames = ", frames, ", expected >= 0");
-    Recording rec(frames, taxels(), axes());
-    rec.set_source("simulated skin (no contact)");
-    float* x = rec.mutable_data();
-    for (int t = 0; t < frames; ++t) {
-      float* f = x + static_cast<std::size_t>(t) * taxels() * axes();
-      sensor_.noise_frame(rng_, f);
-      sensor_.apply_dropouts(rng_, f);
-    }
-    return rec;
+    return sensor_.record_baseline(rng_, frames, "simulated skin (no contact)");
   }
 
  private:
@@ -297,13 +289,7 @@ class SimulatedSkin {
         tv = e.mu * fn * dv / len;
       }
     }
-    su += 0.3 * (tu - su);
-    sv += 0.3 * (tv - sv);
-    const double mag = std::hypot(su, sv), limit = e.mu * fn;
-    if (mag > limit) {
-      su *= limit / mag;
-      sv *= limit / mag;
-    }
+    detail::follow_traction(su, sv, tu, tv, e.mu * fn);
     c.shape = e.shape;
     c.size = e.size;
     c.pad = e.pad;
