@@ -92,3 +92,4 @@
 #include "tjepa/downstream/embed.hpp"
 #include "tjepa/downstream/metrics.hpp"
 #include "tjepa/downstream/probe_training.hpp"
+#include "tjepa/downstream/welch.hpp"

