@@ -92,4 +92,5 @@
 #include "tjepa/downstream/embed.hpp"
 #include "tjepa/downstream/metrics.hpp"
 #include "tjepa/downstream/probe_training.hpp"
+#include "tjepa/downstream/ridge.hpp"
 #include "tjepa/downstream/welch.hpp"

@@ -8,7 +8,6 @@
 #endif
 #include <doctest/doctest.h>
 
-#include <tjepa/downstream/welch.hpp>
 #include <tjepa/tjepa.hpp>
 
 #include <cmath>
@@ -117,6 +116,107 @@ TEST_CASE("welch_t_test: equal samples and zero variance give defined results") 
   CHECK(one.df == doctest::Approx(3.0).epsilon(1e-14));
   CHECK_THROWS_AS(welch_t_test(std::vector<double>{1}, c2), DataError);
   CHECK_THROWS_AS(welch_t_test(c1, std::vector<double>{1, NAN}), DataError);
+}
+
+TEST_CASE("window_features: pad sums and taxel means per axis") {
+  // 2 windows, 3 taxels in groups {0, 1, 0}, 2 frames, 2 axes; x[b, n, t, a] = 100b + 10n + t + 0.5a.
+  WindowBatch wb;
+  wb.batch = 2;
+  wb.taxels = 3;
+  wb.length = 2;
+  wb.axes = 2;
+  wb.x.resize(24);
+  for (int b = 0; b < 2; ++b)
+    for (int n = 0; n < 3; ++n)
+      for (int t = 0; t < 2; ++t)
+        for (int a = 0; a < 2; ++a) wb.x[((b * 3 + n) * 2 + t) * 2 + a] = float(100 * b + 10 * n + t + 0.5 * a);
+  const std::vector<int> group{0, 1, 0};
+  const Eigen::MatrixXd f = window_features(wb, group, 2);
+  REQUIRE(f.rows() == 2);
+  REQUIRE(f.cols() == 2 * 2 + 3 * 2);
+  for (int b = 0; b < 2; ++b)
+    for (int a = 0; a < 2; ++a) {
+      auto mean = [&](int n) { return 100.0 * b + 10 * n + 0.5 + 0.5 * a; };
+      CHECK(f(b, 0 * 2 + a) == doctest::Approx(mean(0) + mean(2)));
+      CHECK(f(b, 1 * 2 + a) == doctest::Approx(mean(1)));
+      for (int n = 0; n < 3; ++n) CHECK(f(b, 4 + n * 2 + a) == doctest::Approx(mean(n)));
+    }
+  CHECK_THROWS_AS(window_features(wb, std::vector<int>{0, 1}, 2), ShapeError);
+  CHECK_THROWS_AS(window_features(wb, std::vector<int>{0, 2, 0}, 2), DataError);
+}
+
+namespace {
+// n rows of p features ~ N(mean_j, scale_j²) (scales and offsets differ, to exercise the
+// standardization).
+Eigen::MatrixXd random_features(int n, int p, Rng& rng) {
+  Eigen::MatrixXd X(n, p);
+  for (int j = 0; j < p; ++j)
+    for (int i = 0; i < n; ++i) X(i, j) = 3.0 * j - 2 + (0.5 + j) * rng.normal(0.0, 1.0);
+  return X;
+}
+}  // namespace
+
+TEST_CASE("fit_ridge: recovers a known linear map and picks the small lambda without noise") {
+  Rng rng(5);
+  const int n = 80, p = 6, k = 3;
+  const Eigen::MatrixXd X = random_features(n, p, rng);
+  Eigen::MatrixXd W(p, k);
+  for (int i = 0; i < p; ++i)
+    for (int j = 0; j < k; ++j) W(i, j) = rng.normal(0.0, 1.0);
+  const Eigen::RowVectorXd b = Eigen::RowVectorXd::LinSpaced(k, -1.0, 2.0);
+  const Eigen::MatrixXd Y = (X * W).rowwise() + b;
+  const std::vector<double> lambdas{10.0, 1e-8, 1.0, 1e-3};
+  const RidgeModel m = fit_ridge(X, Y, lambdas, 0.25, 1);
+  CHECK(m.lambda == 1e-8);
+  REQUIRE(m.validation.size() == 4);
+  CHECK(m.validation[1] < m.validation[3]);
+  CHECK(m.validation[3] < m.validation[2]);
+  CHECK(m.validation[2] < m.validation[0]);
+  const Eigen::MatrixXd Xt = random_features(20, p, rng);
+  const Eigen::MatrixXd Yt = (Xt * W).rowwise() + b;
+  CHECK((predict(m, Xt) - Yt).cwiseAbs().maxCoeff() < 1e-6);
+  // Same seed, same model; the dual form (more features than rows) solves the same problem.
+  const RidgeModel again = fit_ridge(X, Y, lambdas, 0.25, 1);
+  CHECK(again.weight == m.weight);
+  const Eigen::MatrixXd Xw = random_features(10, 30, rng);
+  const Eigen::MatrixXd Yw = random_features(10, 2, rng);
+  const RidgeModel dual = fit_ridge_at(Xw, Yw, 0.7);
+  const Eigen::MatrixXd Z = (Xw.rowwise() - dual.mean).array().rowwise() / dual.scale.array();
+  Eigen::MatrixXd A = Z.transpose() * Z;
+  A.diagonal().array() += 0.7;
+  const Eigen::MatrixXd primal = A.ldlt().solve(Z.transpose() * (Yw.rowwise() - dual.bias));
+  CHECK((dual.weight - primal).cwiseAbs().maxCoeff() < 1e-9);
+  // A constant feature is left unscaled and gets no weight.
+  Eigen::MatrixXd Xc = X;
+  Xc.col(2).setConstant(4.0);
+  const RidgeModel c = fit_ridge_at(Xc, Y, 1.0);
+  CHECK(c.scale(2) == 1.0);
+  CHECK(c.weight.row(2).cwiseAbs().maxCoeff() == 0.0);
+  CHECK_THROWS_AS(fit_ridge(X, Y, std::vector<double>{}, 0.25, 1), ConfigError);
+  CHECK_THROWS_AS(fit_ridge(X, Y, lambdas, 1.0, 1), ConfigError);
+  CHECK_THROWS_AS(fit_ridge(X, Y, std::vector<double>{0.0}, 0.25, 1), ConfigError);
+  CHECK_THROWS_AS(fit_ridge(X, Y.topRows(10), lambdas, 0.25, 1), ShapeError);
+}
+
+TEST_CASE("fit_ridge_classifier: separable classes by argmax of one-hot ridge") {
+  Rng rng(9);
+  const int n = 90, p = 4, C = 3;
+  Eigen::MatrixXd X(n, p);
+  std::vector<int> y(n);
+  for (int i = 0; i < n; ++i) {
+    y[i] = i % C;
+    for (int j = 0; j < p; ++j) X(i, j) = rng.normal(0.0, 0.3) + (j == y[i] ? 4.0 : 0.0);
+  }
+  const std::vector<double> lambdas{1e-3, 1.0, 100.0};
+  const RidgeModel m = fit_ridge_classifier(X, y, C, lambdas, 0.2, 3);
+  CHECK(m.outputs() == C);
+  for (double v : m.validation) CHECK(v < 1.0 / 18);  // no validation error at any lambda
+  const std::vector<int> c = predict_class(m, X);
+  int hit = 0;
+  for (int i = 0; i < n; ++i) hit += c[i] == y[i];
+  CHECK(hit == n);
+  y[0] = 3;
+  CHECK_THROWS_AS(fit_ridge_classifier(X, y, C, lambdas, 0.2, 3), DataError);
 }
 
 }  // TEST_SUITE
