@@ -90,7 +90,10 @@
 
 #include "tjepa/downstream/cross_entropy.hpp"
 #include "tjepa/downstream/embed.hpp"
+#include "tjepa/downstream/features.hpp"
 #include "tjepa/downstream/metrics.hpp"
+#include "tjepa/downstream/early_stopping.hpp"
+#include "tjepa/downstream/probe_head.hpp"
 #include "tjepa/downstream/probe_training.hpp"
 #include "tjepa/downstream/ridge.hpp"
 #include "tjepa/downstream/welch.hpp"

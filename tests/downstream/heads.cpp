@@ -10,6 +10,7 @@
 
 #include <tjepa/tjepa.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <vector>
@@ -217,6 +218,132 @@ TEST_CASE("fit_ridge_classifier: separable classes by argmax of one-hot ridge") 
   CHECK(hit == n);
   y[0] = 3;
   CHECK_THROWS_AS(fit_ridge_classifier(X, y, C, lambdas, 0.2, 3), DataError);
+}
+
+namespace {
+// S samples of L tokens whose direction encodes two regression targets (F, 2F − 3) and a class
+// (a LayerNorm comes first in the probe: the information is in the direction, not the scale).
+struct EncodedSamples {
+  AlignedVector<float> x;  // [S, L, d]
+  HeadTargets targets;
+};
+EncodedSamples encoded_samples(int S, int L, int d, std::uint64_t seed, bool random_targets = false) {
+  Rng rng(seed);
+  EncodedSamples e{AlignedVector<float>(static_cast<std::size_t>(S) * L * d, 0.0f), {2, 4, {}, {}}};
+  for (int i = 0; i < S; ++i) {
+    const float F = static_cast<float>(rng.uniform(0, 10));
+    const int cls = static_cast<int>(rng.below(4));
+    for (int l = 0; l < L; ++l) {
+      float* t = e.x.data() + (static_cast<std::size_t>(i) * L + l) * d;
+      t[0] = F + static_cast<float>(rng.normal(0.0, 0.1));
+      t[1] = 10.0f - F;
+      t[2 + cls] = 10.0f;
+      t[6 + l % (d - 6)] += 1.0f;
+    }
+    const float G = random_targets ? static_cast<float>(rng.normal(0.0, 3.0)) : 2 * F - 3;
+    e.targets.value.insert(e.targets.value.end(), {random_targets ? static_cast<float>(rng.uniform(0, 10)) : F, G});
+    e.targets.label.push_back(random_targets ? static_cast<int>(rng.below(4)) : cls);
+  }
+  return e;
+}
+}  // namespace
+
+TEST_CASE("train_head: learns regression and classes with early stopping and restores the best epoch") {
+  const int S = 160, L = 2, d = 12;
+  const auto [x, targets] = encoded_samples(S, L, d, 4);
+  FrozenFeatures<float> f(x, L, d);
+  HeadTrainConfig cfg;
+  cfg.max_epochs = 60;
+  cfg.patience = 8;
+  cfg.batch = 16;
+  cfg.lr = 1e-2;
+  ProbeHead<float> head(d, 3, 2, 4, 0);
+  CHECK(head.params.contains("probe.head.fc2.weight"));
+  const HeadTrainResult r = train_head(head, f, targets, cfg);
+  REQUIRE(r.epochs() >= 1);
+  CHECK(r.epochs() <= cfg.max_epochs);
+  CHECK(r.train_loss.size() == r.validation_loss.size());
+  const auto best = std::min_element(r.validation_loss.begin(), r.validation_loss.end());
+  CHECK(r.best_epoch == best - r.validation_loss.begin());
+  CHECK(r.best_validation == *best);
+  CHECK(r.best_validation < 0.3 * r.validation_loss.front());
+  // The restored parameters give the best epoch's validation loss.
+  const ValidationSplit split = split_for_validation(S, cfg.validation_fraction, cfg.seed);
+  CHECK(head_objective(head, f, targets, split.validation, cfg.class_weight) ==
+        doctest::Approx(r.best_validation).epsilon(1e-6));
+  const HeadMetrics m = evaluate_head(head, f, targets);
+  REQUIRE(m.rmse.size() == 2);
+  CHECK(m.rmse[0] < 0.25 * 2.9);  // 2.9: the constant predictor's RMSE on F ~ U(0, 10)
+  CHECK(m.rmse[1] < 0.25 * 5.8);
+  CHECK(m.accuracy > 0.9);
+  CHECK(m.majority_accuracy < 0.5);
+  // Same seed, same head.
+  ProbeHead<float> again(d, 3, 2, 4, 0);
+  const HeadTrainResult r2 = train_head(again, f, targets, cfg);
+  CHECK(r2.validation_loss == r.validation_loss);
+  CHECK(std::equal(head.params.values().begin(), head.params.values().end(), again.params.values().begin()));
+  // Regression only and classification only.
+  HeadTargets reg{2, 0, targets.value, {}}, cls{0, 4, {}, targets.label};
+  ProbeHead<float> hr(d, 3, 2, 0, 1), hc(d, 3, 0, 4, 1);
+  cfg.max_epochs = 3;
+  CHECK(train_head(hr, f, reg, cfg).epochs() == 3);
+  CHECK(train_head(hc, f, cls, cfg).epochs() == 3);
+  CHECK(evaluate_head(hc, f, cls).rmse.empty());
+  CHECK_THROWS_AS(train_head(hr, f, cls, cfg), ShapeError);
+  CHECK_THROWS_AS(ProbeHead<float>(d, 3, 0, 1, 0), ConfigError);
+  cfg.patience = 0;
+  CHECK_THROWS_AS(train_head(hr, f, reg, cfg), ConfigError);
+}
+
+TEST_CASE("train_head: stops after patience epochs without improvement on unlearnable targets") {
+  const int S = 60, L = 1, d = 12;
+  const auto [x, targets] = encoded_samples(S, L, d, 8, true);
+  FrozenFeatures<float> f(x, L, d);
+  HeadTrainConfig cfg;
+  cfg.max_epochs = 200;
+  cfg.patience = 4;
+  cfg.batch = 8;
+  cfg.lr = 1e-2;
+  ProbeHead<float> head(d, 3, 2, 4, 2);
+  const HeadTrainResult r = train_head(head, f, targets, cfg);
+  CHECK(r.epochs() < cfg.max_epochs);
+  CHECK(r.epochs() == r.best_epoch + 1 + cfg.patience);
+  for (int e = r.best_epoch + 1; e < r.epochs(); ++e) CHECK(r.validation_loss[e] >= r.best_validation);
+}
+
+TEST_CASE("train_head end to end: the encoder trains and is restored to its best epoch") {
+  const Skin skin = layouts::grid_skin({.rows = 4, .cols = 4, .pitch = 4.0, .group_rows = 2, .group_cols = 2});
+  SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, 3);
+  const Recording base = sim.record_baseline(100);
+  SimRecording rec = sim.record(600);
+  Preprocessor pre(PreprocessConfig::magnetic());
+  pre.fit_baseline(base);
+  pre.fit(rec.recording);
+  const WindowSource src(rec.recording, WindowSpec{5}, rec.labels, pre);
+  const ProbeLabels lab = ProbeLabels::from_source(src, src.windows_with_contact(2));
+  REQUIRE(lab.size() >= 16);
+  const HeadTargets targets{3, 0, lab.force, {}};
+
+  ParamSet<float> ps;
+  const Tokenizer tok = Tokenizer::per_taxel(ps, 16, 3, 5, 8);
+  const Encoder enc(ps, EncoderConfig{.num_tokens = 16, .dim = 8, .depth = 1, .heads = 2});
+  ps.allocate();
+  init_params(ps, 1);
+  const std::vector<float> before(ps.values().begin(), ps.values().end());
+  EncoderFeatures<float> feats(ps, tok, enc, src, lab.window);
+  ProbeHead<float> head(8, 2, 3, 0, 0);
+  HeadTrainConfig cfg;
+  cfg.max_epochs = 4;
+  cfg.patience = 2;
+  cfg.batch = 8;
+  const HeadTrainResult r = train_head(head, feats, targets, cfg);
+  REQUIRE(r.best_epoch >= 0);
+  double moved = 0;
+  for (std::size_t i = 0; i < before.size(); ++i) moved += std::abs(ps.values()[i] - before[i]);
+  CHECK(moved > 0);
+  const ValidationSplit split = split_for_validation(targets.size(), cfg.validation_fraction, cfg.seed);
+  CHECK(head_objective(head, feats, targets, split.validation, cfg.class_weight) ==
+        doctest::Approx(r.best_validation).epsilon(1e-5));
 }
 
 }  // TEST_SUITE
