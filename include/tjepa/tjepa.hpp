@@ -88,6 +88,7 @@
 #include "tjepa/train/loss.hpp"
 #include "tjepa/train/trainer.hpp"
 
+#include "tjepa/downstream/causal_attention.hpp"
 #include "tjepa/downstream/cross_entropy.hpp"
 #include "tjepa/downstream/embed.hpp"
 #include "tjepa/downstream/features.hpp"
@@ -95,5 +96,6 @@
 #include "tjepa/downstream/early_stopping.hpp"
 #include "tjepa/downstream/probe_head.hpp"
 #include "tjepa/downstream/probe_training.hpp"
+#include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/downstream/ridge.hpp"
 #include "tjepa/downstream/welch.hpp"

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <type_traits>
 #include <vector>
 
 #include "../model/gradcheck.hpp"
@@ -344,6 +345,151 @@ TEST_CASE("train_head end to end: the encoder trains and is restored to its best
   const ValidationSplit split = split_for_validation(targets.size(), cfg.validation_fraction, cfg.seed);
   CHECK(head_objective(head, feats, targets, split.validation, cfg.class_weight) ==
         doctest::Approx(r.best_validation).epsilon(1e-5));
+}
+
+TEST_CASE_TEMPLATE("CausalSelfAttention: against a plain-loop causal softmax", T, float, double) {
+  const int B = 2, L = 7, d = 10, H = 2, Dh = 5;
+  ParamSet<T> ps;
+  const CausalSelfAttention attn = CausalSelfAttention::add(ps, "attn", d, H, true);
+  ps.allocate();
+  init_params(ps, 3);
+  Rng rng(4);
+  std::vector<T> x(std::size_t(B) * L * d), y(x.size(), T(0)), qkv(std::size_t(B) * L * 3 * d), att(x.size()),
+      lse(std::size_t(B) * H * L);
+  test::fill_normal(x, rng);
+  for (auto& v : ps.values()) v = static_cast<T>(v * 20);  // weights of O(0.4): peaked softmax rows
+  Workspace<T> ws;
+  attn.forward(ps, x.data(), B, L, qkv.data(), att.data(), lse.data(), y.data(), false, ws);
+  // Reference on the same qkv: row l of head h attends to rows 0..l.
+  const double tol = std::is_same_v<T, float> ? 2e-5 : 1e-12;
+  for (int b = 0; b < B; ++b)
+    for (int h = 0; h < H; ++h)
+      for (int l = 0; l < L; ++l) {
+        auto at = [&](int row, int part, int c) { return double(qkv[(std::size_t(b) * L + row) * 3 * d + part * d + h * Dh + c]); };
+        std::vector<double> s(std::size_t(l) + 1);
+        double mx = -1e300, sum = 0;
+        for (int j = 0; j <= l; ++j) {
+          double dot = 0;
+          for (int c = 0; c < Dh; ++c) dot += at(l, 0, c) * at(j, 1, c);
+          s[std::size_t(j)] = dot / std::sqrt(double(Dh));
+          mx = std::max(mx, s[std::size_t(j)]);
+        }
+        for (auto& v : s) sum += (v = std::exp(v - mx));
+        for (int c = 0; c < Dh; ++c) {
+          double o = 0;
+          for (int j = 0; j <= l; ++j) o += s[std::size_t(j)] / sum * at(j, 2, c);
+          CHECK(double(att[(std::size_t(b) * L + l) * d + h * Dh + c]) == doctest::Approx(o).epsilon(tol).scale(1));
+        }
+        CHECK(double(lse[(std::size_t(b) * H + h) * L + l]) == doctest::Approx(mx + std::log(sum)).epsilon(tol).scale(1));
+      }
+}
+
+TEST_CASE("SequenceHead: gradients of inputs and every parameter") {
+  const int B = 2, L = 4, N = 3, d = 6, P = 3;
+  ParamSet<double> ps;
+  const SequenceHead sh(ps, SequenceHeadConfig{d, 2, L, P, 2.0, 1e-6});
+  ps.allocate();
+  test::randomize(ps, 21);
+  for (const char* name : {"pool.query_tokens", "pool.cross_attention_block.xattn.kv.weight", "pos_embed",
+                           "blocks.0.norm1.weight", "blocks.0.attn.qkv.weight", "blocks.0.attn.proj.bias",
+                           "blocks.0.mlp.fc2.weight", "norm.bias", "head.weight", "head.bias"})
+    CHECK(ps.contains(name));
+  CHECK_FALSE(ps.contains("pool.head.fc1.weight"));
+  Rng rng(22);
+  auto x = test::normal_vector(std::size_t(B) * L * N * d, rng);
+  auto w = test::normal_vector(std::size_t(B) * L * P, rng);
+  std::vector<double> y(w.size());
+  SequenceCache<double> cache, scratch;
+  Workspace<double> ws;
+  auto loss = [&] {
+    sh.forward(ps, x.data(), B, N, y.data(), scratch, ws);
+    return test::dot(w.data(), y.data(), y.size());
+  };
+  ps.zero_grad();
+  sh.forward(ps, x.data(), B, N, y.data(), cache, ws);
+  std::vector<double> dx(x.size(), 0.0);
+  sh.backward(ps, w.data(), dx.data(), cache, ws);
+  CHECK(test::gradient_error(x.data(), dx.data(), x.size(), loss, 96) < test::grad_tolerance);
+  test::check_param_gradients(ps, loss);
+  // A second backward adds the same gradient again.
+  const std::vector<double> g1(ps.grads().begin(), ps.grads().end()), dx1 = dx;
+  sh.forward(ps, x.data(), B, N, y.data(), cache, ws);
+  sh.backward(ps, w.data(), dx.data(), cache, ws);
+  for (std::size_t i = 0; i < g1.size(); ++i) REQUIRE(ps.grads()[i] == doctest::Approx(2 * g1[i]).epsilon(1e-12));
+  for (std::size_t i = 0; i < dx.size(); ++i) REQUIRE(dx[i] == doctest::Approx(2 * dx1[i]).epsilon(1e-12));
+}
+
+TEST_CASE("SequenceHead: the prediction after window l does not see later windows") {
+  const int B = 1, L = 5, N = 2, d = 6, P = 3;
+  ParamSet<double> ps;
+  const SequenceHead sh(ps, SequenceHeadConfig{d, 3, L, P, 4.0, 1e-6});
+  ps.allocate();
+  test::randomize(ps, 5);
+  Rng rng(6);
+  auto x = test::normal_vector(std::size_t(B) * L * N * d, rng);
+  std::vector<double> y0(std::size_t(L) * P), y1(y0.size());
+  SequenceCache<double> c;
+  Workspace<double> ws;
+  sh.forward(ps, x.data(), B, N, y0.data(), c, ws);
+  const int changed = 2;
+  for (int i = 0; i < N * d; ++i) x[std::size_t(changed) * N * d + i] += rng.normal(0.0, 1.0);  // not a constant shift: LayerNorm ignores those
+  sh.forward(ps, x.data(), B, N, y1.data(), c, ws);
+  for (int l = 0; l < L; ++l)
+    for (int p = 0; p < P; ++p) {
+      INFO("position ", l);
+      if (l < changed)
+        CHECK(y1[std::size_t(l) * P + p] == y0[std::size_t(l) * P + p]);
+      else
+        CHECK(y1[std::size_t(l) * P + p] != y0[std::size_t(l) * P + p]);
+    }
+}
+
+TEST_CASE("train_sequence_head: learns a running sum of the windows with early stopping") {
+  // Windows i encode a value F_i in their tokens' direction; sequence q is windows q, q+1, ..., and
+  // its targets after window l are (F_l, running mean of F over 0..l, 0).
+  const int S = 120, L = 5, N = 2, d = 12, Q = S - L + 1;
+  Rng rng(31);
+  AlignedVector<float> x(std::size_t(S) * N * d, 0.0f);
+  std::vector<float> F(S);
+  for (int i = 0; i < S; ++i) {
+    F[std::size_t(i)] = static_cast<float>(rng.uniform(0, 10));
+    for (int n = 0; n < N; ++n) {
+      float* t = x.data() + (std::size_t(i) * N + n) * d;
+      t[0] = F[std::size_t(i)];
+      t[1] = 10 - F[std::size_t(i)];
+      t[2 + n] = 3;
+    }
+  }
+  SequenceTargets targets{L, 3, {}, {}};
+  for (int q = 0; q < Q; ++q) {
+    double run = 0;
+    for (int l = 0; l < L; ++l) {
+      targets.window.push_back(q + l);
+      run += F[std::size_t(q + l)];
+      targets.value.insert(targets.value.end(), {F[std::size_t(q + l)], static_cast<float>(run / (l + 1)), 0.0f});
+    }
+  }
+  FrozenFeatures<float> f(x, N, d);
+  HeadTrainConfig cfg;
+  cfg.max_epochs = 60;
+  cfg.patience = 8;
+  cfg.batch = 8;
+  cfg.lr = 3e-3;
+  SequenceModel<float> model(SequenceHeadConfig{d, 3, L, 3, 2.0, 1e-6}, 0);
+  const HeadTrainResult r = train_sequence_head(model, f, targets, cfg);
+  REQUIRE(r.epochs() >= 1);
+  CHECK(r.best_validation < 0.3 * r.validation_loss.front());
+  const ValidationSplit split = split_for_validation(Q, cfg.validation_fraction, cfg.seed);
+  CHECK(sequence_objective(model, f, targets, split.validation) == doctest::Approx(r.best_validation).epsilon(1e-6));
+  const std::vector<double> rmse = evaluate_sequence_head(model, f, targets);
+  REQUIRE(rmse.size() == 3);
+  CHECK(rmse[0] < 0.3 * 2.9);  // 2.9: the constant predictor on F ~ U(0, 10)
+  CHECK(rmse[1] < 0.5 * 1.6);  // the running mean's spread is smaller (1.6 at l = 2)
+  CHECK(rmse[2] < 1e-3);       // a constant target: the scaler's mean
+  SequenceModel<float> again(SequenceHeadConfig{d, 3, L, 3, 2.0, 1e-6}, 0);
+  CHECK(train_sequence_head(again, f, targets, cfg).validation_loss == r.validation_loss);
+  targets.window[3] = S;
+  CHECK_THROWS_AS(train_sequence_head(again, f, targets, cfg), DataError);
 }
 
 }  // TEST_SUITE
