@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <string>
 
+#include "tjepa/model/attention.hpp"
 #include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/layers.hpp"
 #include "tjepa/model/workspace.hpp"
@@ -22,14 +23,11 @@ struct CausalSelfAttention {
   LinearParams qkv, proj;
   int heads = 0;
 
+  // The parameters of a SelfAttention (model/attention.hpp): only the kernel calls differ.
   template <class T>
   static CausalSelfAttention add(ParamSet<T>& ps, const std::string& name, int dim, int heads, bool bias) {
-    require<ConfigError>(heads > 0 && dim % heads == 0, name, ": dim ", dim, " is not a multiple of heads ", heads);
-    CausalSelfAttention a;
-    a.heads = heads;
-    a.qkv = LinearParams::add(ps, name + ".qkv", dim, 3 * dim, bias);
-    a.proj = LinearParams::add(ps, name + ".proj", dim, dim, bias);
-    return a;
+    const SelfAttention a = SelfAttention::add(ps, name, dim, heads, bias, bias);
+    return {a.qkv, a.proj, a.heads};
   }
   int dim() const { return proj.out; }
   // Query row l of one head over the fused qkv buffer: 1 query, l + 1 keys.
