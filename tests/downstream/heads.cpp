@@ -294,6 +294,13 @@ TEST_CASE("train_head: learns regression and classes with early stopping and res
   CHECK(train_head(hc, f, cls, cfg).epochs() == 3);
   CHECK(evaluate_head(hc, f, cls).rmse.empty());
   CHECK_THROWS_AS(train_head(hr, f, cls, cfg), ShapeError);
+  // The demo's force + indenter labels as general targets.
+  const ProbeLabels pl{{7, 8}, {1, 2, 3, 4, 5, 6}, {0, 3}};
+  const HeadTargets ht = head_targets(pl, 4);
+  CHECK(ht.size() == 2);
+  CHECK(ht.value == pl.force);
+  CHECK(ht.label == pl.indenter);
+  CHECK_THROWS_AS(head_targets(pl, 3), DataError);
   CHECK_THROWS_AS(ProbeHead<float>(d, 3, 0, 1, 0), ConfigError);
   cfg.patience = 0;
   CHECK_THROWS_AS(train_head(hr, f, reg, cfg), ConfigError);
