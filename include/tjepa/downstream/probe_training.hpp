@@ -8,7 +8,7 @@
 //   indenter y[:, 3:]   are logits, loss = softmax cross-entropy
 //   L = L_force + class_weight · L_indenter
 //
-// The embeddings come from a Features object (the loop is a template over it):
+// The embeddings come from a Features object (downstream/features.hpp; the loop is a template over it):
 //   FrozenFeatures   precomputed embeddings [S, L, d] of a frozen encoder (embed_windows): only
 //                    the probe trains
 //   EncoderFeatures  a tokenizer + encoder run on the windows at every step and trained with the
@@ -29,6 +29,8 @@
 #include "tjepa/core/random.hpp"
 #include "tjepa/data/window_source.hpp"
 #include "tjepa/downstream/cross_entropy.hpp"
+#include "tjepa/downstream/features.hpp"
+#include "tjepa/downstream/probe_head.hpp"
 #include "tjepa/downstream/metrics.hpp"
 #include "tjepa/model/attentive_probe.hpp"
 #include "tjepa/model/encoder.hpp"
@@ -65,6 +67,14 @@ struct ProbeLabels {
     return l;
   }
 };
+
+// The same labels as targets of a general ProbeHead (downstream/probe_head.hpp), trained with
+// early stopping by train_head: R = 3 force axes, C = num_classes indenter classes.
+inline HeadTargets head_targets(const ProbeLabels& l, int num_classes) {
+  HeadTargets t{force_axes, num_classes, l.force, l.indenter};
+  t.validate("head_targets");
+  return t;
+}
 
 // Per-axis standardization of the force targets, from the training labels only.
 struct ForceScaler {
@@ -131,38 +141,6 @@ struct ForceIndenterProbe {
   int outputs() const { return force_axes + num_classes; }
 };
 
-// Precomputed embeddings of a frozen encoder: [S, L, d].
-template <class T>
-class FrozenFeatures {
- public:
-  FrozenFeatures(AlignedVector<T> embeddings, int tokens, int dim)
-      : x_(std::move(embeddings)), L_(tokens), d_(dim) {
-    require<ShapeError>(tokens > 0 && dim > 0 && x_.size() % (static_cast<std::size_t>(tokens) * dim) == 0,
-                        "FrozenFeatures: ", x_.size(), " values, expected a multiple of tokens*dim = ", tokens, "*",
-                        dim);
-  }
-  int tokens() const { return L_; }
-  int dim() const { return d_; }
-  int size() const { return static_cast<int>(x_.size() / (static_cast<std::size_t>(L_) * d_)); }
-  // All embeddings, [size, tokens, dim].
-  std::span<const T> embeddings() const { return x_; }
-  ParamSet<T>* trainable() { return nullptr; }
-
-  // x [B, L, d] of samples ids.
-  const T* forward(std::span<const std::int64_t> ids, bool /*train*/) {
-    const std::size_t per = static_cast<std::size_t>(L_) * d_;
-    T* out = detail::grow(batch_, ids.size() * per);
-    for (std::size_t b = 0; b < ids.size(); ++b)
-      std::copy_n(x_.data() + static_cast<std::size_t>(ids[b]) * per, per, out + b * per);
-    return out;
-  }
-  void backward(const T* /*dx*/) {}
-
- private:
-  AlignedVector<T> x_, batch_;
-  int L_, d_;
-};
-
 // Each token's resting embedding, removed from frozen features before a probe: with μ_n the mean of
 // token n's embedding over the training windows and μ̄ the mean of μ_n over tokens,
 //   x[s, n, :] ← x[s, n, :] − μ_n + μ̄          for every window s of `train` and of each `other`
@@ -201,67 +179,6 @@ void center_token_embeddings(std::span<T> train, std::span<const std::span<T>> o
   apply(train);
 }
 
-// A tokenizer + encoder over the windows of a source, trained with the probe (end to end).
-// Sample s is window windows[s] of the source. Windows are float, so T is float.
-template <class T>
-class EncoderFeatures {
-  static_assert(std::is_same_v<T, float>, "EncoderFeatures: windows are float");
-
- public:
-  EncoderFeatures(ParamSet<T>& params, const Tokenizer& tokenizer, const Encoder& encoder, const WindowSource& src,
-                  std::vector<std::int64_t> windows, double drop_path = 0.0)
-      : ps_(params), tok_(tokenizer), enc_(encoder), src_(src), windows_(std::move(windows)), drop_path_(drop_path) {
-    require<ShapeError>(tokenizer.num_tokens == encoder.num_tokens() &&
-                            static_cast<std::size_t>(tokenizer.width) == static_cast<std::size_t>(src.length()) * src.axes(),
-                        "EncoderFeatures: tokenizer of ", tokenizer.num_tokens, " tokens × ", tokenizer.width,
-                        " values, encoder of ", encoder.num_tokens(), " tokens, windows of ", src.taxels(), " taxels × ",
-                        src.length() * src.axes(), " values");
-  }
-  int tokens() const { return enc_.num_tokens(); }
-  int dim() const { return enc_.dim(); }
-  int size() const { return static_cast<int>(windows_.size()); }
-  ParamSet<T>* trainable() { return &ps_; }
-
-  const T* forward(std::span<const std::int64_t> ids, bool train) {
-    ids_.clear();
-    for (std::int64_t s : ids) ids_.push_back(windows_.at(static_cast<std::size_t>(s)));
-    src_.gather(ids_, batch_);
-    const int B = static_cast<int>(ids.size()), N = tokens(), d = dim();
-    const std::size_t M = static_cast<std::size_t>(B) * N * d;
-    windows_to_tokens(batch_, rows_);
-    const T* x = rows_.data();
-    T* tokens_buf = detail::grow(tokens_, M);
-    T* out = detail::grow(out_, M);
-    tok_.forward(ps_, x, B, tokens_buf, train ? &tok_cache_ : nullptr, ws_);
-    EncoderOptions opt;
-    if (train) opt.drop_path = DropPath{drop_path_, noise_()};
-    enc_.forward(ps_, tokens_buf, B, nullptr, N, out, train ? &enc_cache_ : nullptr, ws_, opt);
-    return out;
-  }
-  // dx [B, L, d]: the probe's gradient at the embeddings of the last training forward.
-  void backward(const T* dx) {
-    const std::size_t M = static_cast<std::size_t>(enc_cache_.B) * tokens() * dim();
-    T* dtok = detail::grow(dtokens_, M);
-    std::fill(dtok, dtok + M, T(0));
-    enc_.backward(ps_, dx, dtok, enc_cache_, ws_);
-    tok_.backward(ps_, dtok, static_cast<T*>(nullptr), tok_cache_, ws_);
-  }
-
- private:
-  ParamSet<T>& ps_;
-  const Tokenizer& tok_;
-  const Encoder& enc_;
-  const WindowSource& src_;
-  std::vector<std::int64_t> windows_, ids_;
-  double drop_path_;
-  Rng noise_{0x656e64326564ull};  // "end2end": drop-path seeds
-  WindowBatch batch_;
-  Workspace<T> ws_;
-  TokenizerCache<T> tok_cache_;
-  EncoderCache<T> enc_cache_;
-  AlignedVector<T> rows_, tokens_, out_, dtokens_;
-};
-
 // What a training step reports to the progress callback.
 struct ProbeStepInfo {
   std::int64_t step = 0, total_steps = 0;
@@ -282,19 +199,7 @@ namespace detail {
 template <class T>
 std::array<double, 2> probe_loss(const T* y, const float* force_std, const int* labels, int B, int C,
                                  double class_weight, T* dy) {
-  const int out = force_axes + C;
-  double f = 0;
-  for (int b = 0; b < B; ++b)
-    for (int a = 0; a < force_axes; ++a) {
-      const std::size_t i = static_cast<std::size_t>(b) * out + a;
-      const double e = static_cast<double>(y[i]) - force_std[static_cast<std::size_t>(b) * force_axes + a];
-      f += e * e;
-      if (dy) dy[i] = static_cast<T>(2.0 * e / (B * force_axes));
-    }
-  f /= B * force_axes;
-  const double ce = softmax_cross_entropy(y + force_axes, static_cast<std::size_t>(out), labels, B, C,
-                                          dy ? dy + force_axes : nullptr, static_cast<std::size_t>(out), class_weight);
-  return {f, ce};
+  return head_loss(y, static_cast<std::size_t>(force_axes + C), force_std, labels, B, force_axes, C, class_weight, dy);
 }
 }  // namespace detail
 
@@ -465,14 +370,8 @@ ProbeLrChoice select_probe_lr(std::span<const T> embeddings, int L, int d, const
                        ", expected in (0, 1)");
   require<ShapeError>(embeddings.size() == static_cast<std::size_t>(S) * per, "select_probe_lr: ", embeddings.size(),
                       " values for ", S, " samples of ", L, "x", d);
-  const int n_val = static_cast<int>(std::lround(val_fraction * S));
-  require<DataError>(n_val >= 1 && S - n_val >= 2, "select_probe_lr: ", S, " samples cannot be split ", 1 - val_fraction,
-                     " / ", val_fraction, " into training and validation");
-  std::vector<std::int64_t> order(static_cast<std::size_t>(S));
-  for (int i = 0; i < S; ++i) order[static_cast<std::size_t>(i)] = i;
-  Rng(cfg.seed, 0x76616c6964ull /* "valid" */).shuffle(std::span<std::int64_t>(order));
-  const std::span<const std::int64_t> fit_ids(order.data(), static_cast<std::size_t>(S - n_val));
-  const std::span<const std::int64_t> val_ids(order.data() + (S - n_val), static_cast<std::size_t>(n_val));
+  const ValidationSplit split = split_for_validation(S, val_fraction, cfg.seed);
+  const std::span<const std::int64_t> fit_ids(split.fit), val_ids(split.validation);
   auto rows = [&](std::span<const std::int64_t> ids) {
     AlignedVector<T> x(ids.size() * per);
     for (std::size_t i = 0; i < ids.size(); ++i)

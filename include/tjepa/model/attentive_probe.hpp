@@ -5,6 +5,7 @@
 //   q₁ = q₀ + CrossAttn(q₀, norm1(x))                  3 heads, keys = the sample's L tokens
 //   q₂ = q₁ + Mlp(norm2(q₁))                           [B, d]
 //   y  = head.fc2(gelu(head.fc1(q₂)))                  [B, out]
+// pool() stops at q₂ (the sequence head pools each window so); out_dim 0 builds no head.
 // PyTorch names (prefix "probe." by default): query_tokens; cross_attention_block.norm1.*,
 // cross_attention_block.xattn.{q,kv,proj}.*, cross_attention_block.norm2.*,
 // cross_attention_block.mlp.{fc1,fc2}.*; head.fc1.*, head.fc2.*.
@@ -46,24 +47,27 @@ struct AttentiveProbe {
   AttentiveProbe() = default;
   template <class T>
   AttentiveProbe(ParamSet<T>& ps, const ProbeConfig& c, const std::string& prefix = "probe.") : config(c) {
-    require<ConfigError>(c.out_dim > 0 && c.head_hidden > 0, "AttentiveProbe: out_dim ", c.out_dim,
-                         ", head_hidden ", c.head_hidden, ", expected > 0");
+    require<ConfigError>(c.out_dim >= 0 && (c.out_dim == 0 || c.head_hidden > 0), "AttentiveProbe: out_dim ",
+                         c.out_dim, ", head_hidden ", c.head_hidden, ", expected out_dim >= 0 (0: no head) and head_hidden > 0");
     const std::string blk = prefix + "cross_attention_block.";
     query = ps.add(prefix + "query_tokens", {1, 1, c.dim}, ParamInit::trunc_normal);
     norm1 = NormParams::add(ps, blk + "norm1", c.dim, c.eps);
     xattn = CrossAttention::add(ps, blk + "xattn", c.dim, c.heads, true);
     norm2 = NormParams::add(ps, blk + "norm2", c.dim, c.eps);
     mlp = Mlp::add(ps, blk + "mlp", c.dim, static_cast<int>(c.dim * c.mlp_ratio), true);
-    head = Mlp::add(ps, prefix + "head", c.dim, c.head_hidden, true, c.out_dim);
+    if (c.out_dim > 0) head = Mlp::add(ps, prefix + "head", c.dim, c.head_hidden, true, c.out_dim);
   }
 
-  // x [B, L, d] → y [B, out]. key_valid [B, L] or nullptr. cache == nullptr: inference.
+  bool has_head() const { return config.out_dim > 0; }
+
+  // The pooling alone (the sequence head pools each window this way): x [B, L, d] → q₂ [B, d].
+  // key_valid [B, L] or nullptr. cache == nullptr: inference.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* y,
-               std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
-    check_params(ps, head.fc2.weight, "AttentiveProbe::forward");
-    require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::forward: B = ", B, ", L = ", L, ", expected > 0");
-    const int d = config.dim, H = config.heads, hid = mlp.hidden(), hh = head.hidden();
+  void pool(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* q2,
+            std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
+    check_params(ps, mlp.fc2.weight, "AttentiveProbe::pool");
+    require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::pool: B = ", B, ", L = ", L, ", expected > 0");
+    const int d = config.dim, H = config.heads, hid = mlp.hidden();
     const std::size_t M = std::size_t(B) * L;
     auto buf = [&](AlignedVector<T> ProbeCache<T>::*field, AlignedVector<T>& scratch, std::size_t n) {
       return detail::grow(cache ? cache->*field : scratch, n);
@@ -90,11 +94,22 @@ struct AttentiveProbe {
     T* qn = buf(&ProbeCache<T>::qn, ws.rows2, std::size_t(B) * d);
     norm2.forward(ps, q1, qn, cache ? detail::grow(cache->mean2, std::size_t(B)) : nullptr,
                   cache ? detail::grow(cache->rstd2, std::size_t(B)) : nullptr, B);
-    T* q2 = buf(&ProbeCache<T>::q2, ws.dx, std::size_t(B) * d);
     std::copy(q1, q1 + std::size_t(B) * d, q2);
     T* h = buf(&ProbeCache<T>::h, ws.hidden, std::size_t(B) * hid);
     mlp.forward(ps, qn, h, detail::grow(ws.hidden2, std::size_t(B) * hid), q2, B, true);
-    T* z = buf(&ProbeCache<T>::z, ws.dhidden, std::size_t(B) * hh);
+  }
+
+  // x [B, L, d] → y [B, out]. key_valid [B, L] or nullptr. cache == nullptr: inference.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* y,
+               std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
+    require<ConfigError>(has_head(), "AttentiveProbe::forward: the probe was built without a head (out_dim 0)");
+    check_params(ps, head.fc2.weight, "AttentiveProbe::forward");
+    require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::forward: B = ", B, ", L = ", L, ", expected > 0");
+    const int d = config.dim, hh = head.hidden();
+    T* q2 = detail::grow(cache ? cache->q2 : ws.dx, std::size_t(B) * d);
+    pool(ps, x, B, L, key_valid, q2, cache, ws);
+    T* z = detail::grow(cache ? cache->z : ws.dhidden, std::size_t(B) * hh);
     T* zact = detail::grow(ws.hidden2, std::size_t(B) * hh);
     head.forward(ps, q2, z, zact, y, B, false);
   }
@@ -102,18 +117,31 @@ struct AttentiveProbe {
   // dy [B, out] → parameter gradients and dx [B, L, d] += (may be nullptr).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, std::type_identity_t<T>* dx, const ProbeCache<T>& c, Workspace<T>& ws) const {
+    require<ConfigError>(has_head(), "AttentiveProbe::backward: the probe was built without a head (out_dim 0)");
     check_params(ps, head.fc2.weight, "AttentiveProbe::backward");
     require<ConfigError>(c.B > 0, "AttentiveProbe::backward: the cache holds no forward pass");
-    const int d = config.dim, B = c.B, L = c.L, hid = mlp.hidden(), hh = head.hidden();
-    const std::size_t M = std::size_t(B) * L;
-    const std::uint8_t* kv = c.key_valid.empty() ? nullptr : c.key_valid.data();
+    const int d = config.dim, B = c.B, hh = head.hidden();
     T* dq = detail::grow(ws.dx, std::size_t(B) * d);  // running ∂L/∂q
     std::fill(dq, dq + std::size_t(B) * d, T(0));
-    const std::size_t hmax = std::size_t(B) * std::max(hid, hh);
-    T* s1 = detail::grow(ws.hidden2, hmax);
-    T* s2 = detail::grow(ws.dhidden, hmax);
+    T* s1 = detail::grow(ws.hidden2, std::size_t(B) * hh);
+    T* s2 = detail::grow(ws.dhidden, std::size_t(B) * hh);
     // y = head(q₂)
     head.backward(ps, dy, c.q2.data(), c.z.data(), s1, s2, dq, B);
+    pool_backward(ps, dq, dx, c, ws);
+  }
+
+  // dq [B, d] holds ∂L/∂q₂ of the last pool (it is used as scratch and left changed) → parameter
+  // gradients and dx [B, L, d] += (may be nullptr).
+  template <class T>
+  void pool_backward(ParamSet<T>& ps, std::type_identity_t<T>* dq, std::type_identity_t<T>* dx, const ProbeCache<T>& c,
+                     Workspace<T>& ws) const {
+    check_params(ps, mlp.fc2.weight, "AttentiveProbe::pool_backward");
+    require<ConfigError>(c.B > 0, "AttentiveProbe::pool_backward: the cache holds no forward pass");
+    const int d = config.dim, B = c.B, L = c.L, hid = mlp.hidden();
+    const std::size_t M = std::size_t(B) * L;
+    const std::uint8_t* kv = c.key_valid.empty() ? nullptr : c.key_valid.data();
+    T* s1 = detail::grow(ws.hidden2, std::size_t(B) * hid);
+    T* s2 = detail::grow(ws.dhidden, std::size_t(B) * hid);
     // q₂ = q₁ + mlp(qn), qn = norm2(q₁): dq already holds the identity path
     T* dqn = detail::grow(ws.dln, std::size_t(B) * d);
     std::fill(dqn, dqn + std::size_t(B) * d, T(0));

@@ -1,0 +1,134 @@
+#pragma once
+// Early stopping, the training loop every downstream head of the evaluation protocol shares
+// (attentive probe heads, the sequence head, the end-to-end baseline):
+//   - a seeded split holds out validation_fraction of the training samples (split_for_validation)
+//   - AdamW on the trainable parts, mini-batches of the fitting samples in a seeded order per
+//     epoch; the learning rate rises linearly from lr/10 over warmup_epochs, then stays at lr
+//     (a cosine would need the epoch count that early stopping decides)
+//   - after each epoch the validation loss; the parameters of the epoch with the lowest one are
+//     kept, and the loop stops after `patience` epochs without a new lowest, or at max_epochs
+//   - at the end the kept parameters are restored in every part (the optimizer's moments are not)
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <vector>
+
+#include "tjepa/core/error.hpp"
+#include "tjepa/core/random.hpp"
+#include "tjepa/model/param_set.hpp"
+#include "tjepa/model/prefixed_params.hpp"
+#include "tjepa/optim/adamw.hpp"
+#include "tjepa/optim/clip.hpp"
+
+namespace tjepa {
+
+struct HeadTrainConfig {
+  int max_epochs = 100;
+  int patience = 10;                 // epochs without a lower validation loss before stopping
+  double validation_fraction = 0.2;  // of the training samples, held out for early stopping
+  int batch = 32;
+  double lr = 1e-3;
+  int warmup_epochs = 1;
+  double weight_decay = 0.05;
+  double class_weight = 1.0;         // weight of the cross-entropy against the regression MSE
+  double clip_grad_norm = 10.0;
+  std::uint64_t seed = 0;            // head init, split and data order
+
+  void validate() const {
+    require<ConfigError>(max_epochs > 0, "HeadTrainConfig: max_epochs = ", max_epochs, ", expected > 0");
+    require<ConfigError>(patience > 0, "HeadTrainConfig: patience = ", patience, ", expected > 0");
+    require<ConfigError>(validation_fraction > 0 && validation_fraction < 1, "HeadTrainConfig: validation_fraction = ",
+                         validation_fraction, ", expected in (0, 1)");
+    require<ConfigError>(batch > 0, "HeadTrainConfig: batch = ", batch, ", expected > 0");
+    require<ConfigError>(lr > 0 && std::isfinite(lr), "HeadTrainConfig: lr = ", lr, ", expected finite > 0");
+    require<ConfigError>(warmup_epochs >= 0, "HeadTrainConfig: warmup_epochs = ", warmup_epochs, ", expected >= 0");
+    require<ConfigError>(weight_decay >= 0, "HeadTrainConfig: weight_decay = ", weight_decay, ", expected >= 0");
+    require<ConfigError>(class_weight >= 0, "HeadTrainConfig: class_weight = ", class_weight, ", expected >= 0");
+    require<ConfigError>(clip_grad_norm > 0, "HeadTrainConfig: clip_grad_norm = ", clip_grad_norm, ", expected > 0");
+  }
+};
+
+// The learning curve of one early-stopped training.
+struct HeadTrainResult {
+  std::vector<double> train_loss;       // [epochs run] mean training loss per epoch
+  std::vector<double> validation_loss;  // [epochs run] validation loss after each epoch
+  int best_epoch = -1;                  // 0-based epoch whose parameters were restored
+  double best_validation = std::numeric_limits<double>::infinity();
+  int epochs() const { return static_cast<int>(validation_loss.size()); }
+};
+
+// Samples 0..S−1 split into fitting and validation ids: a seeded shuffle, the last
+// round(fraction·S) are the validation ids. Both parts are non-empty (fitting at least 2).
+struct ValidationSplit {
+  std::vector<std::int64_t> fit, validation;
+};
+
+inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_t seed) {
+  require<ConfigError>(fraction > 0 && fraction < 1, "split_for_validation: fraction = ", fraction,
+                       ", expected in (0, 1)");
+  const int n_val = static_cast<int>(std::lround(fraction * S));
+  require<DataError>(n_val >= 1 && S - n_val >= 2, "split_for_validation: ", S, " samples cannot be split ",
+                     1 - fraction, " / ", fraction, " into fitting and validation samples");
+  std::vector<std::int64_t> order(static_cast<std::size_t>(S));
+  for (int i = 0; i < S; ++i) order[static_cast<std::size_t>(i)] = i;
+  Rng(seed, 0x76616c6964ull /* "valid" */).shuffle(std::span<std::int64_t>(order));
+  ValidationSplit s;
+  s.fit.assign(order.begin(), order.end() - n_val);
+  s.validation.assign(order.end() - n_val, order.end());
+  return s;
+}
+
+// The loop at the top of this file. step(ids) runs forward and backward on a batch of fitting
+// ids (the parts' gradients are zeroed before) and returns its loss; validate() returns the
+// validation loss of the current parameters.
+template <class T, class Step, class Validate>
+HeadTrainResult train_with_early_stopping(const std::vector<PrefixedParams<T>>& parts,
+                                          std::span<const std::int64_t> fit_ids, const HeadTrainConfig& cfg,
+                                          Step&& step, Validate&& validate) {
+  cfg.validate();
+  require<DataError>(!fit_ids.empty(), "train_with_early_stopping: no fitting samples");
+  AdamW<T> opt(parts);
+  const int S = static_cast<int>(fit_ids.size()), B = std::min(cfg.batch, S);
+  const std::int64_t per_epoch = S / B, warmup = static_cast<std::int64_t>(cfg.warmup_epochs) * per_epoch;
+  std::vector<AlignedVector<T>> best(parts.size());
+  std::vector<std::int64_t> order(fit_ids.begin(), fit_ids.end());
+  HeadTrainResult r;
+  std::int64_t k = 0;
+  for (int e = 0; e < cfg.max_epochs; ++e) {
+    std::copy(fit_ids.begin(), fit_ids.end(), order.begin());
+    Rng(cfg.seed, 0x65706f6368ull /* "epoch" */ + static_cast<std::uint64_t>(e)).shuffle(std::span<std::int64_t>(order));
+    double total = 0;
+    for (std::int64_t i = 0; i < per_epoch; ++i, ++k) {
+      for (const auto& p : parts) p.params->zero_grad();
+      const double loss = step(std::span<const std::int64_t>(order.data() + i * B, static_cast<std::size_t>(B)));
+      require<NumericError>(std::isfinite(loss), "train_with_early_stopping: epoch ", e, ", step ", i, ": the loss is ",
+                            loss);
+      clip_grad_norm<T>(parts, cfg.clip_grad_norm);
+      const double lr = k < warmup ? cfg.lr * (0.1 + 0.9 * static_cast<double>(k + 1) / static_cast<double>(warmup))
+                                   : cfg.lr;
+      opt.step(lr, cfg.weight_decay);
+      total += loss;
+    }
+    const double v = validate();
+    require<NumericError>(!std::isnan(v), "train_with_early_stopping: epoch ", e, ": the validation loss is NaN");
+    r.train_loss.push_back(total / static_cast<double>(per_epoch));
+    r.validation_loss.push_back(v);
+    if (v < r.best_validation) {
+      r.best_validation = v;
+      r.best_epoch = e;
+      for (std::size_t j = 0; j < parts.size(); ++j) {
+        const auto vals = parts[j].params->values();
+        best[j].assign(vals.begin(), vals.end());
+      }
+    } else if (e - r.best_epoch >= cfg.patience) {
+      break;
+    }
+  }
+  if (r.best_epoch >= 0)
+    for (std::size_t j = 0; j < parts.size(); ++j) std::ranges::copy(best[j], parts[j].params->values().begin());
+  return r;
+}
+
+}  // namespace tjepa

@@ -1,0 +1,270 @@
+#pragma once
+// General attentive-probe heads of the evaluation protocol (REFERENCE §6): one AttentiveProbe on
+// a window's token embeddings with R regression outputs and/or C class logits, trained with early
+// stopping (downstream/early_stopping.hpp) on frozen embeddings (FrozenFeatures) or end to end
+// with the encoder (EncoderFeatures).
+//
+//   y [B, R + C] = probe(x [B, L, d])
+//   y[:, 0:R]  regress standardized targets (v − mean) / std (ColumnScaler, fitted on the
+//              fitting samples only), loss = mean over B·R of the squared error
+//   y[:, R:]   logits, loss = softmax cross-entropy (downstream/cross_entropy.hpp)
+//   loss = L_regression + class_weight · L_class         (the validation loss is the same)
+// Tasks of the protocol: force (R = 3, C = 0), object class (R = 0, C = objects), both at once
+// (the demo's ForceIndenterProbe: R = 3, C = 4).
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "tjepa/core/error.hpp"
+#include "tjepa/downstream/cross_entropy.hpp"
+#include "tjepa/downstream/early_stopping.hpp"
+#include "tjepa/downstream/features.hpp"
+#include "tjepa/downstream/metrics.hpp"
+#include "tjepa/model/attentive_probe.hpp"
+#include "tjepa/model/init.hpp"
+
+namespace tjepa {
+
+// What a head predicts for S samples.
+struct HeadTargets {
+  int regression = 0;         // R outputs per sample
+  int classes = 0;            // C classes (0: no classification; else >= 2)
+  std::vector<float> value;   // [S, R]
+  std::vector<int> label;     // [S] in [0, C) (empty when C = 0)
+
+  int size() const {
+    return regression > 0 ? static_cast<int>(value.size() / static_cast<std::size_t>(regression))
+                          : static_cast<int>(label.size());
+  }
+  void validate(const char* who) const {
+    require<ConfigError>(regression >= 0 && (classes == 0 || classes > 1) && regression + classes > 0, who,
+                         ": regression = ", regression, ", classes = ", classes,
+                         ", expected R >= 0, C = 0 or C >= 2, and R + C > 0");
+    const int S = size();
+    require<ShapeError>(regression == 0 || value.size() == static_cast<std::size_t>(S) * regression, who, ": ",
+                        value.size(), " regression values, expected a multiple of R = ", regression);
+    require<ShapeError>(classes == 0 ? label.empty() : label.size() == static_cast<std::size_t>(S), who, ": ",
+                        label.size(), " labels for ", S, " samples, expected ", classes == 0 ? 0 : S);
+    for (int c : label) require<DataError>(c >= 0 && c < classes, who, ": label ", c, ", expected in [0, ", classes, ")");
+    for (float v : value) require<DataError>(std::isfinite(v), who, ": regression value ", v, ", expected finite");
+  }
+};
+
+// Per-column standardization of regression targets, from the given rows only.
+struct ColumnScaler {
+  std::vector<double> mean, std;  // [cols]
+
+  // values [*, cols]; rows: the sample ids to fit on (at least 2).
+  static ColumnScaler fit(std::span<const float> values, int cols, std::span<const std::int64_t> rows) {
+    require<DataError>(rows.size() > 1, "ColumnScaler::fit: ", rows.size(), " rows, expected at least 2");
+    ColumnScaler s;
+    s.mean.assign(static_cast<std::size_t>(cols), 0.0);
+    s.std.assign(static_cast<std::size_t>(cols), 0.0);
+    const auto n = static_cast<double>(rows.size());
+    for (int j = 0; j < cols; ++j) {
+      double m = 0, q = 0;
+      for (std::int64_t r : rows) m += values[static_cast<std::size_t>(r) * cols + j];
+      m /= n;
+      for (std::int64_t r : rows) {
+        const double e = values[static_cast<std::size_t>(r) * cols + j] - m;
+        q += e * e;
+      }
+      s.mean[static_cast<std::size_t>(j)] = m;
+      s.std[static_cast<std::size_t>(j)] = std::max(std::sqrt(q / n), 1e-6);
+    }
+    return s;
+  }
+  double standardize(double v, int j) const {
+    return (v - mean[static_cast<std::size_t>(j)]) / std[static_cast<std::size_t>(j)];
+  }
+  double restore(double z, int j) const { return z * std[static_cast<std::size_t>(j)] + mean[static_cast<std::size_t>(j)]; }
+};
+
+namespace detail {
+// y [B, R + C] (row stride ldy) → dy [B, R + C] (overwritten, may be nullptr) and the two losses:
+// the MSE against standardized targets z [B, R] and the cross-entropy against labels [B].
+template <class T, class Z>
+std::array<double, 2> head_loss(const T* y, std::size_t ldy, const Z* z, const int* labels, int B, int R, int C,
+                                double class_weight, T* dy) {
+  double f = 0;
+  for (int b = 0; b < B; ++b)
+    for (int a = 0; a < R; ++a) {
+      const std::size_t i = static_cast<std::size_t>(b) * ldy + a;
+      const double e = static_cast<double>(y[i]) - static_cast<double>(z[static_cast<std::size_t>(b) * R + a]);
+      f += e * e;
+      if (dy) dy[i] = static_cast<T>(2.0 * e / (static_cast<double>(B) * R));
+    }
+  if (R > 0) f /= static_cast<double>(B) * R;
+  const double ce = C > 0 ? softmax_cross_entropy(y + R, ldy, labels, B, C, dy ? dy + R : nullptr, ldy, class_weight)
+                          : 0.0;
+  return {f, ce};
+}
+}  // namespace detail
+
+// An attentive probe with R + C outputs, its parameters and the standardization of its
+// regression targets.
+template <class T>
+struct ProbeHead {
+  ParamSet<T> params;
+  AttentiveProbe probe;
+  ColumnScaler scaler;
+  int regression = 0, classes = 0;
+
+  // head_hidden 0: dim. Parameters "probe.*" initialized from seed.
+  ProbeHead(int dim, int heads, int regression_, int classes_, std::uint64_t seed, int head_hidden = 0)
+      : regression(regression_), classes(classes_) {
+    require<ConfigError>(regression_ >= 0 && (classes_ == 0 || classes_ > 1) && regression_ + classes_ > 0,
+                         "ProbeHead: regression = ", regression_, ", classes = ", classes_,
+                         ", expected R >= 0, C = 0 or C >= 2, and R + C > 0");
+    ProbeConfig c;
+    c.dim = dim;
+    c.heads = heads;
+    c.head_hidden = head_hidden > 0 ? head_hidden : dim;
+    c.out_dim = outputs();
+    probe = AttentiveProbe(params, c);
+    params.allocate();
+    init_params(params, seed);
+    scaler.mean.assign(static_cast<std::size_t>(regression), 0.0);
+    scaler.std.assign(static_cast<std::size_t>(regression), 1.0);
+  }
+  int outputs() const { return regression + classes; }
+};
+
+// Raw outputs y [ids, R + C] (regression still standardized) at inference, batch by batch.
+template <class T, class Features>
+std::vector<T> head_outputs(const ProbeHead<T>& head, Features& features, std::span<const std::int64_t> ids,
+                            int batch = 64) {
+  require<ConfigError>(batch > 0, "head_outputs: batch = ", batch, ", expected > 0");
+  const int out = head.outputs(), L = features.tokens();
+  std::vector<T> y(ids.size() * static_cast<std::size_t>(out));
+  Workspace<T> ws;
+  for (std::size_t s0 = 0; s0 < ids.size(); s0 += static_cast<std::size_t>(batch)) {
+    const int B = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(batch), ids.size() - s0));
+    const T* x = features.forward(ids.subspan(s0, static_cast<std::size_t>(B)), false);
+    head.probe.forward(head.params, x, B, L, nullptr, y.data() + s0 * static_cast<std::size_t>(out), nullptr, ws);
+  }
+  return y;
+}
+
+// The training loss (regression MSE on standardized targets + class_weight · cross-entropy) of
+// the head on samples ids.
+template <class T, class Features>
+double head_objective(const ProbeHead<T>& head, Features& features, const HeadTargets& targets,
+                      std::span<const std::int64_t> ids, double class_weight, int batch = 64) {
+  require<DataError>(!ids.empty(), "head_objective: no samples");
+  const std::vector<T> y = head_outputs(head, features, ids, batch);
+  const int R = head.regression, B = static_cast<int>(ids.size());
+  std::vector<double> z(ids.size() * static_cast<std::size_t>(R));
+  std::vector<int> lab(head.classes > 0 ? ids.size() : 0);
+  for (std::size_t b = 0; b < ids.size(); ++b) {
+    const auto s = static_cast<std::size_t>(ids[b]);
+    for (int a = 0; a < R; ++a) z[b * R + a] = head.scaler.standardize(targets.value[s * R + a], a);
+    if (head.classes > 0) lab[b] = targets.label[s];
+  }
+  const auto [f, ce] = detail::head_loss(y.data(), static_cast<std::size_t>(head.outputs()), z.data(), lab.data(), B, R,
+                                         head.classes, class_weight, static_cast<T*>(nullptr));
+  return f + class_weight * ce;
+}
+
+// Trains head (and the features' encoder, if trainable) on samples 0..S−1 of targets with early
+// stopping: the scaler is fitted on the fitting split, the validation split is held out of
+// training; at return the parameters are those of the best validation epoch.
+template <class T, class Features>
+HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTargets& targets,
+                           const HeadTrainConfig& cfg) {
+  cfg.validate();
+  targets.validate("train_head");
+  const int S = targets.size(), R = head.regression, C = head.classes, out = head.outputs();
+  require<ShapeError>(targets.regression == R && targets.classes == C, "train_head: targets of R = ", targets.regression,
+                      ", C = ", targets.classes, ", the head has R = ", R, ", C = ", C);
+  require<ShapeError>(features.size() == S, "train_head: ", features.size(), " feature rows for ", S, " targets");
+  require<ShapeError>(features.dim() == head.probe.config.dim, "train_head: features of width ", features.dim(),
+                      ", the head expects ", head.probe.config.dim);
+  const ValidationSplit split = split_for_validation(S, cfg.validation_fraction, cfg.seed);
+  if (R > 0) head.scaler = ColumnScaler::fit(targets.value, R, split.fit);
+
+  std::vector<PrefixedParams<T>> parts{{"probe.", &head.params}};
+  if (ParamSet<T>* enc = features.trainable()) parts.push_back({"encoder.", enc});
+  const int L = features.tokens(), d = features.dim();
+  Workspace<T> ws;
+  ProbeCache<T> cache;
+  AlignedVector<T> y, dy, dx;
+  std::vector<double> z;
+  std::vector<int> lab;
+  auto step = [&](std::span<const std::int64_t> ids) {
+    const int B = static_cast<int>(ids.size());
+    z.resize(static_cast<std::size_t>(B) * R);
+    lab.resize(C > 0 ? static_cast<std::size_t>(B) : 0);
+    for (int b = 0; b < B; ++b) {
+      const auto s = static_cast<std::size_t>(ids[static_cast<std::size_t>(b)]);
+      for (int a = 0; a < R; ++a) z[static_cast<std::size_t>(b) * R + a] = head.scaler.standardize(targets.value[s * R + a], a);
+      if (C > 0) lab[static_cast<std::size_t>(b)] = targets.label[s];
+    }
+    T* yp = detail::grow(y, static_cast<std::size_t>(B) * out);
+    T* dyp = detail::grow(dy, static_cast<std::size_t>(B) * out);
+    const T* x = features.forward(ids, true);
+    head.probe.forward(head.params, x, B, L, nullptr, yp, &cache, ws);
+    const auto [f, ce] = detail::head_loss(yp, static_cast<std::size_t>(out), z.data(), lab.data(), B, R, C,
+                                           cfg.class_weight, dyp);
+    T* dxp = nullptr;
+    if (features.trainable()) {
+      dxp = detail::grow(dx, static_cast<std::size_t>(B) * L * d);
+      std::fill(dxp, dxp + static_cast<std::size_t>(B) * L * d, T(0));
+    }
+    head.probe.backward(head.params, dyp, dxp, cache, ws);
+    if (dxp) features.backward(dxp);
+    return f + cfg.class_weight * ce;
+  };
+  auto validate = [&] { return head_objective(head, features, targets, split.validation, cfg.class_weight); };
+  return train_with_early_stopping<T>(parts, split.fit, cfg, step, validate);
+}
+
+// Predictions [S, R + C] for samples 0..S−1: regression in the targets' units, then the logits.
+template <class T, class Features>
+std::vector<T> predict_head(const ProbeHead<T>& head, Features& features, int S, int batch = 64) {
+  require<ShapeError>(S > 0 && S <= features.size(), "predict_head: S = ", S, ", expected in [1, ", features.size(), "]");
+  std::vector<std::int64_t> ids(static_cast<std::size_t>(S));
+  for (int s = 0; s < S; ++s) ids[static_cast<std::size_t>(s)] = s;
+  std::vector<T> y = head_outputs(head, features, ids, batch);
+  const int out = head.outputs();
+  for (int s = 0; s < S; ++s)
+    for (int a = 0; a < head.regression; ++a) {
+      T& v = y[static_cast<std::size_t>(s) * out + a];
+      v = static_cast<T>(head.scaler.restore(v, a));
+    }
+  return y;
+}
+
+// Held-out metrics of a head.
+struct HeadMetrics {
+  std::vector<double> rmse;     // [R] per regression output, in the targets' units
+  double accuracy = 0;          // top-1 (C > 0)
+  double majority_accuracy = 0; // chance level: the most frequent class
+  int samples = 0;
+};
+
+template <class T, class Features>
+HeadMetrics evaluate_head(const ProbeHead<T>& head, Features& features, const HeadTargets& targets, int batch = 64) {
+  targets.validate("evaluate_head");
+  const int S = targets.size();
+  require<ShapeError>(S > 0 && features.size() == S, "evaluate_head: ", features.size(), " feature rows for ", S,
+                      " targets, expected equal and > 0");
+  require<ShapeError>(targets.regression == head.regression && targets.classes == head.classes,
+                      "evaluate_head: targets of R = ", targets.regression, ", C = ", targets.classes,
+                      ", the head has R = ", head.regression, ", C = ", head.classes);
+  const std::vector<T> y = predict_head(head, features, S, batch);
+  const auto out = static_cast<std::size_t>(head.outputs());
+  HeadMetrics m;
+  m.samples = S;
+  if (head.regression > 0) m.rmse = rmse_per_column(y.data(), out, targets.value.data(), S, head.regression);
+  if (head.classes > 0) {
+    m.accuracy = accuracy(y.data() + head.regression, out, targets.label.data(), S, head.classes);
+    m.majority_accuracy = majority_accuracy(targets.label.data(), S, head.classes);
+  }
+  return m;
+}
+
+}  // namespace tjepa

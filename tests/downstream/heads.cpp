@@ -1,0 +1,489 @@
+// Evaluation building blocks of the downstream protocol: Welch's one-sided t-test (the Student-t
+// CDF against closed forms and table quantiles), the ridge baseline on hand-crafted features,
+// attentive-probe heads with early stopping, and the sequence head (gradients against central
+// differences, causal attention against a plain-loop reference, training).
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#endif
+#include <doctest/doctest.h>
+
+#include <tjepa/tjepa.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <tuple>
+#include <type_traits>
+#include <vector>
+
+#include "../model/gradcheck.hpp"
+
+using namespace tjepa;
+
+TEST_SUITE("downstream") {
+
+TEST_CASE("student_t_cdf: closed forms at df 1 2 3 4 and table quantiles") {
+  const double pi = std::numbers::pi;
+  for (double t : {-30.0, -3.0, -1.0, -0.2, 0.0, 0.5, 1.7, 4.0, 25.0}) {
+    INFO("t = ", t);
+    CHECK(student_t_cdf(t, 1) == doctest::Approx(0.5 + std::atan(t) / pi).epsilon(1e-12));  // Cauchy
+    CHECK(student_t_cdf(t, 2) == doctest::Approx(0.5 + t / (2 * std::sqrt(2 + t * t))).epsilon(1e-12));
+    const double u = t / std::sqrt(3.0);
+    CHECK(student_t_cdf(t, 3) == doctest::Approx(0.5 + (u / (1 + u * u) + std::atan(u)) / pi).epsilon(1e-12));
+    const double w = 1 + t * t / 4;
+    CHECK(student_t_cdf(t, 4) ==
+          doctest::Approx(0.5 + 0.375 * t / std::sqrt(w) * (1 - t * t / (12 * w))).epsilon(1e-12));
+    CHECK(student_t_cdf(-t, 7.3) == doctest::Approx(1 - student_t_cdf(t, 7.3)).epsilon(1e-13));
+  }
+  // Upper quantiles of Student's t tables (three decimals): one-sided p at the quantile.
+  CHECK(1 - student_t_cdf(2.015, 5) == doctest::Approx(0.05).epsilon(2e-3));
+  CHECK(1 - student_t_cdf(1.812, 10) == doctest::Approx(0.05).epsilon(2e-3));
+  CHECK(1 - student_t_cdf(2.764, 10) == doctest::Approx(0.01).epsilon(2e-3));
+  CHECK(1 - student_t_cdf(12.706, 1) == doctest::Approx(0.025).epsilon(1e-4));
+  CHECK(1 - student_t_cdf(63.657, 1) == doctest::Approx(0.005).epsilon(1e-4));
+  CHECK(1 - student_t_cdf(2.086, 20) == doctest::Approx(0.025).epsilon(2e-3));
+  // Large df: the normal distribution.
+  CHECK(student_t_cdf(1.959963984540054, 1e9) == doctest::Approx(0.975).epsilon(1e-8));
+  CHECK(student_t_cdf(1.959963984540054, INFINITY) == doctest::Approx(0.975).epsilon(1e-12));
+  CHECK(student_t_cdf(1.959963984540054, 5e6) == doctest::Approx(0.975).epsilon(1e-7));
+  CHECK(student_t_cdf(1.959963984540054, 5e6) < student_t_cdf(1.959963984540054, 2e7));
+  // Tiny df and far tails stay in [0, 1] and monotone.
+  CHECK(student_t_cdf(1e6, 0.3) <= 1.0);
+  CHECK(student_t_cdf(1e6, 0.3) > student_t_cdf(1e3, 0.3));
+  CHECK(student_t_cdf(-1e6, 0.3) >= 0.0);
+  CHECK_THROWS_AS(student_t_cdf(1.0, 0.0), ConfigError);
+  CHECK_THROWS_AS(student_t_cdf(NAN, 3.0), ConfigError);
+}
+
+TEST_CASE("regularized_incomplete_beta: closed forms with non-integer parameters") {
+  for (double x : {0.0, 0.01, 0.3, 0.5, 0.77, 0.999, 1.0}) {
+    INFO("x = ", x);
+    CHECK(regularized_incomplete_beta(1.0, 2.5, x) == doctest::Approx(1 - std::pow(1 - x, 2.5)).epsilon(1e-12));
+    CHECK(regularized_incomplete_beta(3.7, 1.0, x) == doctest::Approx(std::pow(x, 3.7)).epsilon(1e-12));
+    CHECK(regularized_incomplete_beta(0.5, 0.5, x) ==
+          doctest::Approx(2 / std::numbers::pi * std::asin(std::sqrt(x))).epsilon(1e-12));
+  }
+  CHECK_THROWS_AS(regularized_incomplete_beta(0.0, 1.0, 0.5), ConfigError);
+  CHECK_THROWS_AS(regularized_incomplete_beta(1.0, 1.0, 1.5), ConfigError);
+}
+
+TEST_CASE("welch_t_test: statistic and df by hand and both alternatives") {
+  const std::vector<double> a{1, 2, 3, 4}, b{3, 5, 7};
+  // mean 2.5, s² 5/3 over 4; mean 5, s² 4 over 3
+  const double va = 5.0 / 3 / 4, vb = 4.0 / 3, se2 = va + vb;
+  const double t = (2.5 - 5) / std::sqrt(se2), df = se2 * se2 / (va * va / 3 + vb * vb / 2);
+  const WelchResult less = welch_t_test(a, b, Alternative::less);
+  CHECK(less.t == doctest::Approx(t).epsilon(1e-14));
+  CHECK(less.df == doctest::Approx(df).epsilon(1e-14));
+  CHECK(less.df == doctest::Approx(3.2347).epsilon(1e-4));
+  CHECK(less.p == doctest::Approx(student_t_cdf(t, df)).epsilon(1e-14));
+  // df lies between 3 and 4: so does the p-value between the integer-df closed forms.
+  const double p3 = student_t_cdf(t, 3), p4 = student_t_cdf(t, 4);
+  CHECK(less.p < p3);
+  CHECK(less.p > p4);
+  CHECK(less.p > 0.05);
+  CHECK(less.p < 0.1);
+  const WelchResult greater = welch_t_test(a, b, Alternative::greater);
+  CHECK(greater.t == less.t);
+  CHECK(greater.p == doctest::Approx(1 - less.p).epsilon(1e-12));
+  // Swapping the samples mirrors t.
+  const WelchResult swapped = welch_t_test(b, a, Alternative::greater);
+  CHECK(swapped.t == doctest::Approx(-t).epsilon(1e-14));
+  CHECK(swapped.p == doctest::Approx(less.p).epsilon(1e-12));
+  // Equal variances and sizes: Welch's df is 2(n − 1).
+  const WelchResult eq = welch_t_test(std::vector<double>{1, 2, 3}, std::vector<double>{2, 3, 4});
+  CHECK(eq.df == doctest::Approx(4.0).epsilon(1e-14));
+  CHECK(eq.t == doctest::Approx(-1 / std::sqrt(2.0 / 3)).epsilon(1e-14));
+  const SampleSummary s = summarize(a);
+  CHECK(s.mean == 2.5);
+  CHECK(s.sd == doctest::Approx(std::sqrt(5.0 / 3)).epsilon(1e-15));
+}
+
+TEST_CASE("welch_t_test: equal samples and zero variance give defined results") {
+  const std::vector<double> a{0.3, 0.5, 0.4};
+  const WelchResult same = welch_t_test(a, a);
+  CHECK(same.t == 0.0);
+  CHECK(same.p == doctest::Approx(0.5).epsilon(1e-14));
+  const std::vector<double> c1{1, 1, 1}, c2{2, 2, 2};
+  const WelchResult lo = welch_t_test(c1, c2, Alternative::less);
+  CHECK(std::isinf(lo.t));
+  CHECK(lo.t < 0);
+  CHECK(lo.p == 0.0);
+  CHECK(lo.df == 4.0);
+  CHECK(welch_t_test(c1, c2, Alternative::greater).p == 1.0);
+  CHECK(welch_t_test(c2, c1, Alternative::greater).p == 0.0);
+  CHECK(welch_t_test(c1, c1).p == 0.5);
+  // One sample constant: df is the other's n − 1.
+  const WelchResult one = welch_t_test(c1, std::vector<double>{1, 2, 3, 4});
+  CHECK(one.df == doctest::Approx(3.0).epsilon(1e-14));
+  CHECK_THROWS_AS(welch_t_test(std::vector<double>{1}, c2), DataError);
+  CHECK_THROWS_AS(welch_t_test(c1, std::vector<double>{1, NAN}), DataError);
+}
+
+TEST_CASE("window_features: pad sums and taxel means per axis") {
+  // 2 windows, 3 taxels in groups {0, 1, 0}, 2 frames, 2 axes; x[b, n, t, a] = 100b + 10n + t + 0.5a.
+  WindowBatch wb;
+  std::tie(wb.batch, wb.taxels, wb.length, wb.axes) = std::tuple{2, 3, 2, 2};
+  wb.x.resize(24);
+  for (int b = 0; b < 2; ++b)
+    for (int n = 0; n < 3; ++n)
+      for (int t = 0; t < 2; ++t)
+        for (int a = 0; a < 2; ++a) wb.x[((b * 3 + n) * 2 + t) * 2 + a] = float(100 * b + 10 * n + t + 0.5 * a);
+  const std::vector<int> group{0, 1, 0};
+  const Eigen::MatrixXd f = window_features(wb, group, 2);
+  REQUIRE(f.rows() == 2);
+  REQUIRE(f.cols() == 2 * 2 + 3 * 2);
+  for (int b = 0; b < 2; ++b)
+    for (int a = 0; a < 2; ++a) {
+      auto mean = [&](int n) { return 100.0 * b + 10 * n + 0.5 + 0.5 * a; };
+      CHECK(f(b, 0 * 2 + a) == doctest::Approx(mean(0) + mean(2)));
+      CHECK(f(b, 1 * 2 + a) == doctest::Approx(mean(1)));
+      for (int n = 0; n < 3; ++n) CHECK(f(b, 4 + n * 2 + a) == doctest::Approx(mean(n)));
+    }
+  CHECK_THROWS_AS(window_features(wb, std::vector<int>{0, 1}, 2), ShapeError);
+  CHECK_THROWS_AS(window_features(wb, std::vector<int>{0, 2, 0}, 2), DataError);
+}
+
+namespace {
+// n rows of p features ~ N(mean_j, scale_j²) (scales and offsets differ, to exercise the
+// standardization).
+Eigen::MatrixXd random_features(int n, int p, Rng& rng) {
+  Eigen::MatrixXd X(n, p);
+  for (int j = 0; j < p; ++j)
+    for (int i = 0; i < n; ++i) X(i, j) = 3.0 * j - 2 + (0.5 + j) * rng.normal(0.0, 1.0);
+  return X;
+}
+}  // namespace
+
+TEST_CASE("fit_ridge: recovers a known linear map and picks the small lambda without noise") {
+  Rng rng(5);
+  const int n = 80, p = 6, k = 3;
+  const Eigen::MatrixXd X = random_features(n, p, rng);
+  Eigen::MatrixXd W(p, k);
+  for (int i = 0; i < p; ++i)
+    for (int j = 0; j < k; ++j) W(i, j) = rng.normal(0.0, 1.0);
+  const Eigen::RowVectorXd b = Eigen::RowVectorXd::LinSpaced(k, -1.0, 2.0);
+  const Eigen::MatrixXd Y = (X * W).rowwise() + b;
+  const std::vector<double> lambdas{10.0, 1e-8, 1.0, 1e-3};
+  const RidgeModel m = fit_ridge(X, Y, lambdas, 0.25, 1);
+  CHECK(m.lambda == 1e-8);
+  REQUIRE(m.validation.size() == 4);
+  CHECK(m.validation[1] < m.validation[3]);
+  CHECK(m.validation[3] < m.validation[2]);
+  CHECK(m.validation[2] < m.validation[0]);
+  const Eigen::MatrixXd Xt = random_features(20, p, rng);
+  const Eigen::MatrixXd Yt = (Xt * W).rowwise() + b;
+  CHECK((predict(m, Xt) - Yt).cwiseAbs().maxCoeff() < 1e-6);
+  // Same seed, same model; the dual form (more features than rows) solves the same problem.
+  const RidgeModel again = fit_ridge(X, Y, lambdas, 0.25, 1);
+  CHECK(again.weight == m.weight);
+  const Eigen::MatrixXd Xw = random_features(10, 30, rng);
+  const Eigen::MatrixXd Yw = random_features(10, 2, rng);
+  const RidgeModel dual = fit_ridge_at(Xw, Yw, 0.7);
+  const Eigen::MatrixXd Z = (Xw.rowwise() - dual.mean).array().rowwise() / dual.scale.array();
+  Eigen::MatrixXd A = Z.transpose() * Z;
+  A.diagonal().array() += 0.7;
+  const Eigen::MatrixXd primal = A.ldlt().solve(Z.transpose() * (Yw.rowwise() - dual.bias));
+  CHECK((dual.weight - primal).cwiseAbs().maxCoeff() < 1e-9);
+  // A constant feature is left unscaled and gets no weight.
+  Eigen::MatrixXd Xc = X;
+  Xc.col(2).setConstant(4.0);
+  const RidgeModel c = fit_ridge_at(Xc, Y, 1.0);
+  CHECK(c.scale(2) == 1.0);
+  CHECK(c.weight.row(2).cwiseAbs().maxCoeff() == 0.0);
+  CHECK_THROWS_AS(fit_ridge(X, Y, std::vector<double>{}, 0.25, 1), ConfigError);
+  CHECK_THROWS_AS(fit_ridge(X, Y, lambdas, 1.0, 1), ConfigError);
+  CHECK_THROWS_AS(fit_ridge(X, Y, std::vector<double>{0.0}, 0.25, 1), ConfigError);
+  CHECK_THROWS_AS(fit_ridge(X, Y.topRows(10), lambdas, 0.25, 1), ShapeError);
+}
+
+TEST_CASE("fit_ridge_classifier: separable classes by argmax of one-hot ridge") {
+  Rng rng(9);
+  const int n = 90, p = 4, C = 3;
+  Eigen::MatrixXd X(n, p);
+  std::vector<int> y(n);
+  for (int i = 0; i < n; ++i) {
+    y[i] = i % C;
+    for (int j = 0; j < p; ++j) X(i, j) = rng.normal(0.0, 0.3) + (j == y[i] ? 4.0 : 0.0);
+  }
+  const std::vector<double> lambdas{1e-3, 1.0, 100.0};
+  const RidgeModel m = fit_ridge_classifier(X, y, C, lambdas, 0.2, 3);
+  CHECK(m.outputs() == C);
+  for (double v : m.validation) CHECK(v < 1.0 / 18);  // no validation error at any lambda
+  const std::vector<int> c = predict_class(m, X);
+  int hit = 0;
+  for (int i = 0; i < n; ++i) hit += c[i] == y[i];
+  CHECK(hit == n);
+  y[0] = 3;
+  CHECK_THROWS_AS(fit_ridge_classifier(X, y, C, lambdas, 0.2, 3), DataError);
+}
+
+namespace {
+// S samples of L tokens whose direction encodes two regression targets (F, 2F − 3) and a class
+// (a LayerNorm comes first in the probe: the information is in the direction, not the scale).
+struct EncodedSamples {
+  AlignedVector<float> x;  // [S, L, d]
+  HeadTargets targets;
+};
+EncodedSamples encoded_samples(int S, int L, int d, std::uint64_t seed, bool random_targets = false) {
+  Rng rng(seed);
+  EncodedSamples e{AlignedVector<float>(static_cast<std::size_t>(S) * L * d, 0.0f), {2, 4, {}, {}}};
+  for (int i = 0; i < S; ++i) {
+    const float F = static_cast<float>(rng.uniform(0, 10));
+    const int cls = static_cast<int>(rng.below(4));
+    for (int l = 0; l < L; ++l) {
+      float* t = e.x.data() + (static_cast<std::size_t>(i) * L + l) * d;
+      t[0] = F + static_cast<float>(rng.normal(0.0, 0.1));
+      t[1] = 10.0f - F;
+      t[2 + cls] = 10.0f;
+      t[6 + l % (d - 6)] += 1.0f;
+    }
+    const float G = random_targets ? static_cast<float>(rng.normal(0.0, 3.0)) : 2 * F - 3;
+    e.targets.value.insert(e.targets.value.end(), {random_targets ? static_cast<float>(rng.uniform(0, 10)) : F, G});
+    e.targets.label.push_back(random_targets ? static_cast<int>(rng.below(4)) : cls);
+  }
+  return e;
+}
+
+HeadTrainConfig train_config(int max_epochs, int patience, int batch, double lr) {
+  HeadTrainConfig c;
+  c.max_epochs = max_epochs;
+  c.patience = patience;
+  c.batch = batch;
+  c.lr = lr;
+  return c;
+}
+}  // namespace
+
+TEST_CASE("train_head: learns regression and classes with early stopping and restores the best epoch") {
+  const int S = 160, L = 2, d = 12;
+  const auto [x, targets] = encoded_samples(S, L, d, 4);
+  FrozenFeatures<float> f(x, L, d);
+  HeadTrainConfig cfg = train_config(60, 8, 16, 1e-2);
+  ProbeHead<float> head(d, 3, 2, 4, 0);
+  CHECK(head.params.contains("probe.head.fc2.weight"));
+  const HeadTrainResult r = train_head(head, f, targets, cfg);
+  REQUIRE(r.epochs() >= 1);
+  CHECK(r.epochs() <= cfg.max_epochs);
+  CHECK(r.train_loss.size() == r.validation_loss.size());
+  const auto best = std::min_element(r.validation_loss.begin(), r.validation_loss.end());
+  CHECK(r.best_epoch == best - r.validation_loss.begin());
+  CHECK(r.best_validation == *best);
+  CHECK(r.best_validation < 0.3 * r.validation_loss.front());
+  // The restored parameters give the best epoch's validation loss.
+  const ValidationSplit split = split_for_validation(S, cfg.validation_fraction, cfg.seed);
+  CHECK(head_objective(head, f, targets, split.validation, cfg.class_weight) ==
+        doctest::Approx(r.best_validation).epsilon(1e-6));
+  const HeadMetrics m = evaluate_head(head, f, targets);
+  REQUIRE(m.rmse.size() == 2);
+  CHECK(m.rmse[0] < 0.25 * 2.9);  // 2.9: the constant predictor's RMSE on F ~ U(0, 10)
+  CHECK(m.rmse[1] < 0.25 * 5.8);
+  CHECK(m.accuracy > 0.9);
+  CHECK(m.majority_accuracy < 0.5);
+  // Same seed, same head.
+  ProbeHead<float> again(d, 3, 2, 4, 0);
+  const HeadTrainResult r2 = train_head(again, f, targets, cfg);
+  CHECK(r2.validation_loss == r.validation_loss);
+  CHECK(std::equal(head.params.values().begin(), head.params.values().end(), again.params.values().begin()));
+  // Regression only and classification only.
+  HeadTargets reg{2, 0, targets.value, {}}, cls{0, 4, {}, targets.label};
+  ProbeHead<float> hr(d, 3, 2, 0, 1), hc(d, 3, 0, 4, 1);
+  cfg.max_epochs = 3;
+  CHECK(train_head(hr, f, reg, cfg).epochs() == 3);
+  CHECK(train_head(hc, f, cls, cfg).epochs() == 3);
+  CHECK(evaluate_head(hc, f, cls).rmse.empty());
+  CHECK_THROWS_AS(train_head(hr, f, cls, cfg), ShapeError);
+  // The demo's force + indenter labels as general targets.
+  const ProbeLabels pl{{7, 8}, {1, 2, 3, 4, 5, 6}, {0, 3}};
+  const HeadTargets ht = head_targets(pl, 4);
+  CHECK(ht.size() == 2);
+  CHECK(ht.value == pl.force);
+  CHECK(ht.label == pl.indenter);
+  CHECK_THROWS_AS(head_targets(pl, 3), DataError);
+  CHECK_THROWS_AS(ProbeHead<float>(d, 3, 0, 1, 0), ConfigError);
+  cfg.patience = 0;
+  CHECK_THROWS_AS(train_head(hr, f, reg, cfg), ConfigError);
+}
+
+TEST_CASE("train_head: stops after patience epochs without improvement on unlearnable targets") {
+  const int S = 60, L = 1, d = 12;
+  const auto [x, targets] = encoded_samples(S, L, d, 8, true);
+  FrozenFeatures<float> f(x, L, d);
+  const HeadTrainConfig cfg = train_config(200, 4, 8, 1e-2);
+  ProbeHead<float> head(d, 3, 2, 4, 2);
+  const HeadTrainResult r = train_head(head, f, targets, cfg);
+  CHECK(r.epochs() < cfg.max_epochs);
+  CHECK(r.epochs() == r.best_epoch + 1 + cfg.patience);
+  for (int e = r.best_epoch + 1; e < r.epochs(); ++e) CHECK(r.validation_loss[e] >= r.best_validation);
+}
+
+TEST_CASE("train_head end to end: the encoder trains and is restored to its best epoch") {
+  // A simulated 4x4 grid skin of 4 pads, preprocessed as the magnetic sensor is; the head
+  // regresses the force of the windows with a contact.
+  SimulatedSkin sim(SkinGeometry::from_layout(
+                        layouts::grid_skin({.rows = 4, .cols = 4, .pitch = 4.0, .group_rows = 2, .group_cols = 2}).layout),
+                    SimConfig{}, 3);
+  Preprocessor pre(PreprocessConfig::magnetic());
+  pre.fit_baseline(sim.record_baseline(100));
+  SimRecording rec = sim.record(600);
+  pre.fit(rec.recording);
+  const WindowSource src(rec.recording, WindowSpec{5}, rec.labels, pre);
+  const std::vector<std::int64_t> contact = src.windows_with_contact(2);
+  HeadTargets targets{3, 0, {}, {}};
+  for (std::int64_t w : contact) {
+    const auto force = src.label(w).force;
+    targets.value.insert(targets.value.end(), force.begin(), force.end());
+  }
+  REQUIRE(targets.size() >= 16);
+
+  ParamSet<float> ps;
+  const Tokenizer tok = Tokenizer::per_taxel(ps, 16, 3, 5, 8);
+  const Encoder enc(ps, EncoderConfig{.num_tokens = 16, .dim = 8, .depth = 1, .heads = 2});
+  ps.allocate();
+  init_params(ps, 1);
+  const std::vector<float> before(ps.values().begin(), ps.values().end());
+  EncoderFeatures<float> feats(ps, tok, enc, src, contact);
+  ProbeHead<float> head(8, 2, 3, 0, 0);
+  const HeadTrainConfig cfg = train_config(4, 2, 8, 1e-3);
+  const HeadTrainResult r = train_head(head, feats, targets, cfg);
+  REQUIRE(r.best_epoch >= 0);
+  double moved = 0;
+  for (std::size_t i = 0; i < before.size(); ++i) moved += std::abs(ps.values()[i] - before[i]);
+  CHECK(moved > 0);
+  const ValidationSplit split = split_for_validation(targets.size(), cfg.validation_fraction, cfg.seed);
+  CHECK(head_objective(head, feats, targets, split.validation, cfg.class_weight) ==
+        doctest::Approx(r.best_validation).epsilon(1e-5));
+}
+
+TEST_CASE_TEMPLATE("CausalSelfAttention: against a plain-loop causal softmax", T, float, double) {
+  const int B = 2, L = 7, d = 10, H = 2, Dh = 5;
+  ParamSet<T> ps;
+  const CausalSelfAttention attn = CausalSelfAttention::add(ps, "attn", d, H, true);
+  ps.allocate();
+  init_params(ps, 3);
+  Rng rng(4);
+  std::vector<T> x(std::size_t(B) * L * d), y(x.size(), T(0)), qkv(std::size_t(B) * L * 3 * d), att(x.size()),
+      lse(std::size_t(B) * H * L);
+  test::fill_normal(x, rng);
+  for (auto& v : ps.values()) v = static_cast<T>(v * 20);  // weights of O(0.4): peaked softmax rows
+  Workspace<T> ws;
+  attn.forward(ps, x.data(), B, L, qkv.data(), att.data(), lse.data(), y.data(), false, ws);
+  // Reference on the same qkv: row l of head h attends to rows 0..l.
+  const double tol = std::is_same_v<T, float> ? 2e-5 : 1e-12;
+  for (int b = 0; b < B; ++b)
+    for (int h = 0; h < H; ++h)
+      for (int l = 0; l < L; ++l) {
+        auto at = [&](int row, int part, int c) { return double(qkv[(std::size_t(b) * L + row) * 3 * d + part * d + h * Dh + c]); };
+        std::vector<double> s(std::size_t(l) + 1);
+        double mx = -1e300, sum = 0;
+        for (int j = 0; j <= l; ++j) {
+          double dot = 0;
+          for (int c = 0; c < Dh; ++c) dot += at(l, 0, c) * at(j, 1, c);
+          s[std::size_t(j)] = dot / std::sqrt(double(Dh));
+          mx = std::max(mx, s[std::size_t(j)]);
+        }
+        for (auto& v : s) sum += (v = std::exp(v - mx));
+        for (int c = 0; c < Dh; ++c) {
+          double o = 0;
+          for (int j = 0; j <= l; ++j) o += s[std::size_t(j)] / sum * at(j, 2, c);
+          CHECK(double(att[(std::size_t(b) * L + l) * d + h * Dh + c]) == doctest::Approx(o).epsilon(tol).scale(1));
+        }
+        CHECK(double(lse[(std::size_t(b) * H + h) * L + l]) == doctest::Approx(mx + std::log(sum)).epsilon(tol).scale(1));
+      }
+}
+
+TEST_CASE("SequenceHead: gradients of inputs and every parameter / causal predictions") {
+  const int B = 2, L = 4, N = 3, d = 6, P = 3;
+  ParamSet<double> ps;
+  const SequenceHead sh(ps, SequenceHeadConfig{d, 2, L, P, 2.0, 1e-6});
+  ps.allocate();
+  test::randomize(ps, 21);
+  for (const char* name : {"pool.query_tokens", "pool.cross_attention_block.xattn.kv.weight", "pos_embed",
+                           "blocks.0.norm1.weight", "blocks.0.attn.qkv.weight", "blocks.0.attn.proj.bias",
+                           "blocks.0.mlp.fc2.weight", "norm.bias", "head.weight", "head.bias"})
+    CHECK(ps.contains(name));
+  CHECK_FALSE(ps.contains("pool.head.fc1.weight"));
+  Rng rng(22);
+  auto x = test::normal_vector(std::size_t(B) * L * N * d, rng);
+  auto w = test::normal_vector(std::size_t(B) * L * P, rng);
+  std::vector<double> y(w.size());
+  SequenceCache<double> cache, scratch;
+  Workspace<double> ws;
+  auto loss = [&] {
+    sh.forward(ps, x.data(), B, N, y.data(), scratch, ws);
+    return test::dot(w.data(), y.data(), y.size());
+  };
+  ps.zero_grad();
+  sh.forward(ps, x.data(), B, N, y.data(), cache, ws);
+  std::vector<double> dx(x.size(), 0.0);
+  sh.backward(ps, w.data(), dx.data(), cache, ws);
+  CHECK(test::gradient_error(x.data(), dx.data(), x.size(), loss, 96) < test::grad_tolerance);
+  test::check_param_gradients(ps, loss);
+  // A second backward adds the same gradient again.
+  const std::vector<double> g1(ps.grads().begin(), ps.grads().end()), dx1 = dx;
+  sh.forward(ps, x.data(), B, N, y.data(), cache, ws);
+  sh.backward(ps, w.data(), dx.data(), cache, ws);
+  for (std::size_t i = 0; i < g1.size(); ++i) REQUIRE(ps.grads()[i] == doctest::Approx(2 * g1[i]).epsilon(1e-12));
+  for (std::size_t i = 0; i < dx.size(); ++i) REQUIRE(dx[i] == doctest::Approx(2 * dx1[i]).epsilon(1e-12));
+  // The prediction after window l does not see later windows: change window 2 of sequence 1 (not
+  // by a constant shift, which LayerNorm ignores).
+  const std::vector<double> y0 = y;
+  const std::size_t changed = std::size_t(L) + 2;
+  for (int i = 0; i < N * d; ++i) x[changed * N * d + i] += rng.normal(0.0, 1.0);
+  sh.forward(ps, x.data(), B, N, y.data(), scratch, ws);
+  for (std::size_t r = 0; r < std::size_t(B) * L; ++r)
+    for (int p = 0; p < P; ++p) {
+      INFO("row ", r);
+      if (r < changed)
+        CHECK(y[r * P + p] == y0[r * P + p]);
+      else
+        CHECK(y[r * P + p] != y0[r * P + p]);
+    }
+}
+
+TEST_CASE("train_sequence_head: learns a running sum of the windows with early stopping") {
+  // Windows i encode a value F_i in their tokens' direction; sequence q is windows q, q+1, ..., and
+  // its targets after window l are (F_l, running mean of F over 0..l, 0).
+  const int S = 120, L = 5, N = 2, d = 12, Q = S - L + 1;
+  Rng rng(31);
+  AlignedVector<float> x(std::size_t(S) * N * d, 0.0f);
+  std::vector<float> F(S);
+  for (int i = 0; i < S; ++i) {
+    F[std::size_t(i)] = static_cast<float>(rng.uniform(0, 10));
+    for (int n = 0; n < N; ++n) {
+      float* t = x.data() + (std::size_t(i) * N + n) * d;
+      t[0] = F[std::size_t(i)];
+      t[1] = 10 - F[std::size_t(i)];
+      t[2 + n] = 3;
+    }
+  }
+  SequenceTargets targets{L, 3, {}, {}};
+  for (int q = 0; q < Q; ++q) {
+    double run = 0;
+    for (int l = 0; l < L; ++l) {
+      targets.window.push_back(q + l);
+      run += F[std::size_t(q + l)];
+      targets.value.insert(targets.value.end(), {F[std::size_t(q + l)], static_cast<float>(run / (l + 1)), 0.0f});
+    }
+  }
+  FrozenFeatures<float> f(x, N, d);
+  const HeadTrainConfig cfg = train_config(60, 8, 8, 3e-3);
+  SequenceModel<float> model(SequenceHeadConfig{d, 3, L, 3, 2.0, 1e-6}, 0);
+  const HeadTrainResult r = train_sequence_head(model, f, targets, cfg);
+  REQUIRE(r.epochs() >= 1);
+  CHECK(r.best_validation < 0.3 * r.validation_loss.front());
+  const ValidationSplit split = split_for_validation(Q, cfg.validation_fraction, cfg.seed);
+  CHECK(sequence_objective(model, f, targets, split.validation) == doctest::Approx(r.best_validation).epsilon(1e-6));
+  const std::vector<double> rmse = evaluate_sequence_head(model, f, targets);
+  REQUIRE(rmse.size() == 3);
+  CHECK(rmse[0] < 0.3 * 2.9);  // 2.9: the constant predictor on F ~ U(0, 10)
+  CHECK(rmse[1] < 0.5 * 1.6);  // the running mean's spread is smaller (1.6 at l = 2)
+  CHECK(rmse[2] < 1e-3);       // a constant target: the scaler's mean
+  SequenceModel<float> again(SequenceHeadConfig{d, 3, L, 3, 2.0, 1e-6}, 0);
+  CHECK(train_sequence_head(again, f, targets, cfg).validation_loss == r.validation_loss);
+  targets.window[3] = S;
+  CHECK_THROWS_AS(train_sequence_head(again, f, targets, cfg), DataError);
+}
+
+}  // TEST_SUITE
