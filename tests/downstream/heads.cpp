@@ -2,10 +2,6 @@
 // CDF against closed forms and table quantiles), the ridge baseline on hand-crafted features,
 // attentive-probe heads with early stopping, and the sequence head (gradients against central
 // differences, causal attention against a plain-loop reference, training).
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#endif
 #include <doctest/doctest.h>
 
 #include <tjepa/tjepa.hpp>
