@@ -50,6 +50,7 @@
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/masks/local.hpp"
 #include "tjepa/masks/svg.hpp"
+#include "tjepa/masks/uniform_masking.hpp"
 
 #include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
@@ -86,6 +87,7 @@
 #include "tjepa/train/jepa_model.hpp"
 #include "tjepa/train/jepa_step.hpp"
 #include "tjepa/train/loss.hpp"
+#include "tjepa/train/mae.hpp"
 #include "tjepa/train/trainer.hpp"
 
 #include "tjepa/downstream/cross_entropy.hpp"
