@@ -73,6 +73,11 @@ struct MaeConfig : ContextEncoderConfig {
   // reference uses 0.3); the decoder has none.
   double drop_path = 0.0;
   double clip_grad_norm = 10.0;  // as the JEPA step, for the same budget
+  // The decoder's position rows at the masked tokens: its own learned table (decoder.pos_embed
+  // [1, N, pd], false) or the encoder's (true; needs decoder.dim = encoder.dim, and the rows then
+  // get the decoder's gradient too). The encoder's rows put the masked tokens in the coordinates
+  // the visible embeddings were built in; an own table must first learn to agree with them.
+  bool decoder_pos_from_encoder = false;
 
   // Tactile-JEPA's reference encoder (ViT-Tiny) with the default decoder and masking.
   static MaeConfig reference(int num_tokens, int in_dim, int axes = 1) {
@@ -102,6 +107,8 @@ struct MaeConfig : ContextEncoderConfig {
     require<ConfigError>(drop_path >= 0.0 && drop_path < 1.0, "MaeConfig: drop_path = ", drop_path,
                          ", expected in [0, 1)");
     require<ConfigError>(clip_grad_norm > 0.0, "MaeConfig: clip_grad_norm = ", clip_grad_norm, ", expected > 0");
+    require<ConfigError>(!decoder_pos_from_encoder || decoder.dim == encoder.dim, "MaeConfig: decoder.dim = ",
+                         decoder.dim, " with decoder_pos_from_encoder, expected encoder.dim = ", encoder.dim);
   }
 
   nlohmann::json to_json() const {
@@ -111,6 +118,7 @@ struct MaeConfig : ContextEncoderConfig {
     j["norm_targets"] = norm_targets;
     j["drop_path"] = drop_path;
     j["clip_grad_norm"] = clip_grad_norm;
+    j["decoder_pos_from_encoder"] = decoder_pos_from_encoder;
     return j;
   }
 };
@@ -123,7 +131,7 @@ class MaeModel {
   Tokenizer tokenizer;
   Encoder encoder;
   Predictor decoder;
-  PositionTable decoder_pos;  // decoder_params' pos_embed [1, N, pd]
+  PositionTable decoder_pos;  // decoder_params' pos_embed [1, N, pd]; none with decoder_pos_from_encoder
 
   // Builds the modules and initializes them as REFERENCE §4 (seeded). The encoder's values are
   // those of JepaModel(c, seed).context for the same encoder config and seed: both methods start
@@ -133,7 +141,8 @@ class MaeModel {
     config.decoder.out_dim = c.token_width();
     add_context_encoder(context, c, tokenizer, encoder);
     decoder = Predictor(decoder_params, config.decoder, "");
-    decoder_pos = PositionTable::add(decoder_params, "pos_embed", c.encoder.num_tokens, c.decoder.dim);
+    if (!c.decoder_pos_from_encoder)
+      decoder_pos = PositionTable::add(decoder_params, "pos_embed", c.encoder.num_tokens, c.decoder.dim);
     context.allocate();
     decoder_params.allocate();
     init_context_encoder(context, tokenizer, c, seed);
@@ -145,6 +154,14 @@ class MaeModel {
   void set_positions(std::span<const double> rows) {
     detail::check_position_rows(rows, num_tokens(), dim(), "MaeModel::set_positions");
     std::copy(rows.begin(), rows.end(), context.value(encoder.pos_embed()));
+  }
+
+  // The position rows [N, pd] the decoder adds at the masked tokens, and their gradient.
+  const T* decoder_pos_rows() const {
+    return config.decoder_pos_from_encoder ? context.value(encoder.pos_embed()) : decoder_params.value(decoder_pos.table);
+  }
+  T* decoder_pos_grad() {
+    return config.decoder_pos_from_encoder ? context.grad(encoder.pos_embed()) : decoder_params.grad(decoder_pos.table);
   }
 
   int num_tokens() const { return config.encoder.num_tokens; }
@@ -213,8 +230,8 @@ double mae_forward(MaeModel<T>& model, const T* x, int B, const MaskBatch& masks
   T* pred = detail::grow(w.pred, rows * W);
   T* y = detail::grow(w.y, rows * W);
   T* dpred = detail::grow(w.dpred, rows * W);
-  model.decoder.forward(model.decoder_params, z, B, K, model.decoder_params.value(model.decoder_pos.table), N, masked,
-                        B, M, pred, &w.decoder_cache, w.ws);
+  model.decoder.forward(model.decoder_params, z, B, K, model.decoder_pos_rows(), N, masked, B, M, pred,
+                        &w.decoder_cache, w.ws);
   gather_rows(y, x, static_cast<std::size_t>(N) * W, masked, B, M, W);
   if (model.config.norm_targets) normalize_rows(y, rows, W, mae_target_norm_eps);
   // dpred = ∂L/∂pred, kept for mae_backward.
@@ -232,8 +249,7 @@ void mae_backward(MaeModel<T>& model, MaeWorkspace<T>& w) {
   T* dz = detail::grow(w.dz, static_cast<std::size_t>(B) * K * d);
   std::fill(dz, dz + static_cast<std::size_t>(B) * K * d, T(0));
   // pred = decoder(φ, z, pos_dec): into φ, the decoder's position rows and dz.
-  model.decoder.backward(model.decoder_params, w.dpred.data(), dz, model.decoder_params.grad(model.decoder_pos.table),
-                         w.decoder_cache, w.ws);
+  model.decoder.backward(model.decoder_params, w.dpred.data(), dz, model.decoder_pos_grad(), w.decoder_cache, w.ws);
   // z = encoder(θ, tokens; visible), tokens = tokenizer(θ, x): the token buffer takes its gradient.
   T* dtokens = w.tokens.data();
   std::fill(dtokens, dtokens + static_cast<std::size_t>(B) * N * d, T(0));
