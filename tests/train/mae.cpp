@@ -51,16 +51,6 @@ std::vector<double> tiny_input(std::uint64_t seed, int B = 2, int N = 12, int W 
   return test::normal_vector(static_cast<std::size_t>(B) * N * W, rng);
 }
 
-// Runs a scope on one OpenMP thread: the tiny model's thousands of forward passes would spend
-// their time in thread barriers (results do not depend on the thread count).
-struct SingleThread {
-#if defined(_OPENMP)
-  int previous = omp_get_max_threads();
-  SingleThread() { omp_set_num_threads(1); }
-  ~SingleThread() { omp_set_num_threads(previous); }
-#endif
-};
-
 // S windows of a 6 x 6 sheet (36 taxels), m = 2 axes, τ = 2 frames, as tokenizer rows
 // [S, 36, 4] axis-major: a wide Gaussian blob of random centre, width and amplitude moving by a random
 // step between the two frames (first axis its pressure, second its change since the frame
@@ -91,7 +81,7 @@ std::vector<float> blob_windows(int S, std::uint64_t seed) {
 
 TEST_SUITE("train") {
   TEST_CASE("MAE loss: analytic gradient of every encoder and decoder parameter = central differences") {
-    const SingleThread one_thread;
+    const test::SingleThread one_thread;
     MaeConfig c = tiny_config();
     SUBCASE("plain targets") {}
     SUBCASE("per-token normalized targets (norm_pix_loss)") { c.norm_targets = true; }

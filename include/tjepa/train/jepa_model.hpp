@@ -43,6 +43,17 @@ struct ContextEncoderConfig {
   // amplitude. Init only: checkpoints are unaffected.
   double tokenizer_bias_std = 0.0;
 
+  // A config C (deriving from this one) at its defaults, with the reference's ViT-Tiny encoder
+  // for num_tokens tokens of in_dim = m·τ values, m = axes.
+  template <class C>
+  static C reference_for(int num_tokens, int in_dim, int axes) {
+    C c;
+    c.in_dim = in_dim;
+    c.axes = axes;
+    c.encoder.num_tokens = num_tokens;
+    return c;
+  }
+
   // `who` names the config in the messages ("JepaConfig", "MaeConfig").
   void validate_encoder(const char* who) const {
     require<ConfigError>(in_dim > 0, who, ": in_dim = ", in_dim, ", expected > 0");
@@ -80,11 +91,7 @@ struct JepaConfig : ContextEncoderConfig {
 
   // The reference (REFERENCE §4): ViT-Tiny encoder, 4-block predictor of width 192.
   static JepaConfig reference(int num_tokens, int in_dim, int axes = 1) {
-    JepaConfig c;
-    c.in_dim = in_dim;
-    c.axes = axes;
-    c.encoder.num_tokens = num_tokens;
-    return c;
+    return reference_for<JepaConfig>(num_tokens, in_dim, axes);
   }
 
   void validate() const {

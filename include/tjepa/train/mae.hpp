@@ -81,11 +81,7 @@ struct MaeConfig : ContextEncoderConfig {
 
   // Tactile-JEPA's reference encoder (ViT-Tiny) with the default decoder and masking.
   static MaeConfig reference(int num_tokens, int in_dim, int axes = 1) {
-    MaeConfig c;
-    c.in_dim = in_dim;
-    c.axes = axes;
-    c.encoder.num_tokens = num_tokens;
-    return c;
+    return reference_for<MaeConfig>(num_tokens, in_dim, axes);
   }
 
   // W: values per token row of the tokenizer's input (grouped tokens: the largest group's).
