@@ -52,6 +52,7 @@
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/masks/local.hpp"
 #include "tjepa/masks/svg.hpp"
+#include "tjepa/masks/uniform_masking.hpp"
 
 #include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/param_set.hpp"
@@ -90,6 +91,7 @@
 #include "tjepa/train/loss.hpp"
 #include "tjepa/train/config.hpp"
 #include "tjepa/train/trained_model.hpp"
+#include "tjepa/train/mae.hpp"
 #include "tjepa/train/trainer.hpp"
 
 #include "tjepa/downstream/causal_attention.hpp"

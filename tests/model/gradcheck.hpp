@@ -1,6 +1,7 @@
 #pragma once
 // Test helpers of the nn suite: the one central-difference gradient check every kernel and module
-// test uses, and random fills. Not a translation unit (tests/CMakeLists globs *.cpp only).
+// test uses, random fills, and a one-thread scope for tiny models. Not a translation unit
+// (tests/CMakeLists globs *.cpp only).
 #include <doctest/doctest.h>
 
 #include <algorithm>
@@ -9,6 +10,10 @@
 #include <functional>
 #include <string>
 #include <vector>
+
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
 
 #include <tjepa/core/random.hpp>
 #include <tjepa/model/param_set.hpp>
@@ -75,5 +80,15 @@ inline void randomize(ParamSet<double>& ps, std::uint64_t seed, double std = 0.3
     for (auto& v : ps.value_span(ps.id(i))) v = shift + rng.normal(0.0, std);
   }
 }
+
+// Runs a scope on one OpenMP thread: the tiny model's thousands of forward passes would spend
+// their time in thread barriers (results do not depend on the thread count).
+struct SingleThread {
+#if defined(_OPENMP)
+  int previous = omp_get_max_threads();
+  SingleThread() { omp_set_num_threads(1); }
+  ~SingleThread() { omp_set_num_threads(previous); }
+#endif
+};
 
 }  // namespace tjepa::test

@@ -55,16 +55,6 @@ MaskBatch tiny_masks() {
   return m;
 }
 
-// Runs a scope on one OpenMP thread: the tiny model's thousands of forward passes would spend
-// their time in thread barriers (results do not depend on the thread count).
-struct SingleThread {
-#if defined(_OPENMP)
-  int previous = omp_get_max_threads();
-  SingleThread() { omp_set_num_threads(1); }
-  ~SingleThread() { omp_set_num_threads(previous); }
-#endif
-};
-
 std::vector<double> tiny_input(std::uint64_t seed, int B = 2) {
   Rng rng(seed);
   return test::normal_vector(static_cast<std::size_t>(B) * 9 * 4, rng);
@@ -151,7 +141,7 @@ struct TempPath {
 
 TEST_SUITE("train") {
   TEST_CASE("full JEPA loss: analytic gradient of every trainable parameter = central differences") {
-    const SingleThread one_thread;
+    const test::SingleThread one_thread;
     auto model = random_model(1);
     const auto x = tiny_input(5);
     const MaskBatch masks = tiny_masks();

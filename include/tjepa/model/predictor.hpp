@@ -4,7 +4,8 @@
 //   e = ctx · W_inᵀ + b                                   ctx [Bc, K, d_in] → e [Bc, K, pd]
 //   x[b] = [ e[b mod Bc] ; pos[t[b, j]] + mask_token ]    x [B, K + t, pd], B = Bc · R
 //   x ← blocks(x)        (no biases inside, no drop-path)
-//   out[b, j] = norm(x[b, K + j]) · W_outᵀ + b           out [B, t, d_in], target rows only
+//   out[b, j] = norm(x[b, K + j]) · W_outᵀ + b           out [B, t, d_out], target rows only
+// d_out = d_in unless PredictorConfig::out_dim says otherwise (the MAE decoder: the token width).
 //
 // No position is added to the context embeddings (as in the reference). pos [N, pd] is a table
 // given by the caller: the target encoder's pos_embed by default (no gradient), or the context
@@ -14,7 +15,7 @@
 // PyTorch names (prefix "predictor." by default): input_projection.{weight [pd, d_in], bias},
 // mask_token [1, 1, pd] (zero init), blocks.{i}.norm1, blocks.{i}.attn.qkv.weight [3pd, pd],
 // blocks.{i}.attn.proj.weight, blocks.{i}.norm2, blocks.{i}.mlp.fc1.weight, blocks.{i}.mlp.fc2.weight,
-// norm.*, output_projection.{weight [d_in, pd], bias}.
+// norm.*, output_projection.{weight [d_out, pd], bias}.
 #include <algorithm>
 #include <string>
 #include <type_traits>
@@ -33,6 +34,10 @@ struct PredictorConfig {
   double mlp_ratio = 4.0;
   bool bias = false;  // biases inside the blocks (the reference has none)
   double eps = layer_norm_eps;
+  // Width of each output row; 0: in_dim (JEPA predicts embeddings). The MAE decoder
+  // (train/mae.hpp) sets the token width m·τ: it reconstructs the tokenizer's input.
+  int out_dim = 0;
+  int output_width() const { return out_dim > 0 ? out_dim : in_dim; }
 };
 
 template <class T>
@@ -57,15 +62,16 @@ struct Predictor {
   Predictor(ParamSet<T>& ps, const PredictorConfig& c, const std::string& prefix = "predictor.") : config(c) {
     require<ConfigError>(c.in_dim > 0 && c.dim > 0 && c.heads > 0 && c.dim % c.heads == 0, "Predictor: in_dim ",
                          c.in_dim, ", dim ", c.dim, ", heads ", c.heads, ", expected dim a positive multiple of heads");
+    require<ConfigError>(c.out_dim >= 0, "Predictor: out_dim ", c.out_dim, ", expected >= 0 (0: in_dim)");
     input_projection = LinearParams::add(ps, prefix + "input_projection", c.in_dim, c.dim, true);
     mask_token = ps.add(prefix + "mask_token", {1, 1, c.dim}, ParamInit::zeros);
     BlockConfig bc{c.dim, c.heads, c.mlp_ratio, c.bias, c.bias, c.bias, c.eps};
     stack = BlockStack::add(ps, prefix + "blocks.", c.depth, bc);
     norm = NormParams::add(ps, prefix + "norm", c.dim, c.eps);
-    output_projection = LinearParams::add(ps, prefix + "output_projection", c.dim, c.in_dim, true);
+    output_projection = LinearParams::add(ps, prefix + "output_projection", c.dim, c.output_width(), true);
   }
 
-  // ctx [Bc, K, d_in], pos [N, pd], targets [B, t] with B a multiple of Bc → out [B, t, d_in].
+  // ctx [Bc, K, d_in], pos [N, pd], targets [B, t] with B a multiple of Bc → out [B, t, d_out].
   // cache == nullptr: inference.
   template <class T>
   void forward(const ParamSet<T>& ps, const T* ctx, int Bc, int K, const T* pos, int N, const int* targets, int B,
@@ -112,7 +118,7 @@ struct Predictor {
     output_projection.forward(ps, normed, out, int(Mt));
   }
 
-  // dout [B, t, d_in] → parameter gradients, dctx [Bc, K, d_in] += and dpos [N, pd] += (either
+  // dout [B, t, d_out] → parameter gradients, dctx [Bc, K, d_in] += and dpos [N, pd] += (either
   // may be nullptr: the default reads the target encoder's table, which takes no gradient).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dctx, std::type_identity_t<T>* dpos, const PredictorCache<T>& c,
