@@ -5,6 +5,7 @@
 //                    the head trains
 //   EncoderFeatures  a tokenizer + encoder run on the windows at every step and trained with the
 //                    head (end to end)
+//   RowFeatures      rows of another Features object (a task's samples among a table's rows)
 // Interface: tokens(), dim(), size(), trainable() (the ParamSet to train with the head, or
 // nullptr), forward(ids, train) → x [B, L, d], backward(dx [B, L, d]) after a training forward.
 #include <algorithm>
@@ -113,6 +114,33 @@ class EncoderFeatures {
   TokenizerCache<T> tok_cache_;
   EncoderCache<T> enc_cache_;
   AlignedVector<T> rows_, tokens_, out_, dtokens_;
+};
+
+// Sample s of this view is row rows[s] of `base` (which must outlive it): one feature table
+// serves several tasks that each use some of its rows.
+template <class Base>
+class RowFeatures {
+ public:
+  using value_type = std::remove_cvref_t<decltype(*std::declval<Base&>().forward(std::span<const std::int64_t>{}, false))>;
+
+  RowFeatures(Base& base, std::span<const std::int64_t> rows) : base_(base), rows_(rows.begin(), rows.end()) {
+    for (std::int64_t r : rows_)
+      require<ShapeError>(r >= 0 && r < base.size(), "RowFeatures: row ", r, ", the features hold ", base.size());
+  }
+  int tokens() const { return base_.tokens(); }
+  int dim() const { return base_.dim(); }
+  int size() const { return static_cast<int>(rows_.size()); }
+  auto* trainable() { return base_.trainable(); }
+  const value_type* forward(std::span<const std::int64_t> ids, bool train) {
+    ids_.clear();
+    for (std::int64_t s : ids) ids_.push_back(rows_.at(static_cast<std::size_t>(s)));
+    return base_.forward(ids_, train);
+  }
+  void backward(const value_type* dx) { base_.backward(dx); }
+
+ private:
+  Base& base_;
+  std::vector<std::int64_t> rows_, ids_;
 };
 
 }  // namespace tjepa
