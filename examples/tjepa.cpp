@@ -13,6 +13,7 @@
 #endif
 
 #include "cli/commands.hpp"
+#include "cli/eval.hpp"
 
 namespace {
 
@@ -155,6 +156,36 @@ int main(int argc, char** argv) {
                  "frozen probes read each token's embedding minus its training mean (center_token_embeddings)");
   demo->add_flag("--quiet", dm.quiet, "no progress line");
 
+  EvalOptions ev;
+  nlohmann::json eval_overrides = nlohmann::json::object();
+  auto* eval = app.add_subcommand(
+      "eval", "The downstream protocol on the simulated grasping hand: seeds x heads, baselines, MAE, mask ablation");
+  eval->add_option("--data-seed", ev.eval.data_seed, "seed of the simulated session")->capture_default_str();
+  eval->add_option("--seeds", ev.eval.seeds, "pre-training seeds")->capture_default_str();
+  eval->add_option("--head-seeds", ev.eval.head_seeds, "heads per task and pre-training seed")->capture_default_str();
+  eval->add_option("--pretrain-frames", ev.eval.pretrain_frames, "unlabelled frames")->capture_default_str();
+  eval->add_option("--train-frames", ev.eval.train_frames, "labelled training frames")->capture_default_str();
+  eval->add_option("--test-frames", ev.eval.test_frames, "labelled held-out frames")->capture_default_str();
+  eval->add_option("--max-object-windows", ev.eval.tasks.max_object_windows, "object samples per split (0: all)");
+  eval->add_option("--max-force-windows", ev.eval.tasks.max_force_windows, "force samples per split (0: all)");
+  eval->add_option("--max-pose-sequences", ev.eval.tasks.max_pose_sequences, "pose sequences per split (0: all)");
+  eval->add_option("--head-epochs", ev.eval.heads.probe.max_epochs, "heads' epoch limit (early stopping)")->capture_default_str();
+  eval->add_option("--sequence-epochs", ev.eval.heads.sequence.max_epochs, "sequence head's epoch limit")->capture_default_str();
+  eval->add_option("--end-to-end-epochs", ev.eval.heads.end_to_end_max_epochs, "end-to-end epoch limit")->capture_default_str();
+  std::string eval_config;
+  eval->add_option("--config", eval_config, "JSON pre-training configuration (TrainConfig keys); flags override it");
+  run_override<int>(eval, "--steps", "steps", eval_overrides, "pre-training steps");
+  run_override<int>(eval, "--warmup", "warmup_steps", eval_overrides, "pre-training warm-up steps");
+  run_override<int>(eval, "--batch", "batch", eval_overrides, "pre-training batch");
+  run_override<int>(eval, "--dim", "dim", eval_overrides, "encoder width d");
+  run_override<int>(eval, "--depth", "depth", eval_overrides, "encoder blocks");
+  eval->add_flag("--no-mae", [&ev](std::int64_t) { ev.eval.mae = false; }, "skip the MAE row");
+  eval->add_flag("--no-ablation", [&ev](std::int64_t) { ev.eval.ablation = false; }, "skip the mask ablation");
+  eval->add_flag("--no-end-to-end", [&ev](std::int64_t) { ev.eval.end_to_end = false; }, "skip the end-to-end row");
+  eval->add_option("--out", ev.out, "output directory")->capture_default_str();
+  eval->add_flag("--force", ev.force, "overwrite --out");
+  eval->add_flag("--quiet", ev.quiet, "no progress lines");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -175,6 +206,13 @@ int main(int argc, char** argv) {
     if (*pretrain) return run_pretrain(po, std::cout);
     if (*probe) return run_probe(pb, std::cout);
     if (*embed) return run_embed(eo, std::cout);
+    if (*eval) {
+      if (!eval_config.empty()) ev.eval.train.update_from_file(eval_config);
+      ev.eval.train.update(eval_overrides, "command line");
+      ev.command = "tjepa";
+      for (int i = 1; i < argc; ++i) ev.command += std::string(" ") + argv[i];
+      return run_eval(ev, std::cout);
+    }
     if (*demo) {
       if (!demo_config.empty()) dm.run.update_from_file(demo_config);
       dm.run.update(demo_overrides, "command line");

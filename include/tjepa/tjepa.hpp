@@ -30,6 +30,8 @@
 
 #include "tjepa/sim/simulated_dataset.hpp"
 #include "tjepa/sim/simulated_skin.hpp"
+#include "tjepa/sim/grasp_objects.hpp"
+#include "tjepa/sim/grasping_hand.hpp"
 
 #include "tjepa/graph/taxel_graph.hpp"
 #include "tjepa/graph/skin.hpp"
@@ -105,3 +107,6 @@
 #include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/downstream/ridge.hpp"
 #include "tjepa/downstream/welch.hpp"
+#include "tjepa/downstream/grasp_tasks.hpp"
+#include "tjepa/downstream/eval_table.hpp"
+#include "tjepa/downstream/grasp_eval.hpp"

@@ -36,6 +36,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <string>
 #include <vector>
@@ -50,8 +51,10 @@
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
 #include "tjepa/optim/schedule.hpp"
+#include "tjepa/train/config.hpp"
 #include "tjepa/train/jepa_model.hpp"
 #include "tjepa/train/loss.hpp"
+#include "tjepa/train/trainer.hpp"
 
 namespace tjepa {
 
@@ -285,6 +288,51 @@ MaeStepStats mae_train_step(MaeModel<T>& model, AdamW<T>& opt, const TrainingSch
   st.grad_norm = norm;
   opt.step(st.lr, st.weight_decay);
   return st;
+}
+
+// The MAE config of a Tactile-JEPA run's encoder: the same tokenizer and encoder as
+// cfg.model(num_tokens, axes), Tactile-JEPA's predictor shape as the decoder.
+inline MaeConfig mae_config(const TrainConfig& cfg, int num_tokens, int axes, double mask_ratio = 0.75) {
+  const JepaConfig j = cfg.model(num_tokens, axes);
+  MaeConfig m = MaeConfig::reference(num_tokens, j.in_dim, axes);
+  static_cast<ContextEncoderConfig&>(m) = static_cast<const ContextEncoderConfig&>(j);
+  m.decoder = j.predictor;
+  m.mask_ratio = mask_ratio;
+  m.drop_path = cfg.drop_path;
+  m.clip_grad_norm = cfg.clip_grad_norm;
+  return m;
+}
+
+// Pre-trains an MAE on source for cfg.steps steps of cfg.batch windows with cfg's schedule and
+// AdamW: the same budget, and the same windows in the same order, as Trainer with cfg (its data
+// stream), uniform masks drawn from (seed, step). on_step sees every step's stats.
+template <class T>
+std::vector<MaeStepStats> pretrain_mae(MaeModel<T>& model, const WindowSource& source, const TrainConfig& cfg,
+                                       const std::function<void(const MaeStepStats&)>& on_step = {}) {
+  cfg.validate();
+  const int B = cfg.batch;
+  const std::int64_t per_epoch = source.batches_per_epoch(B);
+  require<DataError>(per_epoch > 0, "pretrain_mae: the source holds ", source.size(), " windows, fewer than one batch of ", B);
+  AdamW<T> opt(model.trainable(), cfg.adamw());
+  const TrainingSchedule schedule = cfg.schedule();
+  const UniformMasking masking(model.num_tokens(), model.config.mask_ratio);
+  MaeWorkspace<T> w;
+  MaskBatch masks;
+  WindowBatch batch;
+  AlignedVector<T> x;
+  std::vector<std::int64_t> order;
+  std::vector<MaeStepStats> log;
+  for (std::int64_t s = 0; s < cfg.steps; ++s) {
+    const std::int64_t e = s / per_epoch, b = s % per_epoch;
+    if (b == 0 || order.empty()) order = source.epoch_order(cfg.seed ^ Trainer<T>::kDataSalt, static_cast<std::uint64_t>(e));
+    source.gather(std::span<const std::int64_t>(order).subspan(static_cast<std::size_t>(b * B), static_cast<std::size_t>(B)), batch);
+    windows_to_tokens(batch, x);
+    masking.sample_into(masks, B, cfg.seed ^ Trainer<T>::kMaskSalt, static_cast<std::uint64_t>(s));
+    log.push_back(mae_train_step(model, opt, schedule, s, x.data(), B, masks, w,
+                                 Rng(cfg.seed ^ Trainer<T>::kNoiseSalt, static_cast<std::uint64_t>(s))()));
+    if (on_step) on_step(log.back());
+  }
+  return log;
 }
 
 }  // namespace tjepa

@@ -104,6 +104,13 @@ template <Order AO, int R, int NK>
 // C[R, cols ≤ NK·W] from one depth block (see depth_loop). c_in [R, ldc]: what the product is added
 // to (C itself holding a partial sum or the value accumulated into, or the residual) or nullptr;
 // bias on the first depth block, g (gelu output) and gg (gelu_grad input) on the last.
+// depth_loop writes the tile's first NK·W columns of each row; the edge path reads only
+// cols <= NK·W of them. GCC cannot see that bound and warns (maybe-uninitialized) in some
+// inlining contexts: silenced here, for this function only.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 template <Order AO, int R, int NK>
 void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, float* c, std::ptrdiff_t ldc, int cols,
                   const float* c_in, const float* bias, float* g, const float* gg, const float* pf) {
@@ -144,6 +151,9 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, fl
     }
   }
 }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 using Kernel = void (*)(int, const float*, std::ptrdiff_t, const float*, float*, std::ptrdiff_t, int, const float*,
                         const float*, float*, const float*, const float*);

@@ -1,0 +1,310 @@
+#pragma once
+// The downstream protocol on the simulated grasping hand, end to end (what `tjepa eval` and
+// `tjepa demo` run):
+//
+//   data     one SimulatedHand session (seed data_seed): a contact-free baseline, an unlabelled
+//            pre-training recording, a labelled training and a labelled test recording, each of
+//            its own episodes; magnetic preprocessing fitted on the baseline and the pre-training
+//            recording; optional drift tracking through the session in recording order
+//   tasks    object / force / pose (downstream/grasp_tasks.hpp) on the labelled recordings
+//   rows     constant; ridge on hand-crafted features; the random initial encoder, frozen; the same
+//            encoder trained end to end with each head; MAE pre-trained on the same windows with the
+//            same budget, frozen; Tactile-JEPA, frozen (the target encoder)
+//   ablation Tactile-JEPA with the masks of the paper's Table 4: 2L+2G (the default), 4L, 4G,
+//            4 I-JEPA blocks, and 2L+2G with a local (connected) context
+//   protocol for each pre-training seed s in `seeds`: pre-train, then `head_seeds` heads per task
+//            (head seed s·1000 + h); the table (downstream/eval_table.hpp) averages the heads per
+//            seed, reports mean ± sd over seeds, and Welch-tests the best two rows
+//
+// Everything is a function of the config: the same config gives the same table (at the same
+// thread count).
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "tjepa/data/drift_tracker.hpp"
+#include "tjepa/data/preprocessor.hpp"
+#include "tjepa/data/window_source.hpp"
+#include "tjepa/downstream/eval_table.hpp"
+#include "tjepa/downstream/grasp_tasks.hpp"
+#include "tjepa/graph/skin.hpp"
+#include "tjepa/layout/allegro_xela.hpp"
+#include "tjepa/masks/ijepa_blocks.hpp"
+#include "tjepa/sim/grasping_hand.hpp"
+#include "tjepa/train/config.hpp"
+#include "tjepa/train/mae.hpp"
+#include "tjepa/train/trained_model.hpp"
+#include "tjepa/train/trainer.hpp"
+
+namespace tjepa {
+
+// Tactile-JEPA's pre-training for the grasp protocol: TrainConfig's defaults (2L+2G masks, the
+// scaled-down ViT) with drift tracking, as the sensor drifts during a session.
+inline TrainConfig grasp_pretrain_config() {
+  TrainConfig c;
+  c.drift_time_constant = 200;
+  return c;
+}
+
+struct GraspEvalConfig {
+  std::uint64_t data_seed = 0;
+  std::vector<std::uint64_t> seeds{0, 1, 2};  // pre-training seeds
+  int head_seeds = 3;                         // heads per task and pre-training seed
+  int baseline_frames = 300, pretrain_frames = 60000, train_frames = 40000, test_frames = 20000;
+  GraspSimConfig sim;
+  TrainConfig train = grasp_pretrain_config();  // Tactile-JEPA (and MAE's budget: steps, batch, schedule)
+  double mae_mask_ratio = 0.75;
+  GraspTaskConfig tasks;
+  GraspHeadConfig heads;
+  // Rows to run.
+  bool ridge = true, random = true, end_to_end = true, mae = true, ablation = true;
+
+  void validate() const {
+    require<ConfigError>(!seeds.empty() && head_seeds > 0, "GraspEvalConfig: ", seeds.size(), " seeds, ", head_seeds,
+                         " head seeds, expected at least one of each");
+    require<ConfigError>(baseline_frames > 0 && pretrain_frames > 0 && train_frames > 0 && test_frames > 0,
+                         "GraspEvalConfig: frame counts must be > 0");
+    sim.validate();
+    train.validate();
+    tasks.validate();
+    require<ConfigError>(tasks.label_pad == sim.label_pad, "GraspEvalConfig: tasks.label_pad = ", tasks.label_pad,
+                         ", sim.label_pad = ", sim.label_pad, ", expected equal");
+  }
+
+  nlohmann::json to_json() const {
+    return {{"data_seed", data_seed},
+            {"seeds", seeds},
+            {"head_seeds", head_seeds},
+            {"frames", {{"baseline", baseline_frames}, {"pretrain", pretrain_frames}, {"train", train_frames},
+                        {"test", test_frames}}},
+            {"train", train.to_json()},
+            {"mae_mask_ratio", mae_mask_ratio},
+            {"tasks", {{"label_pad", tasks.label_pad}, {"sequence_length", tasks.sequence_length},
+                       {"sequence_stride", tasks.sequence_stride}, {"max_object_windows", tasks.max_object_windows},
+                       {"max_force_windows", tasks.max_force_windows}, {"max_pose_sequences", tasks.max_pose_sequences}}},
+            {"heads", {{"probe_heads", heads.probe_heads}, {"max_epochs", heads.probe.max_epochs},
+                       {"patience", heads.probe.patience}, {"probe_batch", heads.probe.batch}, {"lr", heads.probe.lr},
+                       {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
+                       {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
+                       {"end_to_end_patience", heads.end_to_end_patience}}},
+            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"ablation", ablation}}}};
+  }
+};
+
+// The simulated session and its tasks.
+struct GraspEvalData {
+  Skin skin;
+  Preprocessor pre;
+  std::optional<DriftTracker> drift;
+  std::optional<WindowSource> pretrain, train, test;
+  GraspTasks train_tasks, test_tasks;
+  std::array<double, 3> contact_share{};  // share of frames with any contact per recording
+};
+
+// The DriftTracker of a run (none when run.drift_time_constant is 0), fitted on the no-contact
+// baseline, then run over recs in order: one continuous session of one sensor.
+inline std::optional<DriftTracker> track_drift(const TrainConfig& run, const Recording& baseline,
+                                               std::span<Recording* const> recs) {
+  if (run.drift_time_constant <= 0) return std::nullopt;
+  DriftTrackerConfig c = DriftTrackerConfig::magnetic();
+  c.time_constant = run.drift_time_constant;
+  DriftTracker tracker(c);
+  tracker.fit(baseline);
+  for (Recording* r : recs) tracker.apply(*r);
+  return tracker;
+}
+
+inline GraspEvalData simulate_grasp_eval_data(const GraspEvalConfig& c) {
+  c.validate();
+  GraspEvalData d{layouts::allegro_xela(), Preprocessor(PreprocessConfig::magnetic()), {}, {}, {}, {}, {}, {}, {}};
+  SimulatedHand sim(d.skin.layout, c.sim, c.data_seed);
+  Recording baseline = sim.record_baseline(c.baseline_frames);
+  GraspRecording pre = sim.record(c.pretrain_frames), tr = sim.record(c.train_frames), te = sim.record(c.test_frames);
+  d.drift = track_drift(c.train, baseline,
+                        std::array<Recording*, 3>{&pre.recording, &tr.recording, &te.recording});
+  d.pre.fit_baseline(baseline);
+  d.pre.fit(pre.recording);
+  const GraspRecording* recs[3] = {&pre, &tr, &te};
+  for (int r = 0; r < 3; ++r) {
+    std::size_t touched = 0;
+    for (const GraspLabel& l : recs[r]->labels) touched += l.contact_mask != 0;
+    d.contact_share[static_cast<std::size_t>(r)] = static_cast<double>(touched) / static_cast<double>(recs[r]->labels.size());
+  }
+  const WindowSpec spec{c.train.tau};
+  d.pretrain.emplace(std::move(pre.recording), spec, std::vector<FrameLabel>{}, d.pre);
+  d.train.emplace(std::move(tr.recording), spec, std::vector<FrameLabel>{}, d.pre);
+  d.test.emplace(std::move(te.recording), spec, std::vector<FrameLabel>{}, d.pre);
+  d.train_tasks = grasp_tasks(*d.train, tr.labels, c.tasks);
+  d.test_tasks = grasp_tasks(*d.test, te.labels, c.tasks);
+  return d;
+}
+
+// A mask variant of the ablation.
+struct MaskVariant {
+  std::string name;
+  MaskConfig masks;
+  bool ijepa_blocks = false;  // draws on the layout's grid placement
+};
+
+inline std::vector<MaskVariant> grasp_mask_ablation(const TrainConfig& c) {
+  const MaskConfig base = c.masks();
+  std::vector<MaskVariant> v;
+  auto with = [&](std::string name, int local, int global) {
+    MaskVariant m{std::move(name), base, false};
+    m.masks.num_local = local;
+    m.masks.num_global = global;
+    return m;
+  };
+  v.push_back(with("4L", 4, 0));
+  v.push_back(with("4G", 0, 4));
+  MaskVariant blocks{"4 I-JEPA blocks", base, true};
+  blocks.masks.scheme = TargetScheme::ijepa_blocks;
+  blocks.masks.blocks.num_targets = 4;
+  v.push_back(blocks);
+  MaskVariant local = with("2L+2G, local context", 2, 2);
+  local.masks.context_sampling = ContextSampling::local;
+  v.push_back(local);
+  return v;
+}
+
+struct GraspEvalResult {
+  EvalTable main, ablation;
+  nlohmann::json info;  // config, data sizes, timings, pre-training losses
+};
+
+// Runs the protocol. progress(line) reports each stage.
+inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::function<void(const std::string&)>& progress = {}) {
+  using clock = std::chrono::steady_clock;
+  const auto t0 = clock::now();
+  auto say = [&](const std::string& s) {
+    if (progress) progress(s);
+  };
+  auto seconds = [](clock::time_point a) { return std::chrono::duration<double>(clock::now() - a).count(); };
+  say("simulating the grasping hand: " + std::to_string(c.pretrain_frames) + " unlabelled + " +
+      std::to_string(c.train_frames) + " labelled + " + std::to_string(c.test_frames) + " held-out frames at 100 Hz");
+  const GraspEvalData d = simulate_grasp_eval_data(c);
+  const GraspTasks &tr = d.train_tasks, &te = d.test_tasks;
+  say("tasks (train / test): object " + std::to_string(tr.object.size()) + " / " + std::to_string(te.object.size()) +
+      " windows, force " + std::to_string(tr.force.size()) + " / " + std::to_string(te.force.size()) +
+      " windows, pose " + std::to_string(tr.pose.size()) + " / " + std::to_string(te.pose.size()) + " sequences of " +
+      std::to_string(tr.pose.length) + " windows; " + std::to_string(d.pretrain->size()) + " pre-training windows");
+  GraspEvalResult res;
+  res.info = {{"config", c.to_json()},
+              {"data", {{"pretrain_windows", d.pretrain->size()},
+                        {"contact_share", d.contact_share},
+                        {"train", {{"object", tr.object.size()}, {"force", tr.force.size()}, {"pose_sequences", tr.pose.size()}}},
+                        {"test", {{"object", te.object.size()}, {"force", te.force.size()}, {"pose_sequences", te.pose.size()}}}}},
+              {"simulate_seconds", seconds(t0)},
+              {"pretraining", nlohmann::json::array()}};
+  res.main.title = "Simulated grasping hand: frozen encoders, baselines, end to end";
+  res.ablation.title = "Mask ablation (Tactile-JEPA, frozen)";
+  const int axes = d.pretrain->axes();
+  const TaxelGraph& graph = d.skin.graph;
+  const GraspHeadConfig& hc = c.heads;
+
+  auto row = [](EvalTable& t, const std::string& name) -> EvalRow& {
+    for (EvalRow& r : t.rows)
+      if (r.name == name) return r;
+    t.rows.push_back(EvalRow{name, {}});
+    return t.rows.back();
+  };
+  auto seeds_of = [&](std::uint64_t s) {
+    std::vector<std::uint64_t> h;
+    for (int i = 0; i < c.head_seeds; ++i) h.push_back(s * 1000 + static_cast<std::uint64_t>(i));
+    return h;
+  };
+  auto stage = [&](const std::string& what) {
+    return [&, what](const std::string& s) { say("  " + what + ": " + s); };
+  };
+  // Pre-trains a Tactile-JEPA model with collator masks; logs its loss curve's ends and time.
+  auto pretrain_jepa = [&](const std::string& name, std::uint64_t s, const MaskVariant* v) {
+    TrainConfig cfg = c.train;
+    cfg.seed = s;
+    auto model = make_jepa_model<float>(cfg, graph, axes, s);
+    std::optional<GridPlacement> grid;
+    if (v && v->ijepa_blocks) grid = GridPlacement::from_layout(d.skin.layout, layouts::allegro::kPhalanxPitch);
+    MaskCollator collator(graph, v ? v->masks : cfg.masks(), grid);
+    Trainer<float> trainer(*model, *d.pretrain, std::move(collator), cfg);
+    const auto t = clock::now();
+    double first = 0, last = 0;
+    trainer.on_step = [&](const JepaStepStats& st) {
+      if (st.step == 0) first = st.loss;
+      last = st.loss;
+      if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
+        say("  " + name + " seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
+            std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss));
+    };
+    trainer.run();
+    res.info["pretraining"].push_back({{"row", name}, {"seed", s}, {"first_loss", first}, {"last_loss", last},
+                                       {"seconds", seconds(t)}});
+    return model;
+  };
+
+  if (true) {
+    const auto t = clock::now();
+    row(res.main, "constant").runs.assign(c.seeds.size(), {score_constant(tr, te)});
+    say("constant: done");
+    if (c.ridge) {
+      EvalRow& r = row(res.main, "ridge (pad sums + taxel means)");
+      for (std::uint64_t s : c.seeds)
+        r.runs.push_back({score_ridge(*d.train, tr, *d.test, te, d.skin.layout.group, d.skin.layout.num_groups(), s)});
+      say("ridge: done (" + std::to_string(seconds(t)) + " s)");
+    }
+  }
+  for (std::uint64_t s : c.seeds) {
+    say("pre-training seed " + std::to_string(s));
+    if (c.random || c.end_to_end) {
+      TrainConfig cfg = c.train;
+      cfg.seed = s;
+      auto model = make_jepa_model<float>(cfg, graph, axes, s);
+      if (c.random)
+        row(res.main, "random init, frozen")
+            .runs.push_back(score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test,
+                                                 te, hc, seeds_of(s), stage("random init")));
+      if (c.end_to_end)
+        row(res.main, "end to end")
+            .runs.push_back(score_end_to_end(model->context, model->tokenizer, model->encoder, *d.train, tr, *d.test, te,
+                                             hc, seeds_of(s), stage("end to end")));
+    }
+    if (c.mae) {
+      TrainConfig cfg = c.train;
+      cfg.seed = s;
+      MaeModel<float> mae(mae_config(cfg, graph.num_nodes(), axes, c.mae_mask_ratio), s);
+      const auto t = clock::now();
+      const auto log = pretrain_mae(mae, *d.pretrain, cfg, [&](const MaeStepStats& st) {
+        if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
+          say("  MAE seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
+              std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss));
+      });
+      res.info["pretraining"].push_back({{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss},
+                                         {"last_loss", log.back().loss}, {"seconds", seconds(t)}});
+      row(res.main, "MAE, frozen")
+          .runs.push_back(score_frozen_encoder(mae.context, mae.tokenizer, mae.encoder, *d.train, tr, *d.test, te, hc,
+                                               seeds_of(s), stage("MAE")));
+    }
+    {
+      auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);
+      auto scores = score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test, te, hc,
+                                         seeds_of(s), stage("Tactile-JEPA"));
+      row(res.main, "Tactile-JEPA, frozen").runs.push_back(scores);
+      if (c.ablation) row(res.ablation, "2L+2G (default)").runs.push_back(scores);
+    }
+    if (c.ablation)
+      for (const MaskVariant& v : grasp_mask_ablation(c.train)) {
+        auto model = pretrain_jepa(v.name, s, &v);
+        row(res.ablation, v.name)
+            .runs.push_back(score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test,
+                                                 te, hc, seeds_of(s), stage(v.name)));
+      }
+  }
+  res.info["total_seconds"] = seconds(t0);
+  return res;
+}
+
+}  // namespace tjepa
