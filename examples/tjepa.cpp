@@ -117,44 +117,17 @@ int main(int argc, char** argv) {
   embed->add_flag("--force", eo.force, "overwrite --out");
   embed->add_flag("--quiet", eo.quiet, "no progress line");
 
-  DemoOptions dm;
+  std::uint64_t demo_seed = 0;
+  std::string demo_out = "runs/demo";
+  bool demo_quiet = false;
   nlohmann::json demo_overrides = nlohmann::json::object();
-  auto* demo = app.add_subcommand("demo", "Pre-train on simulated Allegro data, then compare probes on held-out data");
-  demo->add_option("--seed", dm.seed, "seed of everything (data, init, masks)")->capture_default_str();
-  demo->add_option("--out", dm.out, "output directory")->capture_default_str();
-  std::string demo_config;
-  demo->add_option("--config", demo_config, "JSON run configuration (keys as in the checkpoint's config.run); flags override it");
+  auto* demo = app.add_subcommand(
+      "demo", "About 10 minutes: pre-train on the simulated grasping hand, then object / force / pose against baselines");
+  demo->add_option("--seed", demo_seed, "seed of everything (data, init, masks, heads)")->capture_default_str();
+  demo->add_option("--out", demo_out, "output directory")->capture_default_str();
   run_override<int>(demo, "--steps", "steps", demo_overrides, "pre-training steps");
-  run_override<int>(demo, "--batch", "batch", demo_overrides, "pre-training batch");
   run_override<int>(demo, "--warmup", "warmup_steps", demo_overrides, "pre-training warm-up steps");
-  run_override<int>(demo, "--dim", "dim", demo_overrides, "encoder width d");
-  run_override<int>(demo, "--depth", "depth", demo_overrides, "encoder blocks");
-  run_override<int>(demo, "--heads", "heads", demo_overrides, "attention heads");
-  run_override<int>(demo, "--predictor-depth", "predictor_depth", demo_overrides, "predictor blocks");
-  run_override<double>(demo, "--lr", "lr", demo_overrides, "pre-training peak learning rate");
-  run_override<double>(demo, "--ema-start", "ema_start", demo_overrides, "initial EMA momentum of the target encoder");
-  run_override<double>(demo, "--tokenizer-bias", "tokenizer_bias_std", demo_overrides,
-                       "std of the tokenizer's initial bias (reference: 0)");
-  demo->add_option("--pretrain-frames", dm.pretrain_frames, "unlabelled simulated frames")->capture_default_str();
-  demo->add_option("--pretrain-contacts", dm.pretrain_contacts, "indenters touching at once in the unlabelled data")
-      ->capture_default_str();
-  demo->add_option("--probe-frames", dm.probe_frames, "labelled simulated frames (probe training)")->capture_default_str();
-  demo->add_option("--probe-windows", dm.probe_windows, "labelled training windows")->capture_default_str();
-  demo->add_option("--probe-epochs", dm.probe.epochs, "probe epochs (also the end-to-end budget)")->capture_default_str();
-  demo->add_option_function<double>("--probe-lr", [&dm](const double& v) { dm.probe.lr = v; dm.probe_lrs = {v}; },
-                                    "one probe learning rate (no sweep; also the end-to-end rate)");
-  demo->add_option("--probe-lrs", dm.probe_lrs, "frozen probes' learning rates, chosen among on a validation split")
-      ->capture_default_str();
-  demo->add_option("--repeats", dm.repeats,
-                   "frozen probes per row, averaged: (a) probe seeds, (b) random initializations")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  demo->add_option("--end-to-end-epochs", dm.end_to_end_epochs, "epochs of (c) (0: as the probes)")->capture_default_str();
-  demo->add_option("--checkpoint", dm.checkpoint, "skip pre-training and probe this demo checkpoint");
-  demo->add_flag("--no-end-to-end", [&dm](std::int64_t) { dm.end_to_end = false; }, "skip (c)");
-  demo->add_flag("--center-tokens", dm.center_tokens,
-                 "frozen probes read each token's embedding minus its training mean (center_token_embeddings)");
-  demo->add_flag("--quiet", dm.quiet, "no progress line");
+  demo->add_flag("--quiet", demo_quiet, "no progress lines");
 
   EvalOptions ev;
   nlohmann::json eval_overrides = nlohmann::json::object();
@@ -214,9 +187,11 @@ int main(int argc, char** argv) {
       return run_eval(ev, std::cout);
     }
     if (*demo) {
-      if (!demo_config.empty()) dm.run.update_from_file(demo_config);
-      dm.run.update(demo_overrides, "command line");
-      return run_demo(dm, std::cout);
+      EvalOptions dm = demo_eval_options(demo_seed);
+      dm.out = demo_out;
+      dm.quiet = demo_quiet;
+      dm.eval.train.update(demo_overrides, "command line");
+      return run_eval(dm, std::cout);
     }
   } catch (const std::exception& e) {
     std::fflush(stdout);

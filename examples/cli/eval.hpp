@@ -31,8 +31,6 @@ inline EvalOptions demo_eval_options(std::uint64_t seed) {
   c.pretrain_frames = 40000;
   c.train_frames = 30000;
   c.test_frames = 15000;
-  c.train.steps = 400;
-  c.train.warmup_steps = 40;
   c.tasks.max_object_windows = 1500;
   c.tasks.max_force_windows = 1500;
   c.tasks.max_pose_sequences = 300;
@@ -50,30 +48,35 @@ inline EvalOptions demo_eval_options(std::uint64_t seed) {
 inline int run_eval(const EvalOptions& o, std::ostream& out) {
   o.eval.validate();
   const std::filesystem::path dir = o.out;
-  OutputFiles::check_new(dir / "results.json", o.force);
   out << "tjepa " << version_string << " " << o.command << ": " << o.eval.seeds.size() << " pre-training seed(s) x "
       << o.eval.head_seeds << " head(s) per task; " << max_threads() << " thread(s)\n" << std::flush;
   const auto t0 = std::chrono::steady_clock::now();
-  const GraspEvalResult r = run_grasp_eval(o.eval, [&](const std::string& line) {
-    if (!o.quiet) {
-      const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      out << "[" << format_duration(s) << "] " << line << "\n" << std::flush;
-    }
-  });
-  std::string md = "# " + o.command + "\n\n" + r.main.markdown();
-  if (!r.ablation.rows.empty()) md += "\n" + r.ablation.markdown();
-  out << "\n" << md;
-  OutputFiles files;
-  files.make_dir(dir);
-  write_file_atomic(files.add(dir / "results.md"), md);
-  nlohmann::json j = r.info;
-  j["command"] = o.command;
-  j["main"] = r.main.to_json();
-  if (!r.ablation.rows.empty()) j["ablation"] = r.ablation.to_json();
-  write_file_atomic(files.add(dir / "results.json"), j.dump(2));
-  write_file_atomic(files.add(dir / "results.svg"), r.main.svg());
-  if (!r.ablation.rows.empty()) write_file_atomic(files.add(dir / "ablation.svg"), r.ablation.svg());
-  files.commit();
+  OutputFiles::check_new(dir / "results.json", o.force);
+  std::filesystem::create_directories(dir);
+  // The tables so far, rewritten (atomically) after every pre-training seed.
+  auto write = [&](const GraspEvalResult& r) {
+    std::string md = "# " + o.command + "\n\n" + r.main.markdown();
+    if (!r.ablation.rows.empty()) md += "\n" + r.ablation.markdown();
+    write_file_atomic(dir / "results.md", md);
+    nlohmann::json j = r.info;
+    j["command"] = o.command;
+    j["main"] = r.main.to_json();
+    if (!r.ablation.rows.empty()) j["ablation"] = r.ablation.to_json();
+    write_file_atomic(dir / "results.json", j.dump(2));
+    write_file_atomic(dir / "results.svg", r.main.svg());
+    if (!r.ablation.rows.empty()) write_file_atomic(dir / "ablation.svg", r.ablation.svg());
+    return md;
+  };
+  const GraspEvalResult r = run_grasp_eval(
+      o.eval,
+      [&](const std::string& line) {
+        if (!o.quiet) {
+          const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          out << "[" << format_duration(s) << "] " << line << "\n" << std::flush;
+        }
+      },
+      write);
+  out << "\n" << write(r);
   out << "total " << format_duration(r.info["total_seconds"].get<double>()) << "; wrote " << dir.string()
       << "/{results.md, results.json, results.svg" << (r.ablation.rows.empty() ? "" : ", ablation.svg") << "}\n";
   return 0;

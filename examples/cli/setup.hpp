@@ -36,40 +36,6 @@ inline Skin load_skin(const std::string& spec) {
 // ---------------------------------------------------------------------------------------------
 // Data
 
-// Simulated recordings of one sensor (one SimulatedSkin: same offsets and gains throughout):
-// a contact-free baseline, an unlabelled pre-training recording, a labelled probe-training
-// recording and a labelled held-out test recording, each with its own contact events.
-struct SimulatedData {
-  Recording baseline;
-  Recording pretrain;
-  SimRecording probe_train, test;
-};
-
-inline SimulatedData simulate(const Skin& skin, std::uint64_t seed, int pretrain_frames, int probe_frames,
-                              int test_frames, int pretrain_contacts = 1, int baseline_frames = 300) {
-  SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, seed);
-  SimulatedData d;
-  d.baseline = sim.record_baseline(baseline_frames);
-  d.pretrain = sim.record(pretrain_frames, pretrain_contacts).recording;
-  d.probe_train = sim.record(probe_frames);
-  d.test = sim.record(test_frames);
-  return d;
-}
-
-// The run's DriftTracker (none when drift_time_constant is 0 or there is no baseline), fitted on the
-// no-contact baseline, then run over recs in order: one continuous session of one sensor (the
-// tracker carries its state from one recording to the next).
-inline std::optional<DriftTracker> track_drift(const TrainConfig& run, const Recording* baseline,
-                                               std::span<Recording* const> recs) {
-  if (run.drift_time_constant <= 0 || baseline == nullptr) return std::nullopt;
-  DriftTrackerConfig c = DriftTrackerConfig::magnetic();
-  c.time_constant = run.drift_time_constant;
-  DriftTracker tracker(c);
-  tracker.fit(*baseline);
-  for (Recording* r : recs) tracker.apply(*r);
-  return tracker;
-}
-
 // Preprocessing by name: "magnetic" (Xela: drop-outs, baseline, per-axis standardization; needs a
 // baseline recording), "standardize" (per-axis), "none".
 inline Preprocessor fit_preprocessor(const std::string& mode, const Recording* baseline,

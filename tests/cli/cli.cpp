@@ -6,6 +6,7 @@
 #include <doctest/doctest.h>
 
 #include "../../examples/cli/commands.hpp"
+#include "../../examples/cli/eval.hpp"
 #include <tjepa/graph/skin_from_coordinates.hpp>
 
 #include <algorithm>
@@ -545,36 +546,42 @@ TEST_CASE("probe rows: repeats average to the mean with the sample standard devi
   CHECK_THROWS_WITH_AS(average_rows("none", {}), doctest::Contains("no probes"), ConfigError);
 }
 
-TEST_CASE("demo: the whole pipeline at toy size prints the table and writes its outputs") {
+TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and writes its outputs") {
   TempDir t;
-  DemoOptions o;
+  EvalOptions o = demo_eval_options(3);
+  CHECK(o.eval.seeds == std::vector<std::uint64_t>{3});
+  CHECK(o.eval.data_seed == 3);
+  CHECK_FALSE(o.eval.mae);
+  CHECK_FALSE(o.eval.ablation);
   o.out = (t.path / "demo").string();
-  o.run.update(tiny_run("allegro"), "test");
-  o.pretrain_frames = 400;
-  o.probe_frames = 600;
-  o.test_frames = 400;
-  o.probe_windows = 16;
-  o.test_windows = 16;
-  o.probe.epochs = 1;
-  o.probe.batch = 8;
-  o.repeats = 2;
+  o.eval.train.update(tiny_run("allegro"), "test");
+  o.eval.train.drift_time_constant = 200;
+  o.eval.pretrain_frames = 1000;
+  o.eval.train_frames = 3000;
+  o.eval.test_frames = 2000;
+  o.eval.tasks.sequence_length = 3;
+  o.eval.tasks.max_object_windows = o.eval.tasks.max_force_windows = 30;
+  o.eval.tasks.max_pose_sequences = 8;
+  o.eval.heads.probe.max_epochs = o.eval.heads.sequence.max_epochs = o.eval.heads.end_to_end_max_epochs = 1;
+  o.eval.heads.probe_heads = 1;
   o.quiet = true;
   std::ostringstream out;
-  REQUIRE(run_demo(o, out) == 0);
+  REQUIRE(run_eval(o, out) == 0);
   const std::string s = out.str();
-  for (const char* row : {"constant", "(a) pre-trained, frozen", "(b) random init, frozen", "(c) end to end"})
+  for (const char* row : {"| constant |", "| ridge (pad sums + taxel means) |", "| random init, frozen |", "| end to end |",
+                          "| Tactile-JEPA, frozen |"})
     CHECK(s.find(row) != std::string::npos);
+  CHECK(s.find("MAE") == std::string::npos);
   const auto j = nlohmann::json::parse(read_text(t.path / "demo" / "results.json"));
-  CHECK(j["results"].size() == 4);
-  CHECK(j["seed"] == 0);
-  // (a): 2 probe seeds on one encoder; (b): 2 random initializations; (c): one run.
-  CHECK(j["results"][1]["repeats"].size() == 2);
-  CHECK(j["results"][2]["repeats"].size() == 2);
-  CHECK_FALSE(j["results"][3].contains("repeats"));
-  CHECK(j["probe"]["repeats"] == 2);
-  for (const char* f : {"checkpoint.safetensors", "log.csv", "loss.svg", "results.json"})
-    CHECK(fs::exists(t.path / "demo" / f));
-  CHECK(count_files(t.path / "demo") == 4);
+  CHECK(j["main"]["rows"].size() == 5);
+  CHECK(j["config"]["seeds"] == nlohmann::json::array({3}));
+  CHECK(j["command"] == "tjepa demo");
+  for (const char* f : {"results.md", "results.json", "results.svg"}) CHECK(fs::exists(t.path / "demo" / f));
+  CHECK(count_files(t.path / "demo") == 3);
+  // The same command again refuses to overwrite without --force, and the files stay.
+  o.force = false;
+  CHECK_THROWS_AS(run_eval(o, out), FileError);
+  CHECK(count_files(t.path / "demo") == 3);
 }
 
 }  // TEST_SUITE

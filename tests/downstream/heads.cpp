@@ -1,7 +1,9 @@
 // Evaluation building blocks of the downstream protocol: Welch's one-sided t-test (the Student-t
 // CDF against closed forms and table quantiles), the ridge baseline on hand-crafted features,
 // attentive-probe heads with early stopping, and the sequence head (gradients against central
-// differences, causal attention against a plain-loop reference, training).
+// differences, causal attention against a plain-loop reference, training), and the grasp protocol:
+// the tasks (downstream/grasp_tasks.hpp), the table and its statistics (downstream/eval_table.hpp)
+// and the whole protocol at toy size (downstream/grasp_eval.hpp).
 #include <doctest/doctest.h>
 
 #include <tjepa/tjepa.hpp>
@@ -480,6 +482,187 @@ TEST_CASE("train_sequence_head: learns a running sum of the windows with early s
   CHECK(train_sequence_head(again, f, targets, cfg).validation_loss == r.validation_loss);
   targets.window[3] = S;
   CHECK_THROWS_AS(train_sequence_head(again, f, targets, cfg), DataError);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The grasp protocol (downstream/grasp_tasks.hpp, eval_table.hpp, grasp_eval.hpp)
+
+namespace {
+struct GraspSplit {
+  WindowSource src;
+  std::vector<GraspLabel> labels;
+};
+GraspSplit grasp_split(int frames, std::uint64_t seed) {
+  const Skin hand = layouts::allegro_xela();
+  SimulatedHand sim(hand.layout, GraspSimConfig{}, seed);
+  Preprocessor pre(PreprocessConfig::magnetic());
+  pre.fit_baseline(sim.record_baseline(200));
+  GraspRecording r = sim.record(frames);
+  pre.fit(r.recording);
+  return {WindowSource(std::move(r.recording), WindowSpec{10}, {}, pre), std::move(r.labels)};
+}
+}  // namespace
+
+TEST_CASE("grasp_tasks: every sample carries the label of its window's last frame") {
+  const GraspSplit d = grasp_split(6000, 5);
+  GraspTaskConfig c;
+  c.sequence_length = 4;
+  const GraspTasks t = grasp_tasks(d.src, d.labels, c);
+  REQUIRE(std::is_sorted(t.windows.begin(), t.windows.end()));
+  REQUIRE(std::adjacent_find(t.windows.begin(), t.windows.end()) == t.windows.end());
+  auto last = [&](std::int64_t row) { return d.labels[d.src.start_of(t.windows[row]) + 9]; };
+  REQUIRE(t.object.size() > 0);
+  CHECK(t.object.classes == num_grasp_objects());
+  for (std::size_t i = 0; i < t.object_rows.size(); ++i) {
+    const GraspLabel l = last(t.object_rows[i]);
+    CHECK(l.object == t.object.label[i]);
+    CHECK(l.contact_mask != 0u);
+  }
+  REQUIRE(t.force.size() > 0);
+  for (std::size_t i = 0; i < t.force_rows.size(); ++i) {
+    const GraspLabel l = last(t.force_rows[i]);
+    CHECK(((l.contact_mask >> c.label_pad) & 1u) == 1u);
+    for (int a = 0; a < 3; ++a) CHECK(t.force.value[i * 3 + a] == l.force[a]);
+  }
+  REQUIRE(t.pose.size() > 0);
+  std::vector<bool> used(t.windows.size(), false);
+  for (std::int64_t r : t.object_rows) used[r] = true;
+  for (std::int64_t r : t.force_rows) used[r] = true;
+  for (int q = 0; q < t.pose.size(); ++q)
+    for (int l = 0; l < 4; ++l) {
+      const std::int64_t row = t.pose.window[q * 4 + l];
+      used[row] = true;
+      const int start = d.src.start_of(t.windows[row]);
+      if (l > 0) CHECK(start == d.src.start_of(t.windows[t.pose.window[q * 4 + l - 1]]) + 10);
+      for (int f = 0; f < 10; ++f) CHECK(d.labels[start + f].held);
+      const GraspLabel g = last(row);
+      CHECK(t.pose.value[(q * 4 + l) * 3 + 0] == g.x_cm);
+      CHECK(t.pose.value[(q * 4 + l) * 3 + 2] == g.theta_deg);
+    }
+  CHECK(std::all_of(used.begin(), used.end(), [](bool b) { return b; }));  // the table holds only used windows
+  // Limits pick evenly spaced samples.
+  c.max_object_windows = 7;
+  c.max_force_windows = 5;
+  c.max_pose_sequences = 3;
+  const GraspTasks small = grasp_tasks(d.src, d.labels, c);
+  CHECK(small.object.size() == 7);
+  CHECK(small.force.size() == 5);
+  CHECK(small.pose.size() == 3);
+  CHECK_THROWS_AS(grasp_tasks(d.src, std::span(d.labels).first(100), c), ShapeError);
+}
+
+TEST_CASE("grasp scores: accuracy and force and pose errors by hand and the constant baseline") {
+  GraspTasks te;
+  te.object.classes = 3;
+  te.object.label = {0, 1, 2, 2};
+  te.force.regression = 3;
+  te.force.value = {1, 0, 2, -1, 0, 2};
+  te.pose.length = 1;
+  te.pose.outputs = 3;
+  te.pose.window = {0, 1};
+  te.pose.value = {0, 0, 0, 1, 1, 10};
+  GraspScores s{};
+  score_object(s, std::vector<int>{0, 1, 1, 2}, te);
+  CHECK(s[kObjectAccuracy] == doctest::Approx(75.0));
+  const double fp[6] = {1, 0, 2, 1, 0, 2};  // error (2, 0, 0) on the second row
+  score_force(s, fp, 3, te);
+  CHECK(s[kForceRmseU] == doctest::Approx(std::sqrt(2.0)));
+  CHECK(s[kForceRmseV] == 0.0);
+  CHECK(s[kForceRmse] == doctest::Approx(std::sqrt(2.0)));
+  const double pp[6] = {0, 0, 4, 3, 1, 10};  // position errors 0 and 2 cm; θ errors 4 and 0
+  score_pose(s, pp, 3, te);
+  CHECK(s[kPoseX] == doctest::Approx(std::sqrt(2.0)));
+  CHECK(s[kPoseTheta] == doctest::Approx(std::sqrt(8.0)));
+  CHECK(s[kPoseWithin2cm] == doctest::Approx(100.0));
+  CHECK(s[kPoseWithin5deg] == doctest::Approx(100.0));
+  // The constant predicts the training majority and means.
+  GraspTasks tr = te;
+  tr.object.label = {2, 2, 1, 0};
+  const GraspScores c = score_constant(tr, te);
+  CHECK(c[kObjectAccuracy] == doctest::Approx(50.0));
+  CHECK(c[kForceRmseU] == doctest::Approx(1.0));  // mean 0 against ±1
+  CHECK(c[kPoseTheta] == doctest::Approx(5.0));
+}
+
+TEST_CASE("EvalTable: head means per seed then mean ± sd over seeds and the best two with Welch test") {
+  auto scores = [](double acc, double force) {
+    GraspScores s{};
+    s[kObjectAccuracy] = acc;
+    s[kForceRmse] = force;
+    return s;
+  };
+  EvalTable t;
+  t.title = "toy";
+  t.rows.push_back({"a", {{scores(50, 1.0), scores(52, 1.2)}, {scores(54, 1.1), scores(54, 1.1)}, {scores(60, 0.9), scores(58, 0.9)}}});
+  t.rows.push_back({"b", {{scores(40, 0.5)}, {scores(41, 0.6)}, {scores(42, 0.7)}}});
+  t.rows.push_back({"c <&>", {{scores(10, 2.0)}, {scores(10, 2.0)}, {scores(10, 2.0)}}});
+  CHECK(t.rows[0].samples(kObjectAccuracy) == std::vector<double>{51, 54, 59});
+  CHECK(t.rows[0].summary(kObjectAccuracy).mean == doctest::Approx(54.6666667));
+  CHECK(t.rows[0].summary(kObjectAccuracy).sd == doctest::Approx(std::sqrt(((51 - 54.6666667) * (51 - 54.6666667) + (54 - 54.6666667) * (54 - 54.6666667) + (59 - 54.6666667) * (59 - 54.6666667)) / 2)));
+  const auto cmp = t.comparisons();
+  REQUIRE(cmp.size() == 5);  // the primary metrics
+  CHECK(cmp[0].metric == kObjectAccuracy);
+  CHECK(cmp[0].best == 0);
+  CHECK(cmp[0].second == 1);
+  const std::vector<double> a{51, 54, 59}, b{40, 41, 42};
+  CHECK(cmp[0].test.p == doctest::Approx(welch_t_test(a, b, Alternative::greater).p));
+  CHECK(cmp[0].test.p < 0.05);
+  CHECK(cmp[1].metric == kForceRmse);
+  CHECK(cmp[1].best == 1);  // lower is better
+  CHECK(cmp[1].second == 0);
+  const std::string md = t.markdown();
+  CHECK(md.find("| a | 54.7 ± 4") != std::string::npos);
+  CHECK(md.find("best a, second b") != std::string::npos);
+  const nlohmann::json j = t.to_json();
+  CHECK(j["rows"][1]["mean"]["object_accuracy"].get<double>() == doctest::Approx(41));
+  CHECK(j["rows"][0]["runs"][2][1]["object_accuracy"].get<double>() == 58);
+  const std::string svg = t.svg();
+  CHECK(svg.rfind("<svg", 0) == 0);
+  CHECK(svg.find("c &lt;&amp;&gt;") != std::string::npos);
+  CHECK(svg.find("</svg>") != std::string::npos);
+}
+
+TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same table twice") {
+  GraspEvalConfig c;
+  c.seeds = {0, 1};
+  c.head_seeds = 1;
+  c.baseline_frames = 100;
+  c.pretrain_frames = 2000;
+  c.train_frames = 3000;
+  c.test_frames = 2000;
+  c.train.dim = 12;
+  c.train.heads = 2;
+  c.train.depth = 1;
+  c.train.predictor_depth = 1;
+  c.train.steps = 2;
+  c.train.warmup_steps = 1;
+  c.train.batch = 4;
+  c.tasks.sequence_length = 3;
+  c.tasks.max_object_windows = 40;
+  c.tasks.max_force_windows = 40;
+  c.tasks.max_pose_sequences = 10;
+  c.heads.probe_heads = 2;
+  c.heads.probe.max_epochs = 2;
+  c.heads.sequence.max_epochs = 2;
+  c.heads.end_to_end_max_epochs = 1;
+  int lines = 0;
+  const GraspEvalResult r = run_grasp_eval(c, [&](const std::string&) { ++lines; });
+  CHECK(lines > 10);
+  REQUIRE(r.main.rows.size() == 6);
+  REQUIRE(r.ablation.rows.size() == 5);
+  for (const EvalTable* t : {&r.main, &r.ablation})
+    for (const EvalRow& row : t->rows) {
+      REQUIRE(row.runs.size() == 2);
+      for (const auto& heads : row.runs)
+        for (const GraspScores& s : heads)
+          for (double v : s) CHECK(std::isfinite(v));
+    }
+  CHECK(r.info["pretraining"].size() == 2 * 6);  // JEPA, MAE and 4 mask variants per seed
+  const GraspEvalResult again = run_grasp_eval(c);
+  CHECK(again.main.to_json() == r.main.to_json());
+  CHECK(again.ablation.to_json() == r.ablation.to_json());
+  c.tasks.label_pad = 5;
+  CHECK_THROWS_AS(run_grasp_eval(c), ConfigError);
 }
 
 }  // TEST_SUITE
