@@ -28,15 +28,8 @@ inline EvalOptions demo_eval_options(std::uint64_t seed) {
   c.data_seed = seed;
   c.seeds = {seed};
   c.head_seeds = 1;
-  c.pretrain_frames = 40000;
-  c.train_frames = 30000;
-  c.test_frames = 15000;
-  c.tasks.max_object_windows = 1500;
-  c.tasks.max_force_windows = 1500;
-  c.tasks.max_pose_sequences = 300;
   c.heads.probe.max_epochs = 30;
   c.heads.sequence.max_epochs = 30;
-  c.heads.end_to_end_max_epochs = 3;
   c.mae = false;
   c.ablation = false;
   o.out = "runs/demo";

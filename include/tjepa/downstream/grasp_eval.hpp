@@ -59,11 +59,11 @@ struct GraspEvalConfig {
   std::uint64_t data_seed = 0;
   std::vector<std::uint64_t> seeds{0, 1, 2};  // pre-training seeds
   int head_seeds = 3;                         // heads per task and pre-training seed
-  int baseline_frames = 300, pretrain_frames = 60000, train_frames = 40000, test_frames = 20000;
+  int baseline_frames = 300, pretrain_frames = 40000, train_frames = 30000, test_frames = 15000;
   GraspSimConfig sim;
   TrainConfig train = grasp_pretrain_config();  // Tactile-JEPA (and MAE's budget: steps, batch, schedule)
   double mae_mask_ratio = 0.75;
-  GraspTaskConfig tasks{.max_object_windows = 2000, .max_force_windows = 2000, .max_pose_sequences = 400};
+  GraspTaskConfig tasks{.max_object_windows = 1500, .max_force_windows = 1500, .max_pose_sequences = 300};
   GraspHeadConfig heads;
   // Rows to run.
   bool ridge = true, random = true, end_to_end = true, mae = true, ablation = true;
@@ -181,8 +181,9 @@ struct GraspEvalResult {
   nlohmann::json info;  // config, data sizes, timings, pre-training losses
 };
 
-// Runs the protocol. progress(line) reports each stage; after_seed(result so far) runs after
-// each pre-training seed (e.g. to write partial tables).
+// Runs the protocol: the main rows seed by seed, then the ablation seed by seed. progress(line)
+// reports each stage; after_seed(result so far) runs after each seed of each (e.g. to write
+// partial tables).
 inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::function<void(const std::string&)>& progress = {},
                                       const std::function<void(const GraspEvalResult&)>& after_seed = {}) {
   using clock = std::chrono::steady_clock;
@@ -303,16 +304,22 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       row(res.main, "Tactile-JEPA, frozen").runs.push_back(scores);
       if (c.ablation) row(res.ablation, "2L+2G (default)").runs.push_back(scores);
     }
-    if (c.ablation)
+    res.info["total_seconds"] = seconds(t0);
+    if (after_seed) after_seed(res);
+  }
+  // The ablation after the main table, so that the main table is complete first.
+  if (c.ablation)
+    for (std::uint64_t s : c.seeds) {
+      say("mask ablation, seed " + std::to_string(s));
       for (const MaskVariant& v : grasp_mask_ablation(c.train)) {
         auto model = pretrain_jepa(v.name, s, &v);
         row(res.ablation, v.name)
             .runs.push_back(score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test,
                                                  te, hc, seeds_of(s), stage(v.name)));
       }
-    res.info["total_seconds"] = seconds(t0);
-    if (after_seed) after_seed(res);
-  }
+      res.info["total_seconds"] = seconds(t0);
+      if (after_seed) after_seed(res);
+    }
   res.info["total_seconds"] = seconds(t0);
   return res;
 }

@@ -219,7 +219,7 @@ struct GraspHeadConfig {
   HeadTrainConfig sequence{.max_epochs = 40, .patience = 5, .batch = 16, .lr = 1e-3};
   // End to end (the encoder trains with the head): the same, with these epoch limits (every step
   // runs the encoder forward and backward).
-  int end_to_end_max_epochs = 4, end_to_end_patience = 2;
+  int end_to_end_max_epochs = 3, end_to_end_patience = 2;
   double end_to_end_drop_path = 0.0;
 };
 
