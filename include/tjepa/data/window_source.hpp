@@ -74,6 +74,7 @@ class WindowSource {
   int taxels() const { return recs_[0].taxels(); }
   int axes() const { return recs_[0].axes(); }
   int length() const { return spec_.length; }
+  const WindowSpec& spec() const { return spec_; }
   bool has_labels() const { return !labels_.empty(); }
   const std::vector<Recording>& recordings() const { return recs_; }
   const std::optional<Preprocessor>& preprocessor() const { return pre_; }

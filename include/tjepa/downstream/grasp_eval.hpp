@@ -128,7 +128,13 @@ inline GraspEvalData simulate_grasp_eval_data(const GraspEvalConfig& c) {
   GraspEvalData d{layouts::allegro_xela(), Preprocessor(PreprocessConfig::magnetic()), {}, {}, {}, {}, {}, {}, {}};
   SimulatedHand sim(d.skin.layout, c.sim, c.data_seed);
   Recording baseline = sim.record_baseline(c.baseline_frames);
-  GraspRecording pre = sim.record(c.pretrain_frames), tr = sim.record(c.train_frames), te = sim.record(c.test_frames);
+  GraspRecording pre = sim.record(c.pretrain_frames);
+  // The labelled recordings start new episodes (reseed keeps the sensor and its drift), so no
+  // episode runs from one recording into the next.
+  sim.reseed(c.data_seed ^ 0x747261696e5f6570ull);  // "train_ep"
+  GraspRecording tr = sim.record(c.train_frames);
+  sim.reseed(c.data_seed ^ 0x746573745f657073ull);  // "test_eps"
+  GraspRecording te = sim.record(c.test_frames);
   d.drift = track_drift(c.train, baseline,
                         std::array<Recording*, 3>{&pre.recording, &tr.recording, &te.recording});
   d.pre.fit_baseline(baseline);
@@ -285,6 +291,8 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       TrainConfig cfg = c.train;
       cfg.seed = s;
       MaeModel<float> mae(mae_config(cfg, graph.num_nodes(), axes, c.mae_mask_ratio), s);
+      if (cfg.position_eigenvectors > 0)  // as make_jepa_model: both start from the same encoder
+        mae.set_positions(graph_positions(graph, cfg.dim, cfg.position_eigenvectors, cfg.position_scale, s));
       const auto t = clock::now();
       const auto log = pretrain_mae(mae, *d.pretrain, cfg, [&](const MaeStepStats& st) {
         if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)

@@ -43,7 +43,8 @@ struct GraspTaskConfig {
   int label_pad = 3;           // the pad whose force the labels carry (GraspSimConfig::label_pad)
   int sequence_length = 10;    // L windows per pose sequence (REFERENCE §6: 10–12)
   int sequence_stride = 2;     // windows between the starts of consecutive pose sequences
-  // At most this many samples per task (evenly spaced over the recording); 0: all.
+  // At most this many samples per task (evenly spaced picks from the task's candidates, which
+  // come in recording order); 0: all.
   int max_object_windows = 0, max_force_windows = 0, max_pose_sequences = 0;
 
   void validate() const {
@@ -85,6 +86,9 @@ inline GraspTasks grasp_tasks(const WindowSource& src, std::span<const GraspLabe
                       labels.size(), " labels for ", src.recordings()[0].frames(), " frames");
   const std::int64_t W = src.size();
   const int tau = src.length();
+  require<ConfigError>(src.spec().step() == tau, "grasp_tasks: windows ", src.spec().step(),
+                       " frames apart, expected non-overlapping windows (stride = tau = ", tau,
+                       ") so that consecutive windows form the pose sequences");
   auto last = [&](std::int64_t w) -> const GraspLabel& { return labels[static_cast<std::size_t>(src.start_of(w) + tau - 1)]; };
   // Window w is consecutive to w - 1 when it starts where w - 1 ends (stride = τ).
   auto follows = [&](std::int64_t w) { return w > 0 && src.start_of(w) == src.start_of(w - 1) + tau; };
@@ -180,6 +184,8 @@ using GraspScores = std::array<double, grasp_metrics.size()>;
 
 // Scores from predictions: object classes [S], force [S, 3], pose [Q, L, 3] against te.
 inline void score_object(GraspScores& s, std::span<const int> predicted, const GraspTasks& te) {
+  require<ShapeError>(!predicted.empty() && predicted.size() == te.object.label.size(), "score_object: ",
+                      predicted.size(), " predictions for ", te.object.label.size(), " samples");
   int right = 0;
   for (std::size_t i = 0; i < predicted.size(); ++i) right += predicted[i] == te.object.label[i];
   s[kObjectAccuracy] = 100.0 * right / static_cast<double>(predicted.size());
@@ -187,6 +193,7 @@ inline void score_object(GraspScores& s, std::span<const int> predicted, const G
 template <class T>
 void score_force(GraspScores& s, const T* pred, std::size_t ld, const GraspTasks& te) {
   const int S = te.force.size();
+  require<ShapeError>(S > 0 && ld >= 3, "score_force: ", S, " samples, row stride ", ld);
   const std::vector<double> r = rmse_per_column(pred, ld, te.force.value.data(), S, 3);
   s[kForceRmseU] = r[0];
   s[kForceRmseV] = r[1];
@@ -196,6 +203,7 @@ void score_force(GraspScores& s, const T* pred, std::size_t ld, const GraspTasks
 template <class T>
 void score_pose(GraspScores& s, const T* pred, std::size_t ld, const GraspTasks& te) {
   const int n = te.pose.size() * te.pose.length;
+  require<ShapeError>(n > 0 && ld >= 3, "score_pose: ", n, " rows, row stride ", ld);
   const std::vector<double> r = rmse_per_column(pred, ld, te.pose.value.data(), n, 3);
   s[kPoseX] = r[0];
   s[kPoseY] = r[1];
