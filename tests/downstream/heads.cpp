@@ -1,7 +1,9 @@
 // Evaluation building blocks of the downstream protocol: Welch's one-sided t-test (the Student-t
 // CDF against closed forms and table quantiles), the ridge baseline on hand-crafted features,
-// attentive-probe heads with early stopping, and the sequence head (gradients against central
-// differences, causal attention against a plain-loop reference, training), and the grasp protocol:
+// attentive-probe heads with early stopping (downstream/early_stopping.hpp: the split, patience,
+// the best epoch restored), and the sequence head (gradients against central differences, which
+// include downstream/causal_attention.hpp's parameters and inputs; causal attention against a
+// plain-loop reference; training), and the grasp protocol:
 // the tasks (downstream/grasp_tasks.hpp), the table and its statistics (downstream/eval_table.hpp)
 // and the whole protocol at toy size (downstream/grasp_eval.hpp).
 #include <doctest/doctest.h>
