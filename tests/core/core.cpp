@@ -6,10 +6,49 @@
 #include <tjepa/core/detail/vendor.hpp>
 #include <tjepa/tjepa.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <csignal>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <set>
+#include <stdexcept>
+#include <thread>
 #include <vector>
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct AtomicDir {
+  fs::path path = fs::temp_directory_path() / ("tjepa_atomic_" + std::to_string(::getpid()));
+  AtomicDir() {
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~AtomicDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+  std::vector<std::string> names() const {
+    std::vector<std::string> v;
+    for (const auto& e : fs::directory_iterator(path)) v.push_back(e.path().filename().string());
+    std::sort(v.begin(), v.end());
+    return v;
+  }
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+}  // namespace
 
 TEST_SUITE("core") {
   TEST_CASE("version macros match the version string") {
@@ -122,5 +161,127 @@ TEST_SUITE("core") {
     CHECK(m(1, 0) == 4);
     tjepa::ConstStridedMatrixMap<float> head(buf.data() + 1, 2, 2, Eigen::OuterStride<>(3));
     CHECK(head(1, 1) == 6);
+  }
+
+  TEST_CASE("write_file_atomic: a writer that throws leaves the old file and no temporary") {
+    AtomicDir dir;
+    const fs::path p = dir.path / "out.bin";
+    tjepa::write_file_atomic(p, "old");
+    CHECK_THROWS_WITH_AS(tjepa::write_file_atomic_with(p,
+                                                       [](std::ostream& out) {
+                                                         out << std::string(200000, 'x');
+                                                         throw std::runtime_error("writer gave up");
+                                                       }),
+                         "writer gave up", std::runtime_error);
+    CHECK(slurp(p) == "old");
+    CHECK(dir.names() == std::vector<std::string>{"out.bin"});
+    CHECK_THROWS_WITH_AS(tjepa::write_file_atomic(dir.path / "no_such_dir" / "x", "y"),
+                         doctest::Contains("cannot create a temporary file"), tjepa::FileError);
+  }
+
+  TEST_CASE("write_file_atomic: a write killed part-way leaves the old file and the next write removes its temporary") {
+    AtomicDir dir;
+    const fs::path p = dir.path / "ckpt.safetensors";
+    tjepa::write_file_atomic(p, "old");
+    int pipefd[2];
+    REQUIRE(::pipe(pipefd) == 0);
+    const ::pid_t child = ::fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {
+      ::close(pipefd[0]);
+      try {
+        tjepa::write_file_atomic_with(p, [&](std::ostream& out) {
+          out << std::string(1 << 20, 'n');
+          out.flush();
+          const char c = 1;
+          if (::write(pipefd[1], &c, 1) != 1) ::_exit(3);
+          for (;;) ::pause();  // killed here, mid-write
+        });
+      } catch (...) {
+      }
+      ::_exit(2);
+    }
+    ::close(pipefd[1]);
+    char c = 0;
+    REQUIRE(::read(pipefd[0], &c, 1) == 1);
+    ::close(pipefd[0]);
+    REQUIRE(::kill(child, SIGKILL) == 0);
+    int status = 0;
+    REQUIRE(::waitpid(child, &status, 0) == child);
+    CHECK(WIFSIGNALED(status));
+    CHECK(slurp(p) == "old");
+    const auto stale = tjepa::stale_temporaries(p);
+    REQUIRE(stale.size() == 1);
+    CHECK(fs::file_size(stale[0]) == (1u << 20));
+    CHECK(dir.names().size() == 2);
+    // Another target's write leaves it; the next write of this target removes it.
+    tjepa::write_file_atomic(dir.path / "other", "o");
+    CHECK(dir.names().size() == 3);
+    tjepa::write_file_atomic(p, "new");
+    CHECK(slurp(p) == "new");
+    CHECK(dir.names() == std::vector<std::string>{"ckpt.safetensors", "other"});
+    CHECK(tjepa::stale_temporaries(p).empty());
+  }
+
+  TEST_CASE("write_file_atomic: symlinks never redirect the write") {
+    AtomicDir dir;
+    const fs::path victim = dir.path / "victim";
+    tjepa::write_file_atomic(victim, "precious");
+    // The output path is a symlink: it is replaced by a regular file, its target is untouched.
+    const fs::path p = dir.path / "out";
+    fs::create_symlink(victim, p);
+    tjepa::write_file_atomic(p, "data");
+    CHECK(slurp(victim) == "precious");
+    CHECK_FALSE(fs::is_symlink(fs::symlink_status(p)));
+    CHECK(slurp(p) == "data");
+    // Symlinks planted at the old predictable temporary names and at stale-looking names are not
+    // followed, and a planted link is not removed as a stale temporary.
+    const fs::path q = dir.path / "q";
+    fs::create_symlink(victim, dir.path / ("q.tmp." + std::to_string(::getpid())));
+    const std::string prefix = ".q.tjepa-tmp.";
+    for (const auto& n : dir.names()) CHECK(n.find(prefix) == std::string::npos);
+    tjepa::write_file_atomic(q, "q data");
+    CHECK(slurp(victim) == "precious");
+    CHECK(slurp(q) == "q data");
+  }
+
+  TEST_CASE("write_file_atomic: a full disk throws a FileError naming the file and leaves no temporary") {
+    // RLIMIT_FSIZE makes write(2) fail part-way with EFBIG, as a full disk fails it with ENOSPC.
+    AtomicDir dir;
+    const fs::path p = dir.path / "big.npy";
+    tjepa::write_file_atomic(p, "old");
+    rlimit old{};
+    REQUIRE(::getrlimit(RLIMIT_FSIZE, &old) == 0);
+    auto* old_handler = std::signal(SIGXFSZ, SIG_IGN);
+    rlimit small = old;
+    small.rlim_cur = 100000;
+    REQUIRE(::setrlimit(RLIMIT_FSIZE, &small) == 0);
+    std::string what;
+    try {
+      tjepa::write_file_atomic(p, std::string(1000000, 'z'));
+    } catch (const tjepa::FileError& e) {
+      what = e.what();
+    }
+    ::setrlimit(RLIMIT_FSIZE, &old);
+    std::signal(SIGXFSZ, old_handler);
+    CHECK(what.find("big.npy") != std::string::npos);
+    CHECK(what.find("failed") != std::string::npos);
+    CHECK(slurp(p) == "old");
+    CHECK(dir.names() == std::vector<std::string>{"big.npy"});
+  }
+
+  TEST_CASE("write_file_atomic: two threads writing one path never mix their files") {
+    AtomicDir dir;
+    const fs::path p = dir.path / "shared";
+    const std::string a(300000, 'a'), b(300000, 'b');
+    auto run = [&](const std::string& s) {
+      for (int i = 0; i < 20; ++i) tjepa::write_file_atomic(p, s);
+    };
+    std::thread t1(run, std::cref(a)), t2(run, std::cref(b));
+    t1.join();
+    t2.join();
+    const std::string got = slurp(p);
+    CHECK((got == a || got == b));
+    CHECK(dir.names() == std::vector<std::string>{"shared"});
   }
 }

@@ -159,7 +159,7 @@ TEST_SUITE("data") {
     int files = 0;
     for (const auto& e : fs::directory_iterator(dir.path)) {
       ++files;
-      CHECK(e.path().string().find(".tmp.") == std::string::npos);
+      CHECK(e.path().string().find("tjepa-tmp") == std::string::npos);
     }
     CHECK(files == 2);
     CHECK_THROWS_WITH_AS(tjepa::write_npy<float>(dir / "x.npy", std::vector<float>(5), {2, 3}),

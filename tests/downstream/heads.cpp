@@ -15,6 +15,7 @@
 #include <numbers>
 #include <tuple>
 #include <type_traits>
+#include <set>
 #include <vector>
 
 #include "../model/gradcheck.hpp"
@@ -304,6 +305,39 @@ TEST_CASE("train_head: learns regression and classes with early stopping and res
   CHECK_THROWS_AS(ProbeHead<float>(d, 3, 0, 1, 0), ConfigError);
   cfg.patience = 0;
   CHECK_THROWS_AS(train_head(hr, f, reg, cfg), ConfigError);
+}
+
+TEST_CASE("split_for_validation: random samples or contiguous blocks with gaps - disjoint and seeded") {
+  const ValidationSplit r = split_for_validation(100, 0.2, 3);
+  CHECK(r.validation.size() == 20u);
+  CHECK(r.fit.size() == 80u);
+  std::set<std::int64_t> all(r.fit.begin(), r.fit.end());
+  all.insert(r.validation.begin(), r.validation.end());
+  CHECK(all.size() == 100u);
+  // 5 blocks of 4 in 5 segments of 20; the 2 samples on each side of a block are in neither set.
+  const ValidationSplit b = split_for_validation(100, 0.2, 3, 5, 2);
+  REQUIRE(b.validation.size() == 20u);
+  std::set<std::int64_t> val(b.validation.begin(), b.validation.end()), fit(b.fit.begin(), b.fit.end());
+  for (int seg = 0; seg < 5; ++seg) {
+    std::vector<std::int64_t> in;
+    for (auto v : b.validation)
+      if (v / 20 == seg) in.push_back(v);
+    REQUIRE(in.size() == 4u);
+    CHECK(in.back() - in.front() == 3);  // contiguous
+  }
+  for (auto v : b.validation) {
+    CHECK(fit.count(v) == 0);
+    for (int g = 1; g <= 2; ++g) {  // no fitting sample within the gap of a validation sample
+      CHECK(fit.count(v - g) == 0);
+      CHECK(fit.count(v + g) == 0);
+    }
+  }
+  CHECK(b.fit.size() + b.validation.size() <= 100u);
+  CHECK(b.fit.size() >= 100u - 20u - 5u * 4u);
+  CHECK(split_for_validation(100, 0.2, 3, 5, 2).validation == b.validation);
+  CHECK(split_for_validation(100, 0.2, 4, 5, 2).validation != b.validation);
+  CHECK_THROWS_WITH_AS(split_for_validation(20, 0.2, 3, 5, 2), doctest::Contains("cannot hold 5 validation blocks"),
+                       DataError);
 }
 
 TEST_CASE("train_head: stops after patience epochs without improvement on unlearnable targets") {
@@ -643,6 +677,7 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   c.tasks.max_object_windows = 40;
   c.tasks.max_force_windows = 40;
   c.tasks.max_pose_sequences = 10;
+  c.heads.sequence.validation_blocks = c.heads.sequence.validation_gap = 1;  // 10 sequences: one block
   c.heads.probe_heads = 2;
   c.heads.probe.max_epochs = 2;
   c.heads.sequence.max_epochs = 2;

@@ -481,6 +481,9 @@ TEST_SUITE("graph") {
     edge_fails("nanw.csv", "src,dst,weight\n0,1,nan\n", "nanw.csv:2: edge 0 -- 1 has weight nan");
     edge_fails("dupe.csv", "src,dst\n0,1\n1,0\n", "dupe.csv:3: duplicate edge 1 -- 0");
     edge_fails("cols.csv", "a,b,weight\n0,1,1\n", "no 'src' and 'dst' columns");
+    // Fuzzing finding 1: a header-less file whose first row has one field (the 1-byte file "1").
+    edge_fails("one.csv", "1", "one.csv:1: no header row naming the columns");
+    edge_fails("one_field.csv", "0\n1\n", "1 field(s) where a header-less edge file has 2 or 3");
     CHECK(tjepa::read_edges_csv(write_text("none.csv", "# no edges\n"), l).empty());
   }
 

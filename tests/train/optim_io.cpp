@@ -397,9 +397,23 @@ TEST_SUITE("train") {
     expect(raw_file(R"({"__metadata__":{"k":1},"a":{"dtype":"F32","shape":[2],"data_offsets":[0,8]}})", 8),
            "'k' is not a string");
     expect(raw_file(R"([1,2])", 0), "does not start with '{'");
-    expect(raw_file(R"({"a":[0,8]})", 0), "entry is not an object");
+    expect(raw_file(R"({"a":[0,8]})", 0), "an array outside a tensor's entry");
+    expect(raw_file(R"({"a":7})", 0), "entry is not an object");
     expect(raw_file(R"({"a":{"dtype":"F32","shape":[4294967296,4294967296],"data_offsets":[0,8]}})", 8),
            "too large");
+    // Fuzzing finding 2: numel * dtype size wrapped in 64 bits ([2^53, 512] F32 declared 0 bytes,
+    // [512, 2^52 + 1] F64 declared 4096) and the file was accepted.
+    expect(raw_file(R"({"a":{"dtype":"F32","shape":[9007199254740992,512],"data_offsets":[0,0]}})", 0),
+           "F32 [9007199254740992, 512] is too large");
+    expect(raw_file(R"({"a":{"dtype":"F64","shape":[512,4503599627370497],"data_offsets":[0,4096]}})", 4096),
+           "F64 [512, 4503599627370497] is too large");
+    // Structures no header has stop the parse early (header memory bound).
+    expect(raw_file(R"({"a":{"dtype":"F32","shape":[)" + std::string(64 * 2, '0').replace(1, 125, std::string(63, ',').insert(0, "")).substr(0, 0) +
+                        "0" + [] { std::string z; for (int i = 0; i < 64; ++i) z += ",0"; return z; }() +
+                        R"(],"data_offsets":[0,0]}})", 0),
+           "an array of more than 64 entries");
+    expect(raw_file(R"({"a":{"dtype":{"x":{}},"shape":[2],"data_offsets":[0,8]}})", 8), "nests objects deeper");
+    expect(raw_file(R"({"a":[[0]]})", 0), "an array outside a tensor's entry");
     // A real file cut short anywhere fails cleanly.
     tjepa::SafetensorsFile f;
     const std::vector<double> x(10, 1.0);

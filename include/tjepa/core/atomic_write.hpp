@@ -1,44 +1,201 @@
 #pragma once
-// Atomic file writes: the content goes to `<path>.tmp.<pid>`, then std::filesystem::rename puts it
-// in place, so a reader never sees a half-written file and a failed write leaves the old file.
+// Atomic, durable file writes. The content goes to a temporary file created exclusively
+// (O_CREAT | O_EXCL | O_NOFOLLOW, an unpredictable name) in the target's directory; the file is
+// fsync'ed, renamed over the target, and the directory is fsync'ed. A reader sees the old file or
+// the new one, never a part; after a power cut the rename is either on disk or not. Every error
+// path (a writer that throws, a full disk, a failed rename) removes the temporary file.
+//
+// Temporary names: `.<name>.tjepa-tmp.<host>.<pid>.<random>` beside `<name>`. A process killed
+// mid-write leaves one behind; the next write of the same target on the same host removes those
+// whose process no longer runs (stale_temporaries lists them).
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cstdint>
+#include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <ostream>
+#include <random>
+#include <streambuf>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <vector>
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "tjepa/core/error.hpp"
 
 namespace tjepa {
 
+namespace detail {
+
+// A std::streambuf writing to a POSIX file descriptor through a 64 KiB buffer. A failed write
+// (ENOSPC, EFBIG, EIO) is remembered with its errno and makes the stream bad.
+class FdStreambuf : public std::streambuf {
+ public:
+  explicit FdStreambuf(int fd) : fd_(fd) { setp(buf_.data(), buf_.data() + buf_.size()); }
+  int error() const { return error_; }
+
+ protected:
+  int_type overflow(int_type ch) override {
+    if (!flush_buffer()) return traits_type::eof();
+    if (!traits_type::eq_int_type(ch, traits_type::eof())) {
+      *pptr() = traits_type::to_char_type(ch);
+      pbump(1);
+    }
+    return traits_type::not_eof(ch);
+  }
+  std::streamsize xsputn(const char* s, std::streamsize n) override {
+    if (n >= static_cast<std::streamsize>(buf_.size())) {  // large blocks go straight to the file
+      if (!flush_buffer() || !write_all(s, static_cast<std::size_t>(n))) return 0;
+      return n;
+    }
+    return std::streambuf::xsputn(s, n);
+  }
+  int sync() override { return flush_buffer() ? 0 : -1; }
+
+ private:
+  bool flush_buffer() {
+    const std::size_t n = static_cast<std::size_t>(pptr() - pbase());
+    const bool ok = write_all(pbase(), n);
+    setp(buf_.data(), buf_.data() + buf_.size());
+    return ok;
+  }
+  bool write_all(const char* p, std::size_t n) {
+    if (error_ != 0) return false;
+    while (n > 0) {
+      const ::ssize_t w = ::write(fd_, p, n);
+      if (w < 0) {
+        if (errno == EINTR) continue;
+        error_ = errno;
+        return false;
+      }
+      p += w;
+      n -= static_cast<std::size_t>(w);
+    }
+    return true;
+  }
+
+  int fd_;
+  int error_ = 0;
+  std::array<char, 1 << 16> buf_{};
+};
+
+inline std::string temporary_prefix(const std::filesystem::path& path) {
+  std::array<char, 256> host{};
+  if (::gethostname(host.data(), host.size() - 1) != 0) host[0] = '\0';
+  std::string h(host.data());
+  for (char& c : h)
+    if (c == '.' || c == '/') c = '_';
+  return "." + path.filename().string() + ".tjepa-tmp." + (h.empty() ? std::string("host") : h) + ".";
+}
+
+inline std::uint64_t temporary_nonce() {
+  static thread_local std::mt19937_64 gen([] {
+    std::random_device rd;
+    const auto t = static_cast<std::uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count());
+    return (static_cast<std::uint64_t>(rd()) << 32) ^ rd() ^ t ^ static_cast<std::uint64_t>(::getpid());
+  }());
+  return gen();
+}
+
+// fsync of a directory, so that a rename (or an unlink) inside it is on disk.
+inline void sync_directory(const std::filesystem::path& dir) {
+  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  require<FileError>(fd >= 0, "write_file_atomic: cannot open directory '", dir.string(), "': ", std::strerror(errno));
+  const int rc = ::fsync(fd);
+  const int err = errno;
+  ::close(fd);
+  // Some file systems cannot sync a directory (EINVAL); the rename is done either way.
+  require<FileError>(rc == 0 || err == EINVAL || err == EROFS, "write_file_atomic: cannot sync directory '",
+                     dir.string(), "': ", std::strerror(err));
+}
+
+}  // namespace detail
+
+// The temporary files of earlier writes of `path` on this host whose process no longer runs
+// (killed mid-write). write_file_atomic removes them; exposed for tests and tools.
+inline std::vector<std::filesystem::path> stale_temporaries(const std::filesystem::path& path) {
+  std::vector<std::filesystem::path> stale;
+  const std::filesystem::path dir = path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path();
+  const std::string prefix = detail::temporary_prefix(path);
+  std::error_code ec;
+  for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.compare(0, prefix.size(), prefix) != 0) continue;
+    // <pid>.<random>
+    const std::string rest = name.substr(prefix.size());
+    const std::size_t dot = rest.find('.');
+    if (dot == 0 || dot == std::string::npos || dot > 10) continue;
+    long long pid = 0;
+    bool digits = true;
+    for (std::size_t i = 0; i < dot; ++i) {
+      if (rest[i] < '0' || rest[i] > '9') digits = false;
+      else pid = pid * 10 + (rest[i] - '0');
+    }
+    if (!digits || pid <= 0 || pid == static_cast<long long>(::getpid())) continue;
+    if (::kill(static_cast<::pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to judge)
+    std::error_code lec;
+    if (std::filesystem::is_symlink(it->symlink_status(lec)) || !std::filesystem::is_regular_file(it->symlink_status(lec)))
+      continue;
+    stale.push_back(it->path());
+  }
+  return stale;
+}
+
 // Streams the content: write(std::ostream&) fills the temporary file, which then replaces `path`.
-// Large outputs (a .npy of embeddings) never need to exist in memory as one string.
+// Large outputs (a .npy of embeddings) never need to exist in memory as one string. If `write`
+// throws, the exception propagates and the temporary file is removed; `path` is untouched.
 template <class Writer>
 void write_file_atomic_with(const std::filesystem::path& path, Writer&& write) {
-  const std::filesystem::path tmp = path.string() + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    require<FileError>(static_cast<bool>(out), "write_file_atomic: cannot open '", tmp.string(), "' for writing");
-    write(static_cast<std::ostream&>(out));
+  namespace fs = std::filesystem;
+  require<FileError>(!path.filename().empty(), "write_file_atomic: '", path.string(), "' names no file");
+  const fs::path dir = path.parent_path();
+  for (const fs::path& s : stale_temporaries(path)) {
+    std::error_code ec;
+    fs::remove(s, ec);
+  }
+  const std::string prefix = detail::temporary_prefix(path) + std::to_string(::getpid()) + ".";
+  fs::path tmp;
+  int fd = -1;
+  for (int attempt = 0; attempt < 16 && fd < 0; ++attempt) {
+    tmp = dir / (prefix + std::to_string(detail::temporary_nonce() % 1000000000000ull));
+    fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
+    if (fd < 0 && errno != EEXIST) break;
+  }
+  require<FileError>(fd >= 0, "write_file_atomic: cannot create a temporary file for '", path.string(), "' in '",
+                     (dir.empty() ? fs::path(".") : dir).string(), "': ", std::strerror(errno));
+  auto discard = [&] {
+    if (fd >= 0) ::close(fd);
+    fd = -1;
+    std::error_code ec;
+    fs::remove(tmp, ec);
+  };
+  try {
+    detail::FdStreambuf buf(fd);
+    std::ostream out(&buf);
+    out.exceptions(std::ios::goodbit);
+    write(out);
     out.flush();
-    if (!out) {
-      out.close();
-      std::error_code ec;
-      std::filesystem::remove(tmp, ec);
-      fail<FileError>("write_file_atomic: writing '", tmp.string(), "' failed");
-    }
+    if (!out || buf.error() != 0)
+      fail<FileError>("write_file_atomic: writing '", path.string(), "' failed: ",
+                      buf.error() != 0 ? std::strerror(buf.error()) : "the writer's stream went bad");
+    require<FileError>(::fsync(fd) == 0, "write_file_atomic: cannot sync '", path.string(), "': ", std::strerror(errno));
+    const int rc = ::close(fd);
+    fd = -1;
+    require<FileError>(rc == 0, "write_file_atomic: closing '", path.string(), "' failed: ", std::strerror(errno));
+    // rename(2) replaces a symlink at `path` itself (never its target) and is atomic.
+    require<FileError>(::rename(tmp.c_str(), path.c_str()) == 0, "write_file_atomic: cannot rename '", tmp.string(),
+                       "' to '", path.string(), "': ", std::strerror(errno));
+  } catch (...) {
+    discard();
+    throw;
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::error_code ec2;
-    std::filesystem::remove(tmp, ec2);
-    fail<FileError>("write_file_atomic: cannot rename '", tmp.string(), "' to '", path.string(), "': ",
-                    ec.message());
-  }
+  detail::sync_directory(dir);
 }
 
 inline void write_file_atomic(const std::filesystem::path& path, std::string_view content) {

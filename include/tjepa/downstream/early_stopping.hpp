@@ -1,7 +1,11 @@
 #pragma once
 // Early stopping, the training loop every downstream head of the evaluation protocol shares
 // (attentive probe heads, the sequence head, the end-to-end baseline):
-//   - a seeded split holds out validation_fraction of the training samples (split_for_validation)
+//   - a seeded split holds out validation_fraction of the training samples (split_for_validation):
+//     random samples, or (validation_blocks > 0) contiguous blocks of samples in their order, with
+//     validation_gap samples on each side of a block left out of both sets, for samples in
+//     recording order whose neighbours are alike or overlap (windows of one grasp, sequences of
+//     windows that start a few windows apart)
 //   - AdamW on the trainable parts, mini-batches of the fitting samples in a seeded order per
 //     epoch; the learning rate rises linearly from lr/10 over warmup_epochs, then stays at lr
 //     (a cosine would need the epoch count that early stopping decides)
@@ -28,6 +32,8 @@ struct HeadTrainConfig {
   int max_epochs = 100;
   int patience = 10;                 // epochs without a lower validation loss before stopping
   double validation_fraction = 0.2;  // of the training samples, held out for early stopping
+  int validation_blocks = 0;         // 0: random samples; k > 0: k contiguous blocks (samples in order)
+  int validation_gap = 0;            // samples left out on each side of a validation block
   int batch = 32;
   double lr = 1e-3;
   int warmup_epochs = 1;
@@ -41,6 +47,9 @@ struct HeadTrainConfig {
     require<ConfigError>(patience > 0, "HeadTrainConfig: patience = ", patience, ", expected > 0");
     require<ConfigError>(validation_fraction > 0 && validation_fraction < 1, "HeadTrainConfig: validation_fraction = ",
                          validation_fraction, ", expected in (0, 1)");
+    require<ConfigError>(validation_blocks >= 0, "HeadTrainConfig: validation_blocks = ", validation_blocks,
+                         ", expected >= 0");
+    require<ConfigError>(validation_gap >= 0, "HeadTrainConfig: validation_gap = ", validation_gap, ", expected >= 0");
     require<ConfigError>(batch > 0, "HeadTrainConfig: batch = ", batch, ", expected > 0");
     require<ConfigError>(lr > 0 && std::isfinite(lr), "HeadTrainConfig: lr = ", lr, ", expected finite > 0");
     require<ConfigError>(warmup_epochs >= 0, "HeadTrainConfig: warmup_epochs = ", warmup_epochs, ", expected >= 0");
@@ -65,12 +74,41 @@ struct ValidationSplit {
   std::vector<std::int64_t> fit, validation;
 };
 
-inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_t seed) {
+// blocks = 0: round(fraction·S) random samples are held out. blocks = k > 0: [0, S) is cut into k
+// equal segments and each holds one contiguous validation block (round(fraction·S / k) samples)
+// at a seeded offset; the `gap` samples on each side of a block are in neither set.
+inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_t seed, int blocks = 0, int gap = 0) {
   require<ConfigError>(fraction > 0 && fraction < 1, "split_for_validation: fraction = ", fraction,
                        ", expected in (0, 1)");
+  require<ConfigError>(blocks >= 0 && gap >= 0, "split_for_validation: blocks = ", blocks, ", gap = ", gap,
+                       ", expected >= 0");
   const int n_val = static_cast<int>(std::lround(fraction * S));
   require<DataError>(n_val >= 1 && S - n_val >= 2, "split_for_validation: ", S, " samples cannot be split ",
                      1 - fraction, " / ", fraction, " into fitting and validation samples");
+  if (blocks > 0) {
+    const int per = std::max(1, static_cast<int>(std::lround(static_cast<double>(n_val) / blocks)));
+    const int segment = S / blocks;
+    require<DataError>(segment >= per + 2 * gap + 1, "split_for_validation: ", S, " samples cannot hold ", blocks,
+                       " validation blocks of ", per, " with gaps of ", gap);
+    Rng rng(seed, 0x76616c6964ull /* "valid" */);
+    std::vector<char> role(static_cast<std::size_t>(S), 'f');  // f fit, v validation, g gap
+    std::vector<int> starts;
+    for (int b = 0; b < blocks; ++b) {
+      starts.push_back(b * segment + static_cast<int>(rng.below(static_cast<std::uint64_t>(segment - per + 1))));
+      for (int i = starts.back(); i < starts.back() + per; ++i) role[static_cast<std::size_t>(i)] = 'v';
+    }
+    for (const int start : starts)
+      for (int i = std::max(0, start - gap); i < std::min(S, start + per + gap); ++i)
+        if (role[static_cast<std::size_t>(i)] == 'f') role[static_cast<std::size_t>(i)] = 'g';
+    ValidationSplit s;
+    for (int i = 0; i < S; ++i) {
+      if (role[static_cast<std::size_t>(i)] == 'f') s.fit.push_back(i);
+      if (role[static_cast<std::size_t>(i)] == 'v') s.validation.push_back(i);
+    }
+    require<DataError>(s.fit.size() >= 2, "split_for_validation: ", S, " samples leave ", s.fit.size(),
+                       " fitting samples after the validation blocks and gaps");
+    return s;
+  }
   std::vector<std::int64_t> order(static_cast<std::size_t>(S));
   for (int i = 0; i < S; ++i) order[static_cast<std::size_t>(i)] = i;
   Rng(seed, 0x76616c6964ull /* "valid" */).shuffle(std::span<std::int64_t>(order));

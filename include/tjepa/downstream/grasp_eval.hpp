@@ -76,6 +76,11 @@ struct GraspEvalConfig {
     sim.validate();
     train.validate();
     tasks.validate();
+    const int overlap = (tasks.sequence_length + tasks.sequence_stride - 1) / tasks.sequence_stride - 1;
+    require<ConfigError>(heads.sequence.validation_blocks == 0 || heads.sequence.validation_gap >= overlap,
+                         "GraspEvalConfig: heads.sequence.validation_gap = ", heads.sequence.validation_gap,
+                         ", expected >= ", overlap, " (pose sequences of ", tasks.sequence_length, " windows starting ",
+                         tasks.sequence_stride, " apart overlap up to ", overlap, " starts away)");
     require<ConfigError>(tasks.label_pad == sim.label_pad, "GraspEvalConfig: tasks.label_pad = ", tasks.label_pad,
                          ", sim.label_pad = ", sim.label_pad, ", expected equal");
   }
@@ -92,7 +97,9 @@ struct GraspEvalConfig {
                        {"sequence_stride", tasks.sequence_stride}, {"max_object_windows", tasks.max_object_windows},
                        {"max_force_windows", tasks.max_force_windows}, {"max_pose_sequences", tasks.max_pose_sequences}}},
             {"heads", {{"probe_heads", heads.probe_heads}, {"max_epochs", heads.probe.max_epochs},
-                       {"patience", heads.probe.patience}, {"probe_batch", heads.probe.batch}, {"lr", heads.probe.lr},
+                       {"patience", heads.probe.patience},
+                       {"validation_blocks", heads.probe.validation_blocks}, {"probe_validation_gap", heads.probe.validation_gap},
+                       {"sequence_validation_gap", heads.sequence.validation_gap}, {"sequence_patience", heads.sequence.patience}, {"probe_batch", heads.probe.batch}, {"lr", heads.probe.lr},
                        {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
                        {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
                        {"end_to_end_patience", heads.end_to_end_patience}}},

@@ -183,7 +183,7 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
   require<ShapeError>(features.size() == S, "train_head: ", features.size(), " feature rows for ", S, " targets");
   require<ShapeError>(features.dim() == head.probe.config.dim, "train_head: features of width ", features.dim(),
                       ", the head expects ", head.probe.config.dim);
-  const ValidationSplit split = split_for_validation(S, cfg.validation_fraction, cfg.seed);
+  const ValidationSplit split = split_for_validation(S, cfg.validation_fraction, cfg.seed, cfg.validation_blocks, cfg.validation_gap);
   if (R > 0) head.scaler = ColumnScaler::fit(targets.value, R, split.fit);
 
   std::vector<PrefixedParams<T>> parts{{"probe.", &head.params}};

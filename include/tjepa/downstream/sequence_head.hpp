@@ -237,7 +237,7 @@ HeadTrainResult train_sequence_head(SequenceModel<T>& model, Features& features,
                       " outputs on features of width ", features.dim(), ", the head takes ", hc.length, " x ",
                       hc.outputs, " and width ", hc.dim);
   const int Q = targets.size(), L = targets.length, P = targets.outputs, N = features.tokens(), d = hc.dim;
-  const ValidationSplit split = split_for_validation(Q, cfg.validation_fraction, cfg.seed);
+  const ValidationSplit split = split_for_validation(Q, cfg.validation_fraction, cfg.seed, cfg.validation_blocks, cfg.validation_gap);
   std::vector<std::int64_t> fit_rows;  // (sequence, position) rows of the fitting sequences
   for (std::int64_t q : split.fit)
     for (int l = 0; l < L; ++l) fit_rows.push_back(q * L + l);

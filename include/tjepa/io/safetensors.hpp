@@ -22,6 +22,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <optional>
 #include <ostream>
@@ -106,8 +107,12 @@ inline constexpr Dtype dtype_of = [] {
   else static_assert(sizeof(T) == 0, "tjepa: no safetensors dtype for this element type");
 }();
 
-// Largest header accepted on load, in bytes (the reference crate's limit).
-inline constexpr std::size_t safetensors_max_header = 100'000'000;
+// Largest header accepted on load, in bytes. A tensor's entry takes about 100 bytes, so 16 MiB
+// holds over 100 000 tensors (tjepa's reference-scale checkpoint needs about 40 KB). The
+// reference crate allows 100 MB; a header that large would cost gigabytes to parse.
+inline constexpr std::size_t safetensors_max_header = std::size_t{16} << 20;
+// Longest array in a header (a shape or data_offsets): more dimensions than any tensor has.
+inline constexpr std::size_t safetensors_max_array = 64;
 
 namespace detail {
 // Reverses each element's bytes in place (only big-endian hosts need it: the format is LE).
@@ -270,16 +275,32 @@ inline SafetensorsFile parse_safetensors(std::span<const std::byte> bytes, const
   if (n == 0 || text[0] != '{') bad("the header does not start with '{', expected a JSON object");
 
   // Duplicate keys would silently shadow each other in the parsed object: track them per object.
+  // The parse also stops at the first structure no header has (objects nested deeper than a
+  // tensor's entry, arrays outside an entry or longer than safetensors_max_array), so the memory
+  // and time a header costs stay a small multiple of its length.
   std::vector<std::unordered_set<std::string>> keys;
+  std::vector<std::size_t> arrays;  // entries so far of each open array
   std::string duplicate;
   const nlohmann::json::parser_callback_t check_keys = [&](int, nlohmann::json::parse_event_t event,
                                                            nlohmann::json& parsed) {
     using E = nlohmann::json::parse_event_t;
-    if (event == E::object_start) keys.emplace_back();
-    else if (event == E::object_end) keys.pop_back();
-    else if (event == E::key && !keys.empty() && !keys.back().insert(parsed.get<std::string>()).second &&
-             duplicate.empty())
+    if (event != E::array_start && event != E::array_end && !arrays.empty() && event != E::key &&
+        event != E::object_end && ++arrays.back() > safetensors_max_array)
+      bad("the header holds an array of more than ", safetensors_max_array, " entries");
+    if (event == E::object_start) {
+      if (keys.size() >= 2 || !arrays.empty()) bad("the header nests objects deeper than a tensor's entry");
+      keys.emplace_back();
+    } else if (event == E::object_end) {
+      keys.pop_back();
+    } else if (event == E::array_start) {
+      if (keys.size() != 2 || !arrays.empty()) bad("the header holds an array outside a tensor's entry");
+      arrays.push_back(0);
+    } else if (event == E::array_end) {
+      arrays.pop_back();
+    } else if (event == E::key && !keys.empty() && !keys.back().insert(parsed.get<std::string>()).second &&
+               duplicate.empty()) {
       duplicate = parsed.get<std::string>();
+    }
     return true;
   };
   nlohmann::json header;
@@ -337,6 +358,10 @@ inline SafetensorsFile parse_safetensors(std::span<const std::byte> bytes, const
     const auto begin = off[0].get<std::uint64_t>();
     const auto end = off[1].get<std::uint64_t>();
     if (begin > end) bad("tensor '", name, "': data_offsets [", begin, ", ", end, "] end before they begin");
+    // numel * size can wrap in 64 bits: check before multiplying.
+    if (numel > std::numeric_limits<std::uint64_t>::max() / dtype_size(t.dtype))
+      bad("tensor '", name, "': ", dtype_name(t.dtype), " ", detail::shape_string(t.shape),
+          " is too large (2^64 bytes or more)");
     const std::uint64_t expected = numel * dtype_size(t.dtype);
     if (end - begin != expected)
       bad("tensor '", name, "': data_offsets [", begin, ", ", end, "] hold ", end - begin, " bytes, expected ",

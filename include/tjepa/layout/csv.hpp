@@ -151,6 +151,9 @@ inline std::vector<Edge> read_edges_csv(const std::filesystem::path& path, const
                                                                      : std::vector<std::string>{c.src, c.dst},
                                           col);
   require<FileError>(col.count(c.src) && col.count(c.dst), path.string(), ": no '", c.src, "' and '", c.dst, "' columns");
+  require<FileError>(header || rows[0].fields.size() >= 2, detail::where(path, rows[0].line), "no header row naming the columns (",
+                     c.src, ", ", c.dst, "[, ", c.weight, "]), and ", rows[0].fields.size(),
+                     " field(s) where a header-less edge file has 2 or 3 (src,dst[,weight])");
   const int cs = col.at(c.src), cd = col.at(c.dst), cw = col.count(c.weight) ? col.at(c.weight) : -1;
   std::unordered_map<long long, int> index;
   for (int i = 0; i < layout.size(); ++i) index.emplace(layout.ids[i], i);
