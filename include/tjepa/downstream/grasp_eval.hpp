@@ -98,7 +98,7 @@ struct GraspEvalConfig {
                        {"max_force_windows", tasks.max_force_windows}, {"max_pose_sequences", tasks.max_pose_sequences}}},
             {"heads", {{"probe_heads", heads.probe_heads}, {"max_epochs", heads.probe.max_epochs},
                        {"patience", heads.probe.patience},
-                       {"validation_blocks", heads.probe.validation_blocks}, {"probe_validation_gap", heads.probe.validation_gap},
+                       {"sequence_validation_blocks", heads.sequence.validation_blocks},
                        {"sequence_validation_gap", heads.sequence.validation_gap}, {"sequence_patience", heads.sequence.patience}, {"probe_batch", heads.probe.batch}, {"lr", heads.probe.lr},
                        {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
                        {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
