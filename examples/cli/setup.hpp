@@ -55,10 +55,13 @@ inline Preprocessor fit_preprocessor(const std::string& mode, const Recording* b
   return p;
 }
 
-// A recording from .npy ([T, N, m] or [T, N·m] with axes given) or text/CSV (axes given).
+// A recording from .npy ([T, N, m] or [T, N·m] with axes given) or text/CSV (axes given). A .npy
+// is read into memory, not mapped: the command runs for hours and the file may change under it.
 inline Recording read_recording(const std::filesystem::path& path, int axes) {
   require<FileError>(std::filesystem::exists(path), "no such file '", path.string(), "'");
-  if (path.extension() == ".npy") return read_recording_npy(path, axes > 0 ? axes : 0);
+  NpyReadOptions copy;
+  copy.map = false;
+  if (path.extension() == ".npy") return read_recording_npy(path, axes > 0 ? axes : 0, copy);
   TextFormat f;
   f.axes = axes > 0 ? axes : 3;
   return read_text_recording(path, f);

@@ -369,6 +369,11 @@ TEST_CASE("checkpoint metadata that no run could have throws FileError naming th
   j["train"]["tau"] = 0;  // once a SIGFPE in in_dim % tau
   CHECK(error_of(j).find("tau") != std::string::npos);
   j = good;
+  j["model"]["encoder"]["dim"] = 1 << 20;  // a small file must not allocate terabytes
+  j["model"]["encoder"]["heads"] = 1;
+  j["model"]["predictor"]["in_dim"] = j["model"]["predictor"]["dim"] = 1 << 20;
+  CHECK_MESSAGE(error_of(j).find("describes a model of about") != std::string::npos, error_of(j));
+  j = good;
   j["model"].erase("encoder");
   CHECK(error_of(j).find("missing key 'encoder'") != std::string::npos);
   j = good;

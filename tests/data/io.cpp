@@ -13,6 +13,9 @@
 #include <string>
 #include <vector>
 
+#include <csignal>
+
+#include <sys/wait.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
@@ -165,6 +168,39 @@ TEST_SUITE("data") {
     CHECK_THROWS_WITH_AS(tjepa::write_npy<float>(dir / "x.npy", std::vector<float>(5), {2, 3}),
                          doctest::Contains("holds 6 values, got 5"), tjepa::ShapeError);
     CHECK_THROWS_AS(tjepa::write_npy(dir / "no_such_dir" / "x.npy", rec), tjepa::FileError);
+  }
+
+  TEST_CASE("npy: a mapped array dies with SIGBUS when its file is truncated in place - a copying read does not") {
+    TempDir dir;
+    const auto v = ramp(64 * 1024);  // 256 KiB of data: many pages
+    tjepa::write_npy<float>(dir / "rec.npy", v, {64, 1024});
+    tjepa::NpyReadOptions copy;
+    copy.map = false;
+    const tjepa::NpyArray copied = tjepa::read_npy(dir / "rec.npy", copy);
+    // The mapping's promise, in a child: truncate in place, touch the last page.
+    const ::pid_t child = ::fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {
+      const tjepa::NpyArray mapped = tjepa::read_npy(dir / "rec.npy");
+      if (::truncate((dir / "rec.npy").c_str(), 128) != 0) ::_exit(3);
+      volatile float sink = mapped.data()[mapped.numel() - 1];
+      (void)sink;
+      ::_exit(0);
+    }
+    int status = 0;
+    REQUIRE(::waitpid(child, &status, 0) == child);
+    CHECK(WIFSIGNALED(status));
+    CHECK(WTERMSIG(status) == SIGBUS);
+    // The copy is unaffected (the file is truncated now).
+    CHECK(fs::file_size(dir / "rec.npy") == 128u);
+    REQUIRE(copied.numel() == v.size());
+    CHECK(copied.data()[v.size() - 1] == v.back());
+    CHECK_THROWS_AS(tjepa::read_npy(dir / "rec.npy", copy), tjepa::FileError);
+    // Replacing the file by rename (tjepa's writers) keeps a mapped array intact.
+    tjepa::write_npy<float>(dir / "rec.npy", v, {64, 1024});
+    const tjepa::NpyArray mapped = tjepa::read_npy(dir / "rec.npy");
+    tjepa::write_npy<float>(dir / "rec.npy", std::vector<float>(16, 0.f), {16});
+    CHECK(mapped.data()[v.size() - 1] == v.back());
   }
 
   TEST_CASE("npy: every malformed file gives a FileError that names the file and the problem") {

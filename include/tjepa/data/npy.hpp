@@ -257,19 +257,22 @@ struct NpyArray {
 struct NpyReadOptions {
   // Throw DataError (naming the element's index) if any value is NaN or ±Inf.
   bool require_finite = false;
-  // Use float32 data in place from the mapped file; false: always copy into memory.
+  // Map the file and use float32 data in place (no copy of a multi-GB recording). The file must
+  // then not be truncated or rewritten in place while the array lives (SIGBUS; replacing it by
+  // rename is safe). false: read the file into memory, never mapped.
   bool map = true;
 };
 
 inline NpyArray read_npy(const std::filesystem::path& path, const NpyReadOptions& opt = {}) {
-  auto file = std::make_shared<detail::MappedFile>(path);
+  auto file = std::make_shared<detail::MappedFile>(path, !opt.map);
   const NpyHeader h = parse_npy_header(file->data(), file->size(), file->path());
   NpyArray out;
   out.shape = h.shape;
   out.source = file->path();
   const std::size_t n = h.numel();
   const char* src = file->data() + h.data_offset;
-  if (h.dtype == NpyDtype::float32 && opt.map && h.data_offset % alignof(float) == 0) {
+  // float32 data are used in place (mapped, or in the buffer the file was read into).
+  if (h.dtype == NpyDtype::float32 && reinterpret_cast<std::uintptr_t>(src) % alignof(float) == 0) {
     const float* p = reinterpret_cast<const float*>(static_cast<const void*>(src));
     out.values = detail::FloatStorage(p, n, file);
   } else {

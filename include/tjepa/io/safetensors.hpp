@@ -107,10 +107,11 @@ inline constexpr Dtype dtype_of = [] {
   else static_assert(sizeof(T) == 0, "tjepa: no safetensors dtype for this element type");
 }();
 
-// Largest header accepted on load, in bytes. A tensor's entry takes about 100 bytes, so 16 MiB
-// holds over 100 000 tensors (tjepa's reference-scale checkpoint needs about 40 KB). The
-// reference crate allows 100 MB; a header that large would cost gigabytes to parse.
-inline constexpr std::size_t safetensors_max_header = std::size_t{16} << 20;
+// Largest header accepted on load, in bytes. A tensor's entry takes about 100 bytes, so 4 MiB
+// holds about 40 000 tensors (a tjepa checkpoint of the reference model with its optimizer state
+// has a few hundred). The reference crate allows 100 MB. Parsing costs at most about 30 times the
+// header's length in memory and is linear in time (4 MiB: about 110 MB and 0.4 s).
+inline constexpr std::size_t safetensors_max_header = std::size_t{4} << 20;
 // Longest array in a header (a shape or data_offsets): more dimensions than any tensor has.
 inline constexpr std::size_t safetensors_max_array = 64;
 
@@ -261,6 +262,53 @@ inline void write_safetensors(std::ostream& out, const SafetensorsFile& file) {
   }
 }
 
+namespace detail {
+// The SAX handler of parse_safetensors' first pass over the header.
+struct SafetensorsHeaderCheck {
+  using json = nlohmann::json;
+  std::string source;
+  std::vector<std::unordered_set<std::string>> keys;  // per open object
+  std::vector<std::size_t> arrays;                    // entries so far of each open array
+  std::string duplicate, syntax_error;
+
+  void value() {
+    if (!arrays.empty() && ++arrays.back() > safetensors_max_array)
+      fail<FileError>(source, ": the header holds an array of more than ", safetensors_max_array, " entries");
+  }
+  bool null() { return value(), true; }
+  bool boolean(bool) { return value(), true; }
+  bool number_integer(json::number_integer_t) { return value(), true; }
+  bool number_unsigned(json::number_unsigned_t) { return value(), true; }
+  bool number_float(json::number_float_t, const json::string_t&) { return value(), true; }
+  bool string(json::string_t&) { return value(), true; }
+  bool binary(json::binary_t&) { return value(), true; }
+  bool start_object(std::size_t) {
+    value();
+    if (keys.size() >= 2 || !arrays.empty())
+      fail<FileError>(source, ": the header nests objects deeper than a tensor's entry");
+    keys.emplace_back();
+    return true;
+  }
+  bool key(json::string_t& k) {
+    if (!keys.back().insert(k).second && duplicate.empty()) duplicate = k;
+    return true;
+  }
+  bool end_object() { return keys.pop_back(), true; }
+  bool start_array(std::size_t) {
+    value();
+    if (keys.size() != 2 || !arrays.empty())
+      fail<FileError>(source, ": the header holds an array outside a tensor's entry");
+    arrays.push_back(0);
+    return true;
+  }
+  bool end_array() { return arrays.pop_back(), true; }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception& e) {
+    syntax_error = e.what();
+    return false;
+  }
+};
+}  // namespace detail
+
 // Parses and validates a whole file held in memory; `source` names it in error messages.
 inline SafetensorsFile parse_safetensors(std::span<const std::byte> bytes, const std::string& source,
                                          std::size_t max_header = safetensors_max_header) {
@@ -274,42 +322,26 @@ inline SafetensorsFile parse_safetensors(std::span<const std::byte> bytes, const
   const auto* text = reinterpret_cast<const char*>(bytes.data() + 8);
   if (n == 0 || text[0] != '{') bad("the header does not start with '{', expected a JSON object");
 
-  // Duplicate keys would silently shadow each other in the parsed object: track them per object.
-  // The parse also stops at the first structure no header has (objects nested deeper than a
-  // tensor's entry, arrays outside an entry or longer than safetensors_max_array), so the memory
-  // and time a header costs stay a small multiple of its length.
-  std::vector<std::unordered_set<std::string>> keys;
-  std::vector<std::size_t> arrays;  // entries so far of each open array
-  std::string duplicate;
-  const nlohmann::json::parser_callback_t check_keys = [&](int, nlohmann::json::parse_event_t event,
-                                                           nlohmann::json& parsed) {
-    using E = nlohmann::json::parse_event_t;
-    if (event != E::array_start && event != E::array_end && !arrays.empty() && event != E::key &&
-        event != E::object_end && ++arrays.back() > safetensors_max_array)
-      bad("the header holds an array of more than ", safetensors_max_array, " entries");
-    if (event == E::object_start) {
-      if (keys.size() >= 2 || !arrays.empty()) bad("the header nests objects deeper than a tensor's entry");
-      keys.emplace_back();
-    } else if (event == E::object_end) {
-      keys.pop_back();
-    } else if (event == E::array_start) {
-      if (keys.size() != 2 || !arrays.empty()) bad("the header holds an array outside a tensor's entry");
-      arrays.push_back(0);
-    } else if (event == E::array_end) {
-      arrays.pop_back();
-    } else if (event == E::key && !keys.empty() && !keys.back().insert(parsed.get<std::string>()).second &&
-               duplicate.empty()) {
-      duplicate = parsed.get<std::string>();
-    }
-    return true;
-  };
-  nlohmann::json header;
+  // A first pass (SAX, no DOM) checks what the DOM would hide or what would make it costly:
+  // duplicate keys, objects nested deeper than a tensor's entry, arrays outside an entry or longer
+  // than safetensors_max_array. The DOM of a header that passes costs a small multiple of its
+  // length, and both passes are linear in it.
+  detail::SafetensorsHeaderCheck check;
+  check.source = source;
+  bool valid = false;
   try {
-    header = nlohmann::json::parse(text, text + n, check_keys);
+    valid = nlohmann::json::sax_parse(text, text + n, &check);
   } catch (const nlohmann::json::exception& e) {
     bad("the header is not valid JSON: ", e.what());
   }
-  if (!duplicate.empty()) bad("the header holds the key '", duplicate, "' twice");
+  if (!valid) bad("the header is not valid JSON: ", check.syntax_error);
+  if (!check.duplicate.empty()) bad("the header holds the key '", check.duplicate, "' twice");
+  nlohmann::json header;
+  try {
+    header = nlohmann::json::parse(text, text + n);
+  } catch (const nlohmann::json::exception& e) {
+    bad("the header is not valid JSON: ", e.what());
+  }
   if (!header.is_object()) bad("the header is not a JSON object");
 
   const std::size_t data_size = bytes.size() - 8 - n;

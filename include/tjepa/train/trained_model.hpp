@@ -30,6 +30,21 @@
 
 namespace tjepa {
 
+namespace detail {
+// The weights of a JepaModel of config c (context and target encoders' blocks and positions, the
+// predictor's blocks and linear maps), leaving out tokenizers, biases and LayerNorms: a lower
+// bound of the parameter count, computed in double.
+inline double jepa_weight_count(const JepaConfig& c) {
+  const auto& e = c.encoder;
+  const auto& p = c.predictor;
+  const double d = e.dim, pd = p.dim, he = e.mlp_ratio * d, hp = p.mlp_ratio * pd;
+  const double encoder = static_cast<double>(e.depth) * (4 * d * d + 2 * d * he) + static_cast<double>(e.num_tokens) * d;
+  const double predictor = static_cast<double>(p.depth) * (4 * pd * pd + 2 * pd * hp) +
+                           static_cast<double>(p.in_dim + p.output_width()) * pd;
+  return 2 * encoder + predictor;
+}
+}  // namespace detail
+
 // The data statistics of a run, as a checkpoint stores them: the preprocessor's, and the drift
 // tracker's when the run tracked drift.
 inline CheckpointState data_state(const Preprocessor& pre, const DriftTracker* drift = nullptr) {
@@ -75,6 +90,13 @@ inline TrainedModel load_trained_model(const std::filesystem::path& path) {
   }
   const JepaConfig mc =
       JepaConfig::from_json<FileError>(json_get<nlohmann::json, FileError>(meta, "model", where), where + ".model");
+  // The model is allocated before its tensors are read: metadata that describes a larger model
+  // than the file holds values for is refused first (no multi-GB allocation from a 1 KB file).
+  double held = 0;
+  for (const std::string& name : file.names()) held += static_cast<double>(file.at(name).numel());
+  const double needed = detail::jepa_weight_count(mc);
+  require<FileError>(needed <= held, where, ".model: describes a model of about ", needed,
+                     " weights, the file holds ", held, " values");
   m.model = std::make_unique<JepaModel<float>>(mc, 0);
   const auto parts = m.model->parts();
   const CheckpointState st =

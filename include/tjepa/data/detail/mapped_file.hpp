@@ -1,6 +1,9 @@
 #pragma once
-// A read-only view of a whole file's bytes: memory-mapped where the platform has mmap, so a
-// multi-GB recording is paged in by the kernel and never copied; otherwise read into memory once.
+// A read-only view of a whole file's bytes: memory-mapped where the platform has mmap (and copy is
+// false), so a multi-GB recording is paged in by the kernel and never copied; otherwise read into
+// memory once. A mapping promises nothing if the file is truncated or rewritten in place while it
+// lives: reading a page past the new end kills the process with SIGBUS. Replacing the file by
+// rename (as tjepa's writers do) is safe: the mapping keeps the old file.
 #include <cerrno>
 #include <cstddef>
 #include <cstring>
@@ -25,10 +28,14 @@ namespace tjepa::detail {
 
 class MappedFile {
  public:
-  explicit MappedFile(const std::filesystem::path& path) : path_(path.string()) {
+  explicit MappedFile(const std::filesystem::path& path, bool copy = false) : path_(path.string()) {
     std::error_code ec;
     require<FileError>(std::filesystem::is_regular_file(path, ec), path_,
                        ": no such file (or not a regular file)");
+    if (copy || !TJEPA_HAS_MMAP) {
+      read_copy(path);
+      return;
+    }
 #if TJEPA_HAS_MMAP
     const int fd = ::open(path_.c_str(), O_RDONLY);
     require<FileError>(fd >= 0, path_, ": cannot open: ", std::strerror(errno));
@@ -48,16 +55,6 @@ class MappedFile {
       data_ = static_cast<const char*>(p);
     }
     ::close(fd);
-#else
-    std::ifstream in(path, std::ios::binary);
-    require<FileError>(in.good(), path_, ": cannot open");
-    in.seekg(0, std::ios::end);
-    size_ = static_cast<std::size_t>(in.tellg());
-    in.seekg(0);
-    buffer_.resize(size_);
-    in.read(buffer_.data(), static_cast<std::streamsize>(size_));
-    require<FileError>(in.good() || size_ == 0, path_, ": read error");
-    data_ = buffer_.data();
 #endif
   }
   MappedFile(const MappedFile&) = delete;
@@ -69,18 +66,38 @@ class MappedFile {
   }
 
   const char* data() const { return data_; }
+  bool mapped() const {
+#if TJEPA_HAS_MMAP
+    return map_ != nullptr;
+#else
+    return false;
+#endif
+  }
   std::size_t size() const { return size_; }
   const std::string& path() const { return path_; }
 
  private:
+  // Reads the whole file into buffer_; a file that changes size while it is read is an error.
+  void read_copy(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    require<FileError>(in.good(), path_, ": cannot open");
+    in.seekg(0, std::ios::end);
+    size_ = static_cast<std::size_t>(in.tellg());
+    in.seekg(0);
+    buffer_.resize(size_);
+    in.read(buffer_.data(), static_cast<std::streamsize>(size_));
+    require<FileError>(static_cast<std::size_t>(in.gcount()) == size_, path_, ": read ", in.gcount(), " of ", size_,
+                       " bytes (the file changed while it was read)");
+    data_ = buffer_.data();
+  }
+
   std::string path_;
   const char* data_ = nullptr;
   std::size_t size_ = 0;
 #if TJEPA_HAS_MMAP
   void* map_ = nullptr;
-#else
-  std::vector<char> buffer_;
 #endif
+  std::vector<char> buffer_;
 };
 
 }  // namespace tjepa::detail
