@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Fuzzes every file reader (tests/fuzz/targets.hpp) with libFuzzer under ASan + UBSan for a fixed
-# time each, two at a time, starting from the corpora in tests/fuzz/corpus (copied: new inputs stay
+# time each, as many at once as there are cores, starting from the corpora in tests/fuzz/corpus (copied: new inputs stay
 # in build/fuzz/corpus). Fails on any finding; the crashing input is left in build/fuzz/findings.
 #   tools/fuzz.sh [seconds per target, default 30] [target...]
 set -euo pipefail

@@ -373,6 +373,10 @@ TEST_CASE("checkpoint metadata that no run could have throws FileError naming th
   j["model"]["encoder"]["heads"] = 1;
   j["model"]["predictor"]["in_dim"] = j["model"]["predictor"]["dim"] = 1 << 20;
   CHECK_MESSAGE(error_of(j).find("describes a model of about") != std::string::npos, error_of(j));
+  j = good;  // the tokenizer's map alone: in_dim 2^30 (review finding)
+  j["model"]["in_dim"] = 1 << 30;
+  j["model"]["axes"] = 1;
+  CHECK_MESSAGE(error_of(j).find("describes a model of about") != std::string::npos, error_of(j));
   j = good;
   j["model"].erase("encoder");
   CHECK(error_of(j).find("missing key 'encoder'") != std::string::npos);

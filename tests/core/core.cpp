@@ -270,6 +270,14 @@ TEST_SUITE("core") {
     CHECK(dir.names() == std::vector<std::string>{"big.npy"});
   }
 
+  TEST_CASE("write_file_atomic: a 250-byte file name still gets a temporary within NAME_MAX") {
+    AtomicDir dir;
+    const fs::path p = dir.path / std::string(250, 'n');
+    tjepa::write_file_atomic(p, "long");
+    CHECK(slurp(p) == "long");
+    CHECK(dir.names() == std::vector<std::string>{std::string(250, 'n')});
+  }
+
   TEST_CASE("write_file_atomic: two threads writing one path never mix their files") {
     AtomicDir dir;
     const fs::path p = dir.path / "shared";

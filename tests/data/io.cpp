@@ -181,6 +181,7 @@ TEST_SUITE("data") {
     const ::pid_t child = ::fork();
     REQUIRE(child >= 0);
     if (child == 0) {
+      std::signal(SIGBUS, SIG_DFL);  // sanitizers catch SIGBUS and exit; let the kernel's default act
       const tjepa::NpyArray mapped = tjepa::read_npy(dir / "rec.npy");
       if (::truncate((dir / "rec.npy").c_str(), 128) != 0) ::_exit(3);
       volatile float sink = mapped.data()[mapped.numel() - 1];
@@ -189,8 +190,9 @@ TEST_SUITE("data") {
     }
     int status = 0;
     REQUIRE(::waitpid(child, &status, 0) == child);
-    CHECK(WIFSIGNALED(status));
-    CHECK(WTERMSIG(status) == SIGBUS);
+    // Killed by SIGBUS (or, under a sanitizer that keeps its own handler, its report and exit).
+    if (WIFSIGNALED(status)) CHECK(WTERMSIG(status) == SIGBUS);
+    else CHECK((WIFEXITED(status) && WEXITSTATUS(status) != 0 && WEXITSTATUS(status) != 3));
     // The copy is unaffected (the file is truncated now).
     CHECK(fs::file_size(dir / "rec.npy") == 128u);
     REQUIRE(copied.numel() == v.size());

@@ -80,6 +80,10 @@ inline int checkpoint(const std::uint8_t* data, std::size_t size) {
 inline int npy(const std::uint8_t* data, std::size_t size) {
   const auto p = write_input(data, size, ".npy");
   expect_tjepa_errors([&] { (void)read_npy(p); });
+  NpyReadOptions copy;
+  copy.map = false;
+  copy.require_finite = true;
+  expect_tjepa_errors([&] { (void)read_npy(p, copy); });
   return expect_tjepa_errors([&] { (void)read_recording_npy(p); });
 }
 

@@ -5,9 +5,11 @@
 // the new one, never a part; after a power cut the rename is either on disk or not. Every error
 // path (a writer that throws, a full disk, a failed rename) removes the temporary file.
 //
-// Temporary names: `.<name>.tjepa-tmp.<host>.<pid>.<random>` beside `<name>`. A process killed
-// mid-write leaves one behind; the next write of the same target on the same host removes those
-// whose process no longer runs (stale_temporaries lists them).
+// Temporary names: `.<name>.tjepa-tmp.<host hash>.<pid>.<random>` beside `<name>`. A process
+// killed mid-write leaves one behind; the next write of the same target on the same host removes
+// those whose process no longer runs (stale_temporaries lists them). Hosts are told apart by name:
+// containers that share a host name and a volume but not a PID namespace must not write the same
+// file. Each write lists the target's directory once.
 #include <array>
 #include <cerrno>
 #include <chrono>
@@ -85,13 +87,24 @@ class FdStreambuf : public std::streambuf {
   std::array<char, 1 << 16> buf_{};
 };
 
+// 64-bit FNV-1a, as 16 hex digits: short stand-ins for long names in temporary file names.
+inline std::string short_hash(std::string_view s) {
+  std::uint64_t h = 1469598103934665603ull;
+  for (const char c : s) h = (h ^ static_cast<unsigned char>(c)) * 1099511628211ull;
+  static constexpr char hex[] = "0123456789abcdef";
+  std::string out(16, '0');
+  for (int i = 15; i >= 0; --i, h >>= 4) out[static_cast<std::size_t>(i)] = hex[h & 15];
+  return out;
+}
+
+// `.<name>.tjepa-tmp.<host>.`; a name over 64 bytes is cut to 40 plus a hash, the host is
+// hashed, so the temporary name stays within NAME_MAX whenever the target's name does.
 inline std::string temporary_prefix(const std::filesystem::path& path) {
   std::array<char, 256> host{};
   if (::gethostname(host.data(), host.size() - 1) != 0) host[0] = '\0';
-  std::string h(host.data());
-  for (char& c : h)
-    if (c == '.' || c == '/') c = '_';
-  return "." + path.filename().string() + ".tjepa-tmp." + (h.empty() ? std::string("host") : h) + ".";
+  std::string name = path.filename().string();
+  if (name.size() > 64) name = name.substr(0, 40) + "~" + short_hash(name);
+  return "." + name + ".tjepa-tmp." + short_hash(host.data()).substr(0, 8) + ".";
 }
 
 inline std::uint64_t temporary_nonce() {
@@ -103,16 +116,15 @@ inline std::uint64_t temporary_nonce() {
   return gen();
 }
 
-// fsync of a directory, so that a rename (or an unlink) inside it is on disk.
-inline void sync_directory(const std::filesystem::path& dir) {
+// fsync of a directory, so that a rename inside it is on disk. Best effort: it runs after the
+// rename, when the new file is already in place, so a directory that cannot be opened for reading
+// (mode 0300) or a file system that cannot sync directories does not turn a done write into an
+// error.
+inline void sync_directory(const std::filesystem::path& dir) noexcept {
   const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  require<FileError>(fd >= 0, "write_file_atomic: cannot open directory '", dir.string(), "': ", std::strerror(errno));
-  const int rc = ::fsync(fd);
-  const int err = errno;
+  if (fd < 0) return;
+  (void)::fsync(fd);
   ::close(fd);
-  // Some file systems cannot sync a directory (EINVAL); the rename is done either way.
-  require<FileError>(rc == 0 || err == EINVAL || err == EROFS, "write_file_atomic: cannot sync directory '",
-                     dir.string(), "': ", std::strerror(err));
 }
 
 }  // namespace detail
@@ -167,8 +179,9 @@ void write_file_atomic_with(const std::filesystem::path& path, Writer&& write) {
     fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
     if (fd < 0 && errno != EEXIST) break;
   }
+  const int open_err = errno;
   require<FileError>(fd >= 0, "write_file_atomic: cannot create a temporary file for '", path.string(), "' in '",
-                     (dir.empty() ? fs::path(".") : dir).string(), "': ", std::strerror(errno));
+                     (dir.empty() ? fs::path(".") : dir).string(), "': ", std::strerror(open_err));
   auto discard = [&] {
     if (fd >= 0) ::close(fd);
     fd = -1;
@@ -184,13 +197,18 @@ void write_file_atomic_with(const std::filesystem::path& path, Writer&& write) {
     if (!out || buf.error() != 0)
       fail<FileError>("write_file_atomic: writing '", path.string(), "' failed: ",
                       buf.error() != 0 ? std::strerror(buf.error()) : "the writer's stream went bad");
-    require<FileError>(::fsync(fd) == 0, "write_file_atomic: cannot sync '", path.string(), "': ", std::strerror(errno));
-    const int rc = ::close(fd);
+    int rc = ::fsync(fd);
+    int err = errno;
+    require<FileError>(rc == 0, "write_file_atomic: cannot sync '", path.string(), "': ", std::strerror(err));
+    rc = ::close(fd);
+    err = errno;
     fd = -1;
-    require<FileError>(rc == 0, "write_file_atomic: closing '", path.string(), "' failed: ", std::strerror(errno));
+    require<FileError>(rc == 0, "write_file_atomic: closing '", path.string(), "' failed: ", std::strerror(err));
     // rename(2) replaces a symlink at `path` itself (never its target) and is atomic.
-    require<FileError>(::rename(tmp.c_str(), path.c_str()) == 0, "write_file_atomic: cannot rename '", tmp.string(),
-                       "' to '", path.string(), "': ", std::strerror(errno));
+    rc = ::rename(tmp.c_str(), path.c_str());
+    err = errno;
+    require<FileError>(rc == 0, "write_file_atomic: cannot rename '", tmp.string(), "' to '", path.string(), "': ",
+                       std::strerror(err));
   } catch (...) {
     discard();
     throw;

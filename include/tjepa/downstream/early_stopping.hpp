@@ -88,8 +88,10 @@ inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_
   if (blocks > 0) {
     const int per = std::max(1, static_cast<int>(std::lround(static_cast<double>(n_val) / blocks)));
     const int segment = S / blocks;
-    require<DataError>(segment >= per + 2 * gap + 1, "split_for_validation: ", S, " samples cannot hold ", blocks,
-                       " validation blocks of ", per, " with gaps of ", gap);
+    const std::int64_t used = static_cast<std::int64_t>(blocks) * (per + 2 * static_cast<std::int64_t>(gap));
+    require<DataError>(segment >= per && static_cast<std::int64_t>(S) - used >= 2, "split_for_validation: ", S,
+                       " samples cannot hold ", blocks, " validation blocks of ", per, " with gaps of ", gap,
+                       " and 2 fitting samples");
     Rng rng(seed, 0x76616c6964ull /* "valid" */);
     std::vector<char> role(static_cast<std::size_t>(S), 'f');  // f fit, v validation, g gap
     std::vector<int> starts;

@@ -31,14 +31,24 @@
 namespace tjepa {
 
 namespace detail {
-// The weights of a JepaModel of config c (context and target encoders' blocks and positions, the
-// predictor's blocks and linear maps), leaving out tokenizers, biases and LayerNorms: a lower
+// The weights of a JepaModel of config c (context and target tokenizers, encoders' blocks and
+// positions, the predictor's blocks and linear maps), leaving out biases and LayerNorms: a lower
 // bound of the parameter count, computed in double.
 inline double jepa_weight_count(const JepaConfig& c) {
   const auto& e = c.encoder;
   const auto& p = c.predictor;
   const double d = e.dim, pd = p.dim, he = e.mlp_ratio * d, hp = p.mlp_ratio * pd;
-  const double encoder = static_cast<double>(e.depth) * (4 * d * d + 2 * d * he) + static_cast<double>(e.num_tokens) * d;
+  // Tokenizer: one map of in_dim·d per taxel token, or per distinct group size n one of n·in_dim·d.
+  double tokenizer = static_cast<double>(c.in_dim) * d;
+  if (!c.group_size.empty()) {
+    tokenizer = 0;
+    std::vector<int> sizes(c.group_size.begin(), c.group_size.end());
+    std::sort(sizes.begin(), sizes.end());
+    sizes.erase(std::unique(sizes.begin(), sizes.end()), sizes.end());
+    for (const int n : sizes) tokenizer += static_cast<double>(std::max(n, 1)) * c.in_dim * d;
+  }
+  const double encoder =
+      static_cast<double>(e.depth) * (4 * d * d + 2 * d * he) + static_cast<double>(e.num_tokens) * d + tokenizer;
   const double predictor = static_cast<double>(p.depth) * (4 * pd * pd + 2 * pd * hp) +
                            static_cast<double>(p.in_dim + p.output_width()) * pd;
   return 2 * encoder + predictor;

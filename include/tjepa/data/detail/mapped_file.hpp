@@ -82,7 +82,9 @@ class MappedFile {
     std::ifstream in(path, std::ios::binary);
     require<FileError>(in.good(), path_, ": cannot open");
     in.seekg(0, std::ios::end);
-    size_ = static_cast<std::size_t>(in.tellg());
+    const auto end = in.tellg();
+    require<FileError>(end >= 0, path_, ": cannot find the file's size");
+    size_ = static_cast<std::size_t>(end);
     in.seekg(0);
     buffer_.resize(size_);
     in.read(buffer_.data(), static_cast<std::streamsize>(size_));
