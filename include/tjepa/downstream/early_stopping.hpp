@@ -76,7 +76,12 @@ struct ValidationSplit {
 
 // blocks = 0: round(fraction·S) random samples are held out. blocks = k > 0: [0, S) is cut into k
 // equal segments and each holds one contiguous validation block (round(fraction·S / k) samples)
-// at a seeded offset; the `gap` samples on each side of a block are in neither set.
+// at a seeded offset; the `gap` samples on each side of a block are in neither set (at least 2
+// fitting samples remain: S − blocks·(per + 2·gap) >= 2 is required).
+namespace detail {
+inline constexpr std::uint64_t validation_salt = 0x76616c6964ull;  // "valid"
+}
+
 inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_t seed, int blocks = 0, int gap = 0) {
   require<ConfigError>(fraction > 0 && fraction < 1, "split_for_validation: fraction = ", fraction,
                        ", expected in (0, 1)");
@@ -92,7 +97,7 @@ inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_
     require<DataError>(segment >= per && static_cast<std::int64_t>(S) - used >= 2, "split_for_validation: ", S,
                        " samples cannot hold ", blocks, " validation blocks of ", per, " with gaps of ", gap,
                        " and 2 fitting samples");
-    Rng rng(seed, 0x76616c6964ull /* "valid" */);
+    Rng rng(seed, detail::validation_salt);
     std::vector<char> role(static_cast<std::size_t>(S), 'f');  // f fit, v validation, g gap
     std::vector<int> starts;
     for (int b = 0; b < blocks; ++b) {
@@ -107,13 +112,11 @@ inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_
       if (role[static_cast<std::size_t>(i)] == 'f') s.fit.push_back(i);
       if (role[static_cast<std::size_t>(i)] == 'v') s.validation.push_back(i);
     }
-    require<DataError>(s.fit.size() >= 2, "split_for_validation: ", S, " samples leave ", s.fit.size(),
-                       " fitting samples after the validation blocks and gaps");
     return s;
   }
   std::vector<std::int64_t> order(static_cast<std::size_t>(S));
   for (int i = 0; i < S; ++i) order[static_cast<std::size_t>(i)] = i;
-  Rng(seed, 0x76616c6964ull /* "valid" */).shuffle(std::span<std::int64_t>(order));
+  Rng(seed, detail::validation_salt).shuffle(std::span<std::int64_t>(order));
   ValidationSplit s;
   s.fit.assign(order.begin(), order.end() - n_val);
   s.validation.assign(order.end() - n_val, order.end());

@@ -66,13 +66,6 @@ class MappedFile {
   }
 
   const char* data() const { return data_; }
-  bool mapped() const {
-#if TJEPA_HAS_MMAP
-    return map_ != nullptr;
-#else
-    return false;
-#endif
-  }
   std::size_t size() const { return size_; }
   const std::string& path() const { return path_; }
 
