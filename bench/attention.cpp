@@ -39,10 +39,10 @@ int threads() {
 
 struct Batch {
   int B, L, H = 3, Dh = 64;
-  tjepa::AttentionShape s;
+  tjepa::kernels::AttentionShape s;
   std::vector<float> qkv, out, lse, dout, dqkv;
-  std::vector<tjepa::AttentionWorkspace<float>> ws;
-  Batch(int batch, int tokens) : B(batch), L(tokens), s(tjepa::AttentionShape::fused_self(tokens, 3, 64)) {
+  std::vector<tjepa::kernels::AttentionWorkspace<float>> ws;
+  Batch(int batch, int tokens) : B(batch), L(tokens), s(tjepa::kernels::AttentionShape::fused_self(tokens, 3, 64)) {
     const std::size_t d = static_cast<std::size_t>(H * Dh), n = static_cast<std::size_t>(B) * L;
     tjepa::Rng rng(7);
     qkv.resize(n * 3 * d);
@@ -65,14 +65,14 @@ struct Batch {
   void forward(int b) {
     const std::size_t d = static_cast<std::size_t>(H * Dh), o = static_cast<std::size_t>(b) * L;
     const float* x = qkv.data() + o * 3 * d;
-    tjepa::attention_forward(s, x, x + d, x + 2 * d, nullptr, out.data() + o * d, lse.data() + o * H,
+    tjepa::kernels::attention_forward(s, x, x + d, x + 2 * d, nullptr, out.data() + o * d, lse.data() + o * H,
                              ws[static_cast<std::size_t>(thread_id())]);
   }
   void backward(int b) {
     const std::size_t d = static_cast<std::size_t>(H * Dh), o = static_cast<std::size_t>(b) * L;
     const float* x = qkv.data() + o * 3 * d;
     float* g = dqkv.data() + o * 3 * d;
-    tjepa::attention_backward(s, x, x + d, x + 2 * d, nullptr, out.data() + o * d, lse.data() + o * H,
+    tjepa::kernels::attention_backward(s, x, x + d, x + 2 * d, nullptr, out.data() + o * d, lse.data() + o * H,
                               dout.data() + o * d, g, g + d, g + 2 * d, ws[static_cast<std::size_t>(thread_id())]);
   }
 };

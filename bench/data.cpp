@@ -7,8 +7,8 @@
 #include <tjepa/data/preprocessor.hpp>
 #include <tjepa/sim/simulated_skin.hpp>
 #include <tjepa/data/window_source.hpp>
-#include <tjepa/layout/allegro_xela.hpp>
-#include <tjepa/layout/inspire.hpp>
+#include <tjepa/sensors/allegro_xela.hpp>
+#include <tjepa/sensors/inspire.hpp>
 
 #include <filesystem>
 #include <unistd.h>

@@ -5,8 +5,8 @@
 #include <tjepa/graph/block_grouping.hpp>
 #include <tjepa/graph/coordinate_graphs.hpp>
 #include <tjepa/graph/grow_grouping.hpp>
-#include <tjepa/layout/allegro_xela.hpp>
-#include <tjepa/layout/inspire.hpp>
+#include <tjepa/sensors/allegro_xela.hpp>
+#include <tjepa/sensors/inspire.hpp>
 
 namespace {
 

@@ -108,7 +108,7 @@ void BM_PredictorForwardBackward(benchmark::State& state) {
   PredictorCache<float> cache;
   auto train_step = [&] {
     ps.zero_grad();
-    pred.forward(ps, ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t, out.data(), &cache, ws);
+    pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), &cache, ws);
     pred.backward(ps, dout.data(), dctx.data(), nullptr, cache, ws);
   };
   train_step();  // warm-up, as above
@@ -157,7 +157,7 @@ void BM_JepaStepModel(benchmark::State& state) {
     enc.forward(target, ttokens.data(), B, nullptr, N, z.data(), nullptr, ws, {DropPath{0.3, step}, nullptr});
     tok.forward(ps, x.data(), B, tokens.data(), &tc, ws);
     enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), &ec, ws, {DropPath{0.3, step + (1u << 30)}, nullptr});
-    pred.forward(pps, zc.data(), B, K, target.value(enc.pos_embed()), N, tg.data(), B * R, t, out.data(), &pc, ws);
+    pred.forward(pps, {zc.data(), B, K, target.value(enc.pos_embed()), N, tg.data(), B * R, t}, out.data(), &pc, ws);
     std::fill(dzc.begin(), dzc.end(), 0.0f);
     pred.backward(pps, dout.data(), dzc.data(), nullptr, pc, ws);
     std::fill(dtokens.begin(), dtokens.end(), 0.0f);

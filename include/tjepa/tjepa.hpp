@@ -1,5 +1,9 @@
 #pragma once
-// tjepa: Tactile-JEPA for distributed tactile skins. This umbrella header only includes.
+// tjepa: Tactile-JEPA for distributed tactile skins. This umbrella header only includes the
+// user-facing headers, in the order of the data's path. The kernels under the model's modules
+// (tjepa::kernels: attention, linear, LayerNorm, GELU, softmax, gathers, drop-path) have their own
+// umbrella, <tjepa/kernels.hpp>, for those who call or benchmark them directly.
+
 #include "tjepa/version.hpp"
 
 #include "tjepa/core/aligned.hpp"
@@ -8,14 +12,30 @@
 #include "tjepa/core/random.hpp"
 #include "tjepa/core/atomic_write.hpp"
 #include "tjepa/core/json.hpp"
+#include "tjepa/core/param_set.hpp"
+#include "tjepa/core/prefixed_params.hpp"
 
 #include "tjepa/layout/taxel_layout.hpp"
-#include "tjepa/layout/grid_pad.hpp"
-#include "tjepa/layout/layout_builder.hpp"
-#include "tjepa/layout/allegro_xela.hpp"
-#include "tjepa/layout/generic.hpp"
-#include "tjepa/layout/inspire.hpp"
-#include "tjepa/layout/csv.hpp"
+
+#include "tjepa/graph/taxel_graph.hpp"
+#include "tjepa/graph/skin.hpp"
+#include "tjepa/graph/bridges.hpp"
+#include "tjepa/graph/coordinate_graphs.hpp"
+#include "tjepa/graph/join.hpp"
+#include "tjepa/graph/grouping.hpp"
+#include "tjepa/graph/block_grouping.hpp"
+#include "tjepa/graph/grow_grouping.hpp"
+#include "tjepa/graph/colors.hpp"
+#include "tjepa/graph/spectral_positions.hpp"
+#include "tjepa/graph/svg.hpp"
+
+#include "tjepa/sensors/grid_pad.hpp"
+#include "tjepa/sensors/layout_builder.hpp"
+#include "tjepa/sensors/allegro_xela.hpp"
+#include "tjepa/sensors/generic.hpp"
+#include "tjepa/sensors/inspire.hpp"
+#include "tjepa/sensors/csv.hpp"
+#include "tjepa/sensors/skin_from_coordinates.hpp"
 
 #include "tjepa/data/drift_tracker.hpp"
 #include "tjepa/data/grouped_gather.hpp"
@@ -33,19 +53,6 @@
 #include "tjepa/sim/grasp_objects.hpp"
 #include "tjepa/sim/grasping_hand.hpp"
 
-#include "tjepa/graph/taxel_graph.hpp"
-#include "tjepa/graph/skin.hpp"
-#include "tjepa/graph/bridges.hpp"
-#include "tjepa/graph/coordinate_graphs.hpp"
-#include "tjepa/graph/join.hpp"
-#include "tjepa/graph/grouping.hpp"
-#include "tjepa/graph/block_grouping.hpp"
-#include "tjepa/graph/grow_grouping.hpp"
-#include "tjepa/graph/colors.hpp"
-#include "tjepa/graph/skin_from_coordinates.hpp"
-#include "tjepa/graph/spectral_positions.hpp"
-#include "tjepa/graph/svg.hpp"
-
 #include "tjepa/masks/collator.hpp"
 #include "tjepa/masks/config.hpp"
 #include "tjepa/masks/context.hpp"
@@ -56,20 +63,11 @@
 #include "tjepa/masks/svg.hpp"
 #include "tjepa/masks/uniform_masking.hpp"
 
-#include "tjepa/model/kernels/attention.hpp"
-#include "tjepa/model/param_set.hpp"
-
 #include "tjepa/model/attention.hpp"
 #include "tjepa/model/attentive_probe.hpp"
 #include "tjepa/model/block.hpp"
 #include "tjepa/model/encoder.hpp"
 #include "tjepa/model/init.hpp"
-#include "tjepa/model/kernels/drop_path.hpp"
-#include "tjepa/model/kernels/gather.hpp"
-#include "tjepa/model/kernels/gelu.hpp"
-#include "tjepa/model/kernels/layer_norm.hpp"
-#include "tjepa/model/kernels/linear.hpp"
-#include "tjepa/model/kernels/softmax.hpp"
 #include "tjepa/model/layers.hpp"
 #include "tjepa/model/mlp.hpp"
 #include "tjepa/model/position_table.hpp"
@@ -77,7 +75,6 @@
 #include "tjepa/model/stage_clock.hpp"
 #include "tjepa/model/tokenizer.hpp"
 #include "tjepa/model/workspace.hpp"
-#include "tjepa/model/prefixed_params.hpp"
 
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"

@@ -1,13 +1,13 @@
 // The `tjepa` command's subcommands, run in-process on tiny inputs: layout, pretrain, probe,
 // embed, demo. Each checks what the command promises: the files it writes (and that a failing
 // command leaves none behind), the numbers it reports, and one-line errors for bad input.
-// The layout-CSV cases read a skin through graph/skin_from_coordinates.hpp (edges inferred from
+// The layout-CSV cases read a skin through sensors/skin_from_coordinates.hpp (edges inferred from
 // the coordinates); it is named here so each module these tests cover is traceable.
 #include <doctest/doctest.h>
 
 #include "../../examples/cli/commands.hpp"
 #include "../../examples/cli/eval.hpp"
-#include <tjepa/graph/skin_from_coordinates.hpp>
+#include <tjepa/sensors/skin_from_coordinates.hpp>
 
 #include <algorithm>
 #include <cmath>

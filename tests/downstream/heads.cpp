@@ -402,7 +402,8 @@ TEST_CASE_TEMPLATE("CausalSelfAttention: against a plain-loop causal softmax", T
   test::fill_normal(x, rng);
   for (auto& v : ps.values()) v = static_cast<T>(v * 20);  // weights of O(0.4): peaked softmax rows
   Workspace<T> ws;
-  attn.forward(ps, x.data(), B, L, qkv.data(), att.data(), lse.data(), y.data(), false, ws);
+  attn.forward(ps, AttentionRows{B, L}, x.data(), AttentionSaved<T>{.qkv = qkv.data(), .att = att.data(), .lse = lse.data()},
+               y.data(), ws);
   // Reference on the same qkv: row l of head h attends to rows 0..l.
   const double tol = std::is_same_v<T, float> ? 2e-5 : 1e-12;
   for (int b = 0; b < B; ++b)

@@ -21,8 +21,8 @@
 #include <tjepa/data/npy.hpp>
 #include <tjepa/data/text_reader.hpp>
 #include <tjepa/io/safetensors.hpp>
-#include <tjepa/layout/csv.hpp>
-#include <tjepa/layout/generic.hpp>
+#include <tjepa/sensors/csv.hpp>
+#include <tjepa/sensors/generic.hpp>
 #include <tjepa/train/config.hpp>
 #include <tjepa/train/trained_model.hpp>
 

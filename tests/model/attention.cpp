@@ -16,13 +16,14 @@
 
 namespace {
 
-using tjepa::AttentionShape;
+namespace kernels = tjepa::kernels;
+using kernels::AttentionShape;
 
 // Buffers of one sample: q [Lq, ldq], k [Lk, ldk], v [Lk, ldv], out [Lq, ldo], filled with N(0, sd)
 // (padding columns too, so a kernel that reads outside its head's columns gives wrong results).
 template <class T>
 struct Problem {
-  AttentionShape s;
+  kernels::AttentionShape s;
   std::vector<T> q, k, v, w;  // w: the fixed random weights of L = sum w * out
   std::vector<std::uint8_t> valid;
   bool masked = false;
@@ -51,7 +52,7 @@ Problem<T> make_problem(int Lq, int Lk, int H, int Dh, bool fused, bool masked, 
   p.fused = fused;
   p.masked = masked;
   if (fused) {
-    p.s = AttentionShape::fused_self(Lq, H, Dh);
+    p.s = kernels::AttentionShape::fused_self(Lq, H, Dh);
     fill(p.qkv, static_cast<std::size_t>(Lq) * 3 * d, rng, sd);
   } else {
     p.s = {Lq, Lk, H, Dh, d + extra_ld, d + 2 * extra_ld, d + 3 * extra_ld, d + extra_ld};
@@ -114,13 +115,13 @@ enum class Impl { ref, fast };
 
 template <class T>
 void forward(Impl impl, const Problem<T>& p, std::vector<T>& out, std::vector<T>& lse,
-             tjepa::AttentionWorkspace<T>& ws) {
+             tjepa::kernels::AttentionWorkspace<T>& ws) {
   out.assign(static_cast<std::size_t>(p.s.Lq) * p.s.ldo, T(0));
   lse.assign(static_cast<std::size_t>(p.s.H) * p.s.Lq, T(0));
   if (impl == Impl::ref)
-    tjepa::ref::attention_forward(p.s, p.Q(), p.K(), p.V(), p.mask(), out.data(), lse.data());
+    tjepa::kernels::ref::attention_forward(p.s, p.Q(), p.K(), p.V(), p.mask(), out.data(), lse.data());
   else
-    tjepa::attention_forward(p.s, p.Q(), p.K(), p.V(), p.mask(), out.data(), lse.data(), ws);
+    tjepa::kernels::attention_forward(p.s, p.Q(), p.K(), p.V(), p.mask(), out.data(), lse.data(), ws);
 }
 
 // Gradients of L = sum w * out with respect to the q, k, v buffers (in their own layouts).
@@ -131,7 +132,7 @@ struct Grads {
 
 template <class T>
 Grads<T> backward(Impl impl, const Problem<T>& p, const std::vector<T>& out, const std::vector<T>& lse,
-                  tjepa::AttentionWorkspace<T>& ws, int times = 1) {
+                  tjepa::kernels::AttentionWorkspace<T>& ws, int times = 1) {
   Grads<T> g;
   T *dq = nullptr, *dk = nullptr, *dv = nullptr;
   if (p.fused) {
@@ -149,16 +150,16 @@ Grads<T> backward(Impl impl, const Problem<T>& p, const std::vector<T>& out, con
   }
   for (int t = 0; t < times; ++t) {
     if (impl == Impl::ref)
-      tjepa::ref::attention_backward(p.s, p.Q(), p.K(), p.V(), p.mask(), out.data(), lse.data(),
+      tjepa::kernels::ref::attention_backward(p.s, p.Q(), p.K(), p.V(), p.mask(), out.data(), lse.data(),
                                      p.w.data(), dq, dk, dv);
     else
-      tjepa::attention_backward(p.s, p.Q(), p.K(), p.V(), p.mask(), out.data(), lse.data(), p.w.data(),
+      tjepa::kernels::attention_backward(p.s, p.Q(), p.K(), p.V(), p.mask(), out.data(), lse.data(), p.w.data(),
                                 dq, dk, dv, ws);
   }
   return g;
 }
 
-double loss(Impl impl, const Problem<double>& p, tjepa::AttentionWorkspace<double>& ws) {
+double loss(Impl impl, const Problem<double>& p, tjepa::kernels::AttentionWorkspace<double>& ws) {
   std::vector<double> out, lse;
   forward(impl, p, out, lse, ws);
   double l = 0.0;
@@ -171,7 +172,7 @@ double loss(Impl impl, const Problem<double>& p, tjepa::AttentionWorkspace<doubl
 // kernel reads (columns of the heads), by central differences on x.
 double grad_check(Impl impl, Problem<double>& p, std::vector<double>& x, const std::vector<double>& gx,
                   int rows, int ld, int col0) {
-  tjepa::AttentionWorkspace<double> ws;
+  tjepa::kernels::AttentionWorkspace<double> ws;
   const double eps = 1e-5;
   double num2 = 0.0, ana2 = 0.0, diff2 = 0.0;
   for (int r = 0; r < rows; ++r)
@@ -198,7 +199,7 @@ void check_gradients(Impl impl, int Lq, int Lk, int H, int Dh, bool fused, bool 
   CAPTURE(fused);
   CAPTURE(masked);
   auto p = make_problem<double>(Lq, Lk, H, Dh, fused, masked, seed, 1.0, fused ? 0 : 2);
-  tjepa::AttentionWorkspace<double> ws;
+  tjepa::kernels::AttentionWorkspace<double> ws;
   std::vector<double> out, lse;
   forward(impl, p, out, lse, ws);
   const auto g = backward(impl, p, out, lse, ws);
@@ -235,7 +236,7 @@ double max_rel_diff(const std::vector<T>& a, const std::vector<T>& b) {
 // The fast kernels against the reference on one problem: out, lse and the three gradients.
 template <class T>
 void check_fast_vs_ref(const Problem<T>& p, double tol) {
-  tjepa::AttentionWorkspace<T> ws;
+  tjepa::kernels::AttentionWorkspace<T> ws;
   std::vector<T> out_r, lse_r, out_f, lse_f;
   forward(Impl::ref, p, out_r, lse_r, ws);
   forward(Impl::fast, p, out_f, lse_f, ws);
@@ -265,7 +266,7 @@ TEST_SUITE("nn") {
   TEST_CASE("ref attention equals a naive softmax(QK^T/sqrt(Dh))V for self and cross attention with masks") {
     for (bool masked : {false, true}) {
       auto self = make_problem<double>(13, 13, 3, 8, true, masked, 1);
-      tjepa::AttentionWorkspace<double> ws;
+      tjepa::kernels::AttentionWorkspace<double> ws;
       std::vector<double> out, lse;
       forward(Impl::ref, self, out, lse, ws);
       CHECK(max_abs_diff_out(self, out, naive_attention(self)) < 1e-12);
@@ -279,7 +280,7 @@ TEST_SUITE("nn") {
     for (Impl impl : {Impl::ref, Impl::fast}) {
       auto p = make_problem<T>(7, 9, 2, 5, false, true, 3);
       std::fill(p.valid.begin(), p.valid.end(), std::uint8_t{0});
-      tjepa::AttentionWorkspace<T> ws;
+      tjepa::kernels::AttentionWorkspace<T> ws;
       std::vector<T> out, lse;
       forward(impl, p, out, lse, ws);
       for (auto x : out) CHECK(x == T(0));
@@ -305,7 +306,7 @@ TEST_SUITE("nn") {
   TEST_CASE_TEMPLATE("attention backward accumulates: two passes give exactly twice the gradient", T, float, double) {
     for (Impl impl : {Impl::ref, Impl::fast}) {
       auto p = make_problem<T>(17, 17, 3, 16, true, true, 20);
-      tjepa::AttentionWorkspace<T> ws;
+      tjepa::kernels::AttentionWorkspace<T> ws;
       std::vector<T> out, lse;
       forward(impl, p, out, lse, ws);
       const auto g1 = backward(impl, p, out, lse, ws, 1);
@@ -319,17 +320,17 @@ TEST_SUITE("nn") {
 
   TEST_CASE("attention rejects bad shapes and null buffers and names the argument") {
     std::vector<float> b(64, 0.0f), lse(8, 0.0f);
-    tjepa::AttentionWorkspace<float> ws;
-    AttentionShape s{2, 2, 2, 4, 8, 8, 8, 8};
-    AttentionShape bad = s;
+    tjepa::kernels::AttentionWorkspace<float> ws;
+    kernels::AttentionShape s{2, 2, 2, 4, 8, 8, 8, 8};
+    kernels::AttentionShape bad = s;
     bad.ldk = 7;
-    CHECK_THROWS_WITH_AS(tjepa::attention_forward(bad, b.data(), b.data(), b.data(), nullptr, b.data(), lse.data(), ws),
+    CHECK_THROWS_WITH_AS(tjepa::kernels::attention_forward(bad, b.data(), b.data(), b.data(), nullptr, b.data(), lse.data(), ws),
                          doctest::Contains("ldk = 7"), tjepa::ShapeError);
     bad = s;
     bad.Lq = 0;
-    CHECK_THROWS_WITH_AS(tjepa::ref::attention_forward(bad, b.data(), b.data(), b.data(), nullptr, b.data(), lse.data()),
+    CHECK_THROWS_WITH_AS(tjepa::kernels::ref::attention_forward(bad, b.data(), b.data(), b.data(), nullptr, b.data(), lse.data()),
                          doctest::Contains("Lq = 0"), tjepa::ShapeError);
-    CHECK_THROWS_WITH_AS(tjepa::attention_backward(s, b.data(), b.data(), b.data(), nullptr, b.data(),
+    CHECK_THROWS_WITH_AS(tjepa::kernels::attention_backward(s, b.data(), b.data(), b.data(), nullptr, b.data(),
                                                    static_cast<const float*>(nullptr), b.data(), b.data(), b.data(),
                                                    b.data(), ws),
                          doctest::Contains("lse is null"), tjepa::ShapeError);
@@ -357,7 +358,7 @@ TEST_SUITE("nn") {
       CAPTURE(L);
       // sd 0.5 gives scores of a few units, so the softmax is neither flat nor one-hot.
       auto p = make_problem<float>(L, L, 3, 64, true, L == 528, 300 + static_cast<std::uint64_t>(L), 0.5);
-      tjepa::AttentionWorkspace<float> ws;
+      tjepa::kernels::AttentionWorkspace<float> ws;
       std::vector<float> out, lse;
       forward(Impl::fast, p, out, lse, ws);
       CHECK(max_abs_diff_out(p, out, naive_attention(p)) < 1e-5);
@@ -402,7 +403,7 @@ TEST_SUITE("nn") {
     auto big = make_problem<float>(131, 131, 3, 64, true, true, 400);
     auto small = make_problem<float>(70, 70, 3, 64, true, false, 401);
     auto cross = make_problem<float>(16, 131, 3, 64, false, true, 402);
-    tjepa::AttentionWorkspace<float> ws;
+    tjepa::kernels::AttentionWorkspace<float> ws;
     ws.reserve(big.s);
     const float* data = ws.buffer.data();
     const int* keys = ws.keys.data();

@@ -16,7 +16,7 @@
 #endif
 
 #include <tjepa/core/random.hpp>
-#include <tjepa/model/param_set.hpp>
+#include <tjepa/core/param_set.hpp>
 
 namespace tjepa::test {
 

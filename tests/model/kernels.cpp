@@ -3,6 +3,7 @@
 // (two backward passes give exactly twice the gradient).
 #include <doctest/doctest.h>
 
+#include <tjepa/kernels.hpp>
 #include <tjepa/tjepa.hpp>
 
 #include "gradcheck.hpp"
@@ -67,52 +68,52 @@ TEST_SUITE("nn") {
       auto w = random_vector<T>(std::size_t(C), rng), b = random_vector<T>(std::size_t(C), rng);
       // LayerNorm
       std::vector<T> y1(n), y2(n), m1(M), m2(M), r1(M), r2(M);
-      ref::layer_norm_forward(y1.data(), m1.data(), r1.data(), x.data(), w.data(), b.data(), M, C, T(1e-6));
-      layer_norm_forward(y2.data(), m2.data(), r2.data(), x.data(), w.data(), b.data(), M, C, T(1e-6));
+      kernels::ref::layer_norm_forward(y1.data(), m1.data(), r1.data(), x.data(), w.data(), b.data(), M, C, T(1e-6));
+      kernels::layer_norm_forward(y2.data(), m2.data(), r2.data(), x.data(), w.data(), b.data(), M, C, T(1e-6));
       CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
       CHECK(max_rel_diff(r2, r1) < simd_tolerance<T>());
       std::vector<T> dx1(n, T(0.5)), dx2(n, T(0.5)), dw1(C, T(0)), dw2(C, T(0)), db1(C, T(0)), db2(C, T(0));
-      ref::layer_norm_backward(dx1.data(), dw1.data(), db1.data(), g.data(), x.data(), w.data(), m1.data(), r1.data(), M, C);
-      layer_norm_backward(dx2.data(), dw2.data(), db2.data(), g.data(), x.data(), w.data(), m1.data(), r1.data(), M, C);
+      kernels::ref::layer_norm_backward(dx1.data(), dw1.data(), db1.data(), g.data(), x.data(), w.data(), m1.data(), r1.data(), M, C);
+      kernels::layer_norm_backward(dx2.data(), dw2.data(), db2.data(), g.data(), x.data(), w.data(), m1.data(), r1.data(), M, C);
       CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
       CHECK(max_rel_diff(dw2, dw1) < simd_tolerance<T>());
       CHECK(max_rel_diff(db2, db1) < simd_tolerance<T>());
       // GELU, and fc1's fused bias + GELU
-      ref::gelu_forward(y1.data(), x.data(), n);
-      gelu_forward(y2.data(), x.data(), n);
+      kernels::ref::gelu_forward(y1.data(), x.data(), n);
+      kernels::gelu_forward(y2.data(), x.data(), n);
       CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
       std::fill(dx1.begin(), dx1.end(), T(0.5));
       std::fill(dx2.begin(), dx2.end(), T(0.5));
-      ref::gelu_backward(dx1.data(), g.data(), x.data(), n);
-      gelu_backward(dx2.data(), g.data(), x.data(), n);
+      kernels::ref::gelu_backward(dx1.data(), g.data(), x.data(), n);
+      kernels::gelu_backward(dx2.data(), g.data(), x.data(), n);
       CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
       std::vector<T> pre = x, xb(n);
       for (int m = 0; m < M; ++m)
         for (int c = 0; c < C; ++c) xb[std::size_t(m) * C + c] = x[std::size_t(m) * C + c] + b[std::size_t(c)];
-      bias_gelu_forward(y2.data(), pre.data(), b.data(), M, C);
-      ref::gelu_forward(y1.data(), xb.data(), n);
+      kernels::bias_gelu_forward(y2.data(), pre.data(), b.data(), M, C);
+      kernels::ref::gelu_forward(y1.data(), xb.data(), n);
       CHECK(max_rel_diff(pre, xb) < simd_tolerance<T>());
       CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
       // Softmax
-      ref::softmax_forward(y1.data(), x.data(), M, C);
-      softmax_forward(y2.data(), x.data(), M, C);
+      kernels::ref::softmax_forward(y1.data(), x.data(), M, C);
+      kernels::softmax_forward(y2.data(), x.data(), M, C);
       CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
       std::fill(dx1.begin(), dx1.end(), T(0.5));
       std::fill(dx2.begin(), dx2.end(), T(0.5));
-      ref::softmax_backward(dx1.data(), g.data(), y1.data(), M, C);
-      softmax_backward(dx2.data(), g.data(), y1.data(), M, C);
+      kernels::ref::softmax_backward(dx1.data(), g.data(), y1.data(), M, C);
+      kernels::softmax_backward(dx2.data(), g.data(), y1.data(), M, C);
       CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
       // Linear: [M, C] → [M, C + 2]
       const int N = C + 2;
       auto W = random_vector<T>(std::size_t(N) * C, rng), bias = random_vector<T>(std::size_t(N), rng);
       std::vector<T> o1(std::size_t(M) * N), o2(o1.size());
-      ref::linear_forward(o1.data(), x.data(), W.data(), bias.data(), M, C, N);
-      linear_forward(o2.data(), x.data(), W.data(), bias.data(), M, C, N);
+      kernels::ref::linear_forward(o1.data(), x.data(), W.data(), bias.data(), M, C, N);
+      kernels::linear_forward(o2.data(), x.data(), W.data(), bias.data(), M, C, N);
       CHECK(max_rel_diff(o2, o1) < simd_tolerance<T>());
       auto go = random_vector<T>(o1.size(), rng);
       std::vector<T> di1(n, T(0)), di2(n, T(0)), dW1(W.size(), T(0)), dW2(W.size(), T(0)), dB1(N, T(0)), dB2(N, T(0));
-      ref::linear_backward(di1.data(), dW1.data(), dB1.data(), go.data(), x.data(), W.data(), M, C, N);
-      linear_backward(di2.data(), dW2.data(), dB2.data(), go.data(), x.data(), W.data(), M, C, N);
+      kernels::ref::linear_backward(di1.data(), dW1.data(), dB1.data(), go.data(), x.data(), W.data(), M, C, N);
+      kernels::linear_backward(di2.data(), dW2.data(), dB2.data(), go.data(), x.data(), W.data(), M, C, N);
       CHECK(max_rel_diff(di2, di1) < simd_tolerance<T>());
       CHECK(max_rel_diff(dW2, dW1) < simd_tolerance<T>());
       CHECK(max_rel_diff(dB2, dB1) < simd_tolerance<T>());
@@ -121,17 +122,17 @@ TEST_SUITE("nn") {
       const int Nf = std::max(1, C / 2);
       auto Wf = random_vector<T>(std::size_t(Nf) * C, rng), gf = random_vector<T>(std::size_t(M) * Nf, rng);
       std::vector<T> dWf1(Wf.size(), T(0.25)), dWf2(Wf.size(), T(0.25)), dif1(n, T(0)), dif2(n, T(3));
-      ref::linear_backward(dif1.data(), dWf1.data(), static_cast<T*>(nullptr), gf.data(), x.data(), Wf.data(), M, C, Nf);
-      linear_backward(dif2.data(), dWf2.data(), static_cast<T*>(nullptr), gf.data(), x.data(), Wf.data(), M, C, Nf,
+      kernels::ref::linear_backward(dif1.data(), dWf1.data(), static_cast<T*>(nullptr), gf.data(), x.data(), Wf.data(), M, C, Nf);
+      kernels::linear_backward(dif2.data(), dWf2.data(), static_cast<T*>(nullptr), gf.data(), x.data(), Wf.data(), M, C, Nf,
                       false);
       CHECK(max_rel_diff(dWf2, dWf1) < simd_tolerance<T>());
       CHECK(max_rel_diff(dif2, dif1) < simd_tolerance<T>());
       // Drop-path: samples are the M rows
       std::vector<T> scale(M);
-      drop_path_sample(scale.data(), 1, M, 0.4, 5);
+      kernels::drop_path_sample(scale.data(), 1, M, 0.4, 5);
       std::vector<T> a1 = g, a2 = g;
-      ref::drop_path_forward(a1.data(), x.data(), scale.data(), M, std::size_t(C));
-      drop_path_forward(a2.data(), x.data(), scale.data(), M, std::size_t(C));
+      kernels::ref::drop_path_forward(a1.data(), x.data(), scale.data(), M, std::size_t(C));
+      kernels::drop_path_forward(a2.data(), x.data(), scale.data(), M, std::size_t(C));
       CHECK(a1 == a2);
     }
   }
@@ -142,15 +143,15 @@ TEST_SUITE("nn") {
     auto x = random_vector<double>(std::size_t(M) * K, rng), W = random_vector<double>(std::size_t(N) * K, rng);
     auto g = random_vector<double>(std::size_t(M) * N, rng);
     std::vector<double> o1(std::size_t(M) * N), o2(o1.size(), 1.0), o3(o1.size(), 1.0);
-    ref::linear_forward(o1.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
-    linear_forward(o2.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
+    kernels::ref::linear_forward(o1.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
+    kernels::linear_forward(o2.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
     CHECK(max_rel_diff(o2, o1) < 1e-12);
-    linear_forward_accumulate(o3.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
+    kernels::linear_forward_accumulate(o3.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
     for (auto& v : o3) v -= 1.0;
     CHECK(max_rel_diff(o3, o1) < 1e-12);
     std::vector<double> di1(x.size(), 0.0), di2(x.size(), 0.0), dW1(W.size(), 0.0), dW2(W.size(), 0.0);
-    ref::linear_backward(di1.data(), dW1.data(), static_cast<double*>(nullptr), g.data(), x.data(), W.data(), M, K, N);
-    linear_backward(di2.data(), dW2.data(), static_cast<double*>(nullptr), g.data(), x.data(), W.data(), M, K, N);
+    kernels::ref::linear_backward(di1.data(), dW1.data(), static_cast<double*>(nullptr), g.data(), x.data(), W.data(), M, K, N);
+    kernels::linear_backward(di2.data(), dW2.data(), static_cast<double*>(nullptr), g.data(), x.data(), W.data(), M, K, N);
     CHECK(max_rel_diff(di2, di1) < 1e-12);
     CHECK(max_rel_diff(dW2, dW1) < 1e-12);
   }
@@ -193,7 +194,7 @@ TEST_SUITE("nn") {
       detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N,
                           {false, b.data(), h.data()});
       std::vector<float> hr(y.size());
-      ref::gelu_forward(hr.data(), yb.data(), hr.size());
+      kernels::ref::gelu_forward(hr.data(), yb.data(), hr.size());
       CHECK(max_rel_diff(c, yb) < 3e-5);
       CHECK(max_rel_diff(h, hr) < 3e-5);
       detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N,
@@ -211,7 +212,7 @@ TEST_SUITE("nn") {
       CHECK(max_rel_diff(dW2, expect(dW, [](std::size_t, double v) { return v - 0.25; })) < 3e-5);
       // dpre = (g·W) ⊙ gelu'(pre), overwritten: the MLP's backward through GELU (pre = x here)
       std::vector<float> dpre(x.size(), 7.0f);
-      linear_backward_input_gelu(dpre.data(), g.data(), W.data(), x.data(), M, K, N);
+      kernels::linear_backward_input_gelu(dpre.data(), g.data(), W.data(), x.data(), M, K, N);
       CHECK(max_rel_diff(dpre, expect(dx, [&](std::size_t i, double v) { return v * detail::gelu_grad(double(x[i])); })) <
             3e-5);
       // C = r + x·Wᵀ + b from a separate residual r (the block's residual add without a copy)
@@ -228,7 +229,7 @@ TEST_SUITE("nn") {
     // float GEMM, an output with a partial panel, and a product large enough to be split over
     // threads; with a separate residual, in place (residual = out), and without one.
     Rng rng(31);
-    const int shapes[][4] = {{1, 5, 7, 3}, {47, 13, 40, 9}, {mlp_tile_rows, 24, 96, 24}, {49, 70, 300, 33},
+    const int shapes[][4] = {{1, 5, 7, 3}, {47, 13, 40, 9}, {kernels::mlp_tile_rows, 24, 96, 24}, {49, 70, 300, 33},
                              {200, 70, 300, 96}};
     for (const auto& sh : shapes) {
       const int M = sh[0], K = sh[1], H = sh[2], N = sh[3];
@@ -239,41 +240,41 @@ TEST_SUITE("nn") {
       auto b2 = random_vector<T>(std::size_t(N), rng), r = random_vector<T>(std::size_t(M) * N, rng);
       // The untiled fast path, and the scalar reference.
       std::vector<T> h(std::size_t(M) * H), fast(r.size()), hr(h.size()), want(r.size());
-      linear_bias_gelu_forward(h.data(), h.data(), x.data(), w1.data(), b1.data(), M, K, H);
-      linear_forward_residual(fast.data(), r.data(), h.data(), w2.data(), b2.data(), M, H, N);
-      ref::linear_forward(hr.data(), x.data(), w1.data(), b1.data(), M, K, H);
-      ref::gelu_forward(hr.data(), hr.data(), hr.size());
-      ref::linear_forward(want.data(), hr.data(), w2.data(), b2.data(), M, H, N);
+      kernels::linear_bias_gelu_forward(h.data(), h.data(), x.data(), w1.data(), b1.data(), M, K, H);
+      kernels::linear_forward_residual(fast.data(), r.data(), h.data(), w2.data(), b2.data(), M, H, N);
+      kernels::ref::linear_forward(hr.data(), x.data(), w1.data(), b1.data(), M, K, H);
+      kernels::ref::gelu_forward(hr.data(), hr.data(), hr.size());
+      kernels::ref::linear_forward(want.data(), hr.data(), w2.data(), b2.data(), M, H, N);
       AlignedVector<T> scratch;
       std::vector<T> y(r.size(), T(7));
-      mlp_forward_tiled(y.data(), static_cast<const T*>(nullptr), x.data(), w1.data(), b1.data(), w2.data(), b2.data(),
+      kernels::mlp_forward_tiled(y.data(), static_cast<const T*>(nullptr), x.data(), w1.data(), b1.data(), w2.data(), b2.data(),
                         M, K, H, N, scratch);
       CHECK(max_rel_diff(y, want) < 10 * simd_tolerance<T>());
       for (std::size_t i = 0; i < want.size(); ++i) want[i] += r[i];
-      mlp_forward_tiled(y.data(), r.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch);
+      kernels::mlp_forward_tiled(y.data(), r.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch);
       CHECK(max_rel_diff(y, want) < 10 * simd_tolerance<T>());
       // Each row goes through the same micro-kernels in the same order as untiled: float is
       // bit-identical, so inference and the cached training forward agree exactly.
       if constexpr (std::is_same_v<T, float>) CHECK(y == fast);
       std::vector<T> z = r;
-      mlp_forward_tiled(z.data(), z.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch);
+      kernels::mlp_forward_tiled(z.data(), z.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch);
       CHECK(z == y);
-      // Weights packed once (PackedWeights; float only) give the same values as packing per call.
-      PackedWeights<T> cache;
+      // Weights packed once (kernels::PackedWeights; float only) give the same values as packing per call.
+      kernels::PackedWeights<T> cache;
       const T* p1 = cache.get(w1.data(), H, K);
       const T* p2 = cache.get(w2.data(), N, H);
       CHECK(cache.get(w1.data(), H, K) == p1);
       CHECK(cache.size() == (std::is_same_v<T, float> ? 2u : 0u));
       CHECK((p1 == nullptr) == std::is_same_v<T, double>);
       z = r;
-      mlp_forward_tiled(z.data(), z.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch,
+      kernels::mlp_forward_tiled(z.data(), z.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch,
                         p1, p2);
       CHECK(z == y);
       std::vector<T> h2(h.size()), y2(r.size());
-      linear_forward(h2.data(), x.data(), w1.data(), b1.data(), M, K, H);
-      linear_forward(hr.data(), x.data(), w1.data(), b1.data(), M, K, H, p1);
+      kernels::linear_forward(h2.data(), x.data(), w1.data(), b1.data(), M, K, H);
+      kernels::linear_forward(hr.data(), x.data(), w1.data(), b1.data(), M, K, H, p1);
       CHECK(hr == h2);
-      linear_forward_residual(y2.data(), r.data(), h.data(), w2.data(), b2.data(), M, H, N, p2);
+      kernels::linear_forward_residual(y2.data(), r.data(), h.data(), w2.data(), b2.data(), M, H, N, p2);
       CHECK(y2 == fast);
     }
   }
@@ -288,11 +289,11 @@ TEST_SUITE("nn") {
       auto w = random_vector<double>(std::size_t(M) * N, rng);
       std::vector<double> y(w.size());
       auto loss = [&] {
-        linear_forward(y.data(), x.data(), W.data(), b.data(), M, C, N);
+        kernels::linear_forward(y.data(), x.data(), W.data(), b.data(), M, C, N);
         return test::dot(w.data(), y.data(), y.size());
       };
       auto bwd = [&](std::vector<std::vector<double>>& gr) {
-        linear_backward(gr[0].data(), gr[1].data(), gr[2].data(), w.data(), x.data(), W.data(), M, C, N);
+        kernels::linear_backward(gr[0].data(), gr[1].data(), gr[2].data(), w.data(), x.data(), W.data(), M, C, N);
       };
       std::vector<std::vector<double>> gr{std::vector<double>(n), std::vector<double>(W.size()), std::vector<double>(b.size())};
       bwd(gr);
@@ -306,12 +307,12 @@ TEST_SUITE("nn") {
       auto w = random_vector<double>(n, rng);
       std::vector<double> y(n), mean(M), rstd(M);
       auto loss = [&] {
-        layer_norm_forward(y.data(), mean.data(), rstd.data(), x.data(), g.data(), b.data(), M, C);
+        kernels::layer_norm_forward(y.data(), mean.data(), rstd.data(), x.data(), g.data(), b.data(), M, C);
         return test::dot(w.data(), y.data(), n);
       };
       loss();
       auto bwd = [&](std::vector<std::vector<double>>& gr) {
-        layer_norm_backward(gr[0].data(), gr[1].data(), gr[2].data(), w.data(), x.data(), g.data(), mean.data(),
+        kernels::layer_norm_backward(gr[0].data(), gr[1].data(), gr[2].data(), w.data(), x.data(), g.data(), mean.data(),
                             rstd.data(), M, C);
       };
       std::vector<std::vector<double>> gr{std::vector<double>(n), std::vector<double>(C), std::vector<double>(C)};
@@ -325,10 +326,10 @@ TEST_SUITE("nn") {
       auto w = random_vector<double>(n, rng);
       std::vector<double> y(n);
       auto loss = [&] {
-        gelu_forward(y.data(), x.data(), n);
+        kernels::gelu_forward(y.data(), x.data(), n);
         return test::dot(w.data(), y.data(), n);
       };
-      auto bwd = [&](std::vector<std::vector<double>>& gr) { gelu_backward(gr[0].data(), w.data(), x.data(), n); };
+      auto bwd = [&](std::vector<std::vector<double>>& gr) { kernels::gelu_backward(gr[0].data(), w.data(), x.data(), n); };
       std::vector<std::vector<double>> gr{std::vector<double>(n)};
       bwd(gr);
       CHECK(gradient_error(x.data(), gr[0].data(), n, loss) < grad_tolerance);
@@ -338,11 +339,11 @@ TEST_SUITE("nn") {
       auto w = random_vector<double>(n, rng);
       std::vector<double> y(n);
       auto loss = [&] {
-        softmax_forward(y.data(), x.data(), M, C);
+        kernels::softmax_forward(y.data(), x.data(), M, C);
         return test::dot(w.data(), y.data(), n);
       };
       loss();
-      auto bwd = [&](std::vector<std::vector<double>>& gr) { softmax_backward(gr[0].data(), w.data(), y.data(), M, C); };
+      auto bwd = [&](std::vector<std::vector<double>>& gr) { kernels::softmax_backward(gr[0].data(), w.data(), y.data(), M, C); };
       std::vector<std::vector<double>> gr{std::vector<double>(n)};
       bwd(gr);
       CHECK(gradient_error(x.data(), gr[0].data(), n, loss) < grad_tolerance);
@@ -352,7 +353,7 @@ TEST_SUITE("nn") {
       std::vector<double> scale(M);
       // The first seed whose draws keep some samples and drop others.
       for (std::uint64_t seed = 0; seed < 64; ++seed) {
-        drop_path_sample(scale.data(), 1, M, 0.5, seed);
+        kernels::drop_path_sample(scale.data(), 1, M, 0.5, seed);
         if (std::count(scale.begin(), scale.end(), 0.0) % M != 0) break;
       }
       CHECK(std::count(scale.begin(), scale.end(), 0.0) > 0);
@@ -361,11 +362,11 @@ TEST_SUITE("nn") {
       std::vector<double> y(n);
       auto loss = [&] {
         y = base;
-        drop_path_forward(y.data(), x.data(), scale.data(), M, std::size_t(C));
+        kernels::drop_path_forward(y.data(), x.data(), scale.data(), M, std::size_t(C));
         return test::dot(w.data(), y.data(), n);
       };
       auto bwd = [&](std::vector<std::vector<double>>& gr) {
-        drop_path_backward(gr[0].data(), w.data(), scale.data(), M, std::size_t(C));
+        kernels::drop_path_backward(gr[0].data(), w.data(), scale.data(), M, std::size_t(C));
       };
       std::vector<std::vector<double>> gr{std::vector<double>(n)};
       bwd(gr);
@@ -381,14 +382,14 @@ TEST_SUITE("nn") {
         std::vector<double> y(base.size());
         auto loss = [&] {
           y = base;
-          gather_add_rows(y.data(), src.data(), batch, idx.data(), B, K, C);
+          kernels::gather_add_rows(y.data(), src.data(), batch, idx.data(), B, K, C);
           double l = test::dot(w.data(), y.data(), y.size());
-          gather_rows(y.data(), src.data(), batch, idx.data(), B, K, C);
+          kernels::gather_rows(y.data(), src.data(), batch, idx.data(), B, K, C);
           return l + test::dot(w.data(), y.data(), y.size());
         };
         auto bwd = [&](std::vector<std::vector<double>>& gr) {
-          scatter_add_rows(gr[0].data(), batch, w.data(), idx.data(), B, K, C);
-          scatter_add_rows(gr[0].data(), batch, w.data(), idx.data(), B, K, C);
+          kernels::scatter_add_rows(gr[0].data(), batch, w.data(), idx.data(), B, K, C);
+          kernels::scatter_add_rows(gr[0].data(), batch, w.data(), idx.data(), B, K, C);
         };
         std::vector<std::vector<double>> gr{std::vector<double>(src.size())};
         bwd(gr);
@@ -400,10 +401,10 @@ TEST_SUITE("nn") {
 
   TEST_CASE("drop-path draws are per sample: independent of the batch they sit in") {
     std::vector<float> a(3 * 8), b(3 * 5);
-    drop_path_sample(a.data(), 3, 8, 0.3, 77);
-    drop_path_sample(b.data(), 3, 5, 0.3, 77);
+    kernels::drop_path_sample(a.data(), 3, 8, 0.3, 77);
+    kernels::drop_path_sample(b.data(), 3, 5, 0.3, 77);
     for (int s = 0; s < 3; ++s)
       for (int i = 0; i < 5; ++i) CHECK(a[std::size_t(s) * 8 + i] == b[std::size_t(s) * 5 + i]);
-    CHECK_THROWS_AS(drop_path_sample(a.data(), 1, 2, 1.0, 0), ConfigError);
+    CHECK_THROWS_AS(kernels::drop_path_sample(a.data(), 1, 2, 1.0, 0), ConfigError);
   }
 }

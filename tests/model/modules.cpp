@@ -182,13 +182,13 @@ TEST_SUITE("nn") {
     std::vector<double> out(w.size());
     Workspace<double> ws;
     auto loss = [&] {
-      pred.forward(ps, ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t, out.data(), nullptr, ws);
+      pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), nullptr, ws);
       return test::dot(w.data(), out.data(), out.size());
     };
     PredictorCache<double> cache;
     std::vector<double> dctx(ctx.size(), 0.0), dpos(pos.size(), 0.0);
     ps.zero_grad();
-    pred.forward(ps, ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t, out.data(), &cache, ws);
+    pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), &cache, ws);
     pred.backward(ps, w.data(), dctx.data(), dpos.data(), cache, ws);
     CHECK(gradient_error(ctx.data(), dctx.data(), ctx.size(), loss) < grad_tolerance);
     CHECK(gradient_error(pos.data(), dpos.data(), pos.size(), loss) < grad_tolerance);
@@ -252,7 +252,7 @@ TEST_SUITE("nn") {
     auto step = [&](std::vector<double>& dtokens) {
       std::vector<double> dz(z.size(), 0.0);
       enc.forward(ps, tokens.data(), B, ctx.data(), K, z.data(), &ec, ws, {DropPath{0.3, 7}, nullptr});
-      pred.forward(ps, z.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), B, t, out.data(), &pc, ws);
+      pred.forward(ps, {z.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), B, t}, out.data(), &pc, ws);
       pred.backward(ps, w.data(), dz.data(), ps.grad(enc.pos_embed()), pc, ws);
       enc.backward(ps, dz.data(), dtokens.data(), ec, ws);
     };
@@ -289,15 +289,17 @@ TEST_SUITE("nn") {
       auto w = test::normal_vector(std::size_t(B) * L * d, rng);
       std::vector<double> y(w.size());
       auto loss = [&] {
-        attn.forward(ps, x.data(), B, L, valid.data(), qkv.data(), att.data(), static_cast<double*>(nullptr),
-                     y.data(), false, ws);
+        attn.forward(ps, AttentionRows{B, L, valid.data()}, x.data(),
+                     AttentionSaved<double>{.qkv = qkv.data(), .att = att.data()}, y.data(), ws);
         return test::dot(w.data(), y.data(), y.size());
       };
       ps.zero_grad();
-      attn.forward(ps, x.data(), B, L, valid.data(), qkv.data(), att.data(), lse.data(), y.data(), false, ws);
+      const AttentionRows rows{B, L, valid.data()};
+      const AttentionSaved<double> saved{.qkv = qkv.data(), .att = att.data(), .lse = lse.data()};
+      attn.forward(ps, rows, x.data(), saved, y.data(), ws);
       std::vector<double> dx(x.size(), 0.0), dqkv(qkv.size()), datt(att.size());
-      attn.backward(ps, w.data(), x.data(), B, L, valid.data(), qkv.data(), att.data(), lse.data(), dqkv.data(),
-                    datt.data(), dx.data(), ws);
+      attn.backward(ps, rows, w.data(), x.data(), saved, AttentionScratch<double>{.dqkv = dqkv.data(), .datt = datt.data()},
+                    dx.data(), ws);
       CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
       // A padded token is never attended to: changing it changes only its own output row.
       loss();
@@ -317,8 +319,9 @@ TEST_SUITE("nn") {
       auto x1 = test::normal_vector(std::size_t(L1) * d, rng);
       std::vector<double> qkv1(std::size_t(L1) * 3 * d), att1(std::size_t(L1) * d), y1(att1.size());
       std::vector<double> ref_att(att1.size()), ref_lse(std::size_t(3) * L1), lse1(ref_lse.size());
-      attn.forward(ps, x1.data(), 1, L1, nullptr, qkv1.data(), att1.data(), lse1.data(), y1.data(), false, ws);
-      ref::attention_forward(AttentionShape::fused_self(L1, 3, d / 3), qkv1.data(), qkv1.data() + d,
+      attn.forward(ps, AttentionRows{1, L1}, x1.data(),
+                   AttentionSaved<double>{.qkv = qkv1.data(), .att = att1.data(), .lse = lse1.data()}, y1.data(), ws);
+      kernels::ref::attention_forward(kernels::AttentionShape::fused_self(L1, 3, d / 3), qkv1.data(), qkv1.data() + d,
                              qkv1.data() + 2 * d, nullptr, ref_att.data(), ref_lse.data());
       double diff = 0;
       for (std::size_t i = 0; i < att1.size(); ++i) diff = std::max(diff, std::abs(att1[i] - ref_att[i]));
@@ -330,7 +333,7 @@ TEST_SUITE("nn") {
       auto w = test::normal_vector(std::size_t(M) * 7, rng);
       std::vector<double> y(w.size()), hp(std::size_t(M) * 20), h(hp.size()), dh(hp.size());
       auto loss = [&] {
-        mlp.forward(ps, x.data(), hp.data(), h.data(), y.data(), M, false);
+        mlp.forward(ps, x.data(), hp.data(), h.data(), y.data(), M);
         return test::dot(w.data(), y.data(), y.size());
       };
       ps.zero_grad();
@@ -560,7 +563,7 @@ TEST_SUITE("nn") {
       // The target encoder, with the reference's drop-path 0.3 (it runs in training mode there).
       enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, ws, {DropPath{0.3, 5}, nullptr});
       enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), nullptr, ws);        // context
-      pred.forward(ps, zc.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), 2 * B, t, out.data(), nullptr, ws);
+      pred.forward(ps, {zc.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), 2 * B, t}, out.data(), nullptr, ws);
       probe.forward(ps, z.data(), B, N, nullptr, y.data(), nullptr, ws);
     };
     run();

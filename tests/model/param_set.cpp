@@ -1,6 +1,6 @@
 #include <doctest/doctest.h>
 
-#include <tjepa/model/param_set.hpp>
+#include <tjepa/core/param_set.hpp>
 
 TEST_SUITE("nn") {
   TEST_CASE("ParamSet registers named views in one flat aligned buffer") {

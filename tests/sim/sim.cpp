@@ -5,8 +5,8 @@
 #include <doctest/doctest.h>
 
 #include <tjepa/data/preprocessor.hpp>
-#include <tjepa/layout/allegro_xela.hpp>
-#include <tjepa/layout/generic.hpp>
+#include <tjepa/sensors/allegro_xela.hpp>
+#include <tjepa/sensors/generic.hpp>
 #include <tjepa/sim/grasping_hand.hpp>
 #include <tjepa/sim/simulated_skin.hpp>
 

@@ -285,8 +285,9 @@ TEST_SUITE("train") {
     for (int j = 0; j < masks.num_targets(); ++j) {
       const TargetSet& ts = masks.targets[j];
       std::vector<double> p(B * ts.size * d);
-      model.predictor.forward(model.predictor_params, z.data(), B, masks.K,
-                              model.target.value(model.encoder.pos_embed()), N, ts.indices.data(), B, ts.size,
+      model.predictor.forward(model.predictor_params,
+                              {z.data(), B, masks.K, model.target.value(model.encoder.pos_embed()), N,
+                               ts.indices.data(), B, ts.size},
                               p.data(), nullptr, ws);
       double s = 0;
       for (int b = 0; b < B; ++b)

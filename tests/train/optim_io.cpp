@@ -4,7 +4,7 @@
 
 #include <tjepa/tjepa.hpp>
 // The modules this file tests (the umbrella above holds them all; named here so each is traceable).
-#include <tjepa/model/prefixed_params.hpp>
+#include <tjepa/core/prefixed_params.hpp>
 #include <tjepa/optim/adamw.hpp>
 #include <tjepa/optim/detail/deterministic_sum.hpp>
 

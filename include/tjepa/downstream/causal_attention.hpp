@@ -31,53 +31,60 @@ struct CausalSelfAttention {
   }
   int dim() const { return proj.out; }
   // Query row l of one head over the fused qkv buffer: 1 query, l + 1 keys.
-  AttentionShape row_shape(int l) const {
+  kernels::AttentionShape row_shape(int l) const {
     const int d = dim();
     return {1, l + 1, 1, d / heads, 3 * d, 3 * d, 3 * d, d};
   }
 
-  // x [B·L, d] → y [B·L, d] (y += when accumulate). qkv_buf [B·L, 3d], att [B·L, d] and lse
-  // [B, H, L] are filled (kept for backward).
+  // x [B·L, d] → y [B·L, d] = residual + attention (r.key_valid and r.q_from unused: the causal
+  // mask is the key set). saved.qkv [B·L, 3d], saved.att [B·L, d] and saved.lse [B, H, L] are
+  // filled (kept for backward).
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, int B, int L, T* qkv_buf, T* att, T* lse, T* y, bool accumulate,
-               Workspace<T>& ws) const {
+  void forward(const ParamSet<T>& ps, const AttentionRows& r, const T* x, const AttentionSaved<T>& saved, T* y,
+               Workspace<T>& ws, const T* residual = nullptr) const {
+    const int B = r.B, L = r.L;
     require<ShapeError>(B > 0 && L > 0, "CausalSelfAttention::forward: B = ", B, ", L = ", L, ", expected > 0");
+    require<ShapeError>(r.q_from == 0 && r.key_valid == nullptr,
+                        "CausalSelfAttention::forward: q_from and key_valid are not used, expected 0 and nullptr");
     const int d = dim(), Dh = d / heads;
-    qkv.forward(ps, x, qkv_buf, B * L);
-    AttentionWorkspace<T>* aws = ws.attention_per_thread(row_shape(L - 1));
+    qkv.forward(ps, x, saved.qkv, B * L);
+    kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(row_shape(L - 1));
     TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
     for (int bh = 0; bh < B * heads; ++bh) {
       const int b = bh / heads, h = bh % heads;
-      const T* q = qkv_buf + std::size_t(b) * L * 3 * d + std::size_t(h) * Dh;  // row 0 of the sample
+      const T* q = saved.qkv + std::size_t(b) * L * 3 * d + std::size_t(h) * Dh;  // row 0 of the sample
       for (int l = 0; l < L; ++l)
-        attention_forward(row_shape(l), q + std::size_t(l) * 3 * d, q + d, q + 2 * d, nullptr,
-                          att + (std::size_t(b) * L + l) * d + std::size_t(h) * Dh, lse + std::size_t(bh) * L + l,
-                          aws[detail::thread_id()]);
+        kernels::attention_forward(row_shape(l), q + std::size_t(l) * 3 * d, q + d, q + 2 * d, nullptr,
+                                   saved.att + (std::size_t(b) * L + l) * d + std::size_t(h) * Dh,
+                                   saved.lse + std::size_t(bh) * L + l, aws[detail::thread_id()]);
     }
-    if (accumulate)
-      proj.forward_accumulate(ps, att, y, B * L);
+    if (residual)
+      proj.forward_residual(ps, saved.att, residual, y, B * L);
     else
-      proj.forward(ps, att, y, B * L);
+      proj.forward(ps, saved.att, y, B * L);
   }
 
-  // dx [B·L, d] += ∂L/∂x given dy [B·L, d]. dqkv [B·L, 3d] and datt [B·L, d] are scratch.
+  // dx [B·L, d] += ∂L/∂x given dy [B·L, d]; the parameters' gradients +=. scratch.dqkv [B·L, 3d]
+  // and scratch.datt [B·L, d].
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dy, const T* x, int B, int L, const T* qkv_buf, const T* att, const T* lse,
-                T* dqkv, T* datt, T* dx, Workspace<T>& ws) const {
-    const int d = dim(), Dh = d / heads;
-    proj.backward(ps, dy, att, datt, B * L, false);  // y = att · Wprojᵀ + b
+  void backward(ParamSet<T>& ps, const AttentionRows& r, const T* dy, const T* x, const AttentionSaved<T>& saved,
+                const AttentionScratch<T>& scratch, T* dx, Workspace<T>& ws) const {
+    const int B = r.B, L = r.L, d = dim(), Dh = d / heads;
+    T* dqkv = scratch.dqkv;
+    std::fill(scratch.datt, scratch.datt + std::size_t(B) * L * d, T(0));
+    proj.backward(ps, dy, saved.att, scratch.datt, B * L);  // y = att · Wprojᵀ + b
     std::fill(dqkv, dqkv + std::size_t(B) * L * 3 * d, T(0));
-    AttentionWorkspace<T>* aws = ws.attention_per_thread(row_shape(L - 1));
+    kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(row_shape(L - 1));
     TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
     for (int bh = 0; bh < B * heads; ++bh) {
       const int b = bh / heads, h = bh % heads;
       const std::size_t q0 = std::size_t(b) * L * 3 * d + std::size_t(h) * Dh;
       for (int l = 0; l < L; ++l) {
         const std::size_t o = (std::size_t(b) * L + l) * d + std::size_t(h) * Dh;
-        attention_backward(row_shape(l), qkv_buf + q0 + std::size_t(l) * 3 * d, qkv_buf + q0 + d,
-                           qkv_buf + q0 + 2 * d, nullptr, att + o, lse + std::size_t(bh) * L + l, datt + o,
-                           dqkv + q0 + std::size_t(l) * 3 * d, dqkv + q0 + d, dqkv + q0 + 2 * d,
-                           aws[detail::thread_id()]);
+        kernels::attention_backward(row_shape(l), saved.qkv + q0 + std::size_t(l) * 3 * d, saved.qkv + q0 + d,
+                                    saved.qkv + q0 + 2 * d, nullptr, saved.att + o, saved.lse + std::size_t(bh) * L + l,
+                                    scratch.datt + o, dqkv + q0 + std::size_t(l) * 3 * d, dqkv + q0 + d,
+                                    dqkv + q0 + 2 * d, aws[detail::thread_id()]);
       }
     }
     qkv.backward(ps, dqkv, x, dx, B * L);  // qkv = x · Wqkvᵀ + b

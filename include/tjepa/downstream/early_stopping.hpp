@@ -21,8 +21,8 @@
 
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
-#include "tjepa/model/param_set.hpp"
-#include "tjepa/model/prefixed_params.hpp"
+#include "tjepa/core/param_set.hpp"
+#include "tjepa/core/prefixed_params.hpp"
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
 

@@ -34,7 +34,7 @@
 #include "tjepa/downstream/eval_table.hpp"
 #include "tjepa/downstream/grasp_tasks.hpp"
 #include "tjepa/graph/skin.hpp"
-#include "tjepa/layout/allegro_xela.hpp"
+#include "tjepa/sensors/allegro_xela.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/sim/grasping_hand.hpp"
 #include "tjepa/train/config.hpp"

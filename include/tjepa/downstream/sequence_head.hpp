@@ -33,7 +33,7 @@ struct SequenceHeadConfig {
   int length = 10;      // L windows per sequence
   int outputs = 3;      // P: pose x, y, θ
   double mlp_ratio = 4.0;
-  double eps = layer_norm_eps;
+  double eps = kernels::layer_norm_eps;
 };
 
 // Activations of one forward pass, kept for backward; also the scratch of inference.
@@ -98,13 +98,15 @@ struct SequenceHead {
     norm1.forward(ps, h0, n1, detail::grow(c.mean1, M), detail::grow(c.rstd1, M), int(M));
     T* h1 = detail::grow(c.h1, Md);
     std::copy(h0, h0 + Md, h1);
-    attn.forward(ps, n1, B, L, detail::grow(c.qkv, M * 3 * d), detail::grow(c.att, Md),
-                 detail::grow(c.lse, std::size_t(B) * attn.heads * L), h1, true, ws);
+    attn.forward(ps, AttentionRows{B, L}, n1,
+                 AttentionSaved<T>{.qkv = detail::grow(c.qkv, M * 3 * d), .att = detail::grow(c.att, Md),
+                                   .lse = detail::grow(c.lse, std::size_t(B) * attn.heads * L)},
+                 h1, ws, h1);
     T* n2 = detail::grow(c.n2, Md);
     norm2.forward(ps, h1, n2, detail::grow(c.mean2, M), detail::grow(c.rstd2, M), int(M));
     T* h2 = detail::grow(c.h2, Md);
     std::copy(h1, h1 + Md, h2);
-    mlp.forward(ps, n2, detail::grow(c.hpre, M * hid), detail::grow(c.hact, M * hid), h2, int(M), true);
+    mlp.forward(ps, n2, detail::grow(c.hpre, M * hid), detail::grow(c.hact, M * hid), h2, int(M), h2);
     T* n3 = detail::grow(c.n3, Md);
     norm.forward(ps, h2, n3, detail::grow(c.mean3, M), detail::grow(c.rstd3, M), int(M));
     head.forward(ps, n3, y, int(M));
@@ -126,13 +128,16 @@ struct SequenceHead {
     std::fill(dh, dh + Md, T(0));
     norm.backward(ps, dn, c.h2.data(), c.mean3.data(), c.rstd3.data(), dh, int(M));
     // h₂ = h₁ + mlp(n2), n2 = norm2(h₁): dh already holds the identity path
+    std::fill(dn, dn + Md, T(0));
     mlp.backward(ps, dh, c.n2.data(), c.hpre.data(), detail::grow(c.dhid, M * hid), detail::grow(c.dhid2, M * hid), dn,
-                 int(M), false);
+                 int(M));
     norm2.backward(ps, dn, c.h1.data(), c.mean2.data(), c.rstd2.data(), dh, int(M));
     // h₁ = h₀ + attn(n1), n1 = norm1(h₀)
     std::fill(dn, dn + Md, T(0));
-    attn.backward(ps, dh, c.n1.data(), B, L, c.qkv.data(), c.att.data(), c.lse.data(), detail::grow(c.dqkv, M * 3 * d),
-                  detail::grow(c.datt, Md), dn, ws);
+    attn.backward(ps, AttentionRows{B, L}, dh, c.n1.data(),
+                  AttentionSaved<T>{.qkv = c.qkv.data(), .att = c.att.data(), .lse = c.lse.data()},
+                  AttentionScratch<T>{.dqkv = detail::grow(c.dqkv, M * 3 * d), .datt = detail::grow(c.datt, Md)}, dn,
+                  ws);
     norm1.backward(ps, dn, c.h0.data(), c.mean1.data(), c.rstd1.data(), dh, int(M));
     // h₀ = p + pos_embed[l]
     T* dpe = ps.grad(pos);

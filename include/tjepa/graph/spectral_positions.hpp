@@ -2,11 +2,9 @@
 // Graph positions: a starting point for the learned position table that already knows which taxels
 // are neighbours (Laplacian eigenmaps, as graph transformers use for positional encodings).
 //
-// The reference initializes the table e_i ∈ R^d with N(0, 0.02²) and learns it; in 500 epochs the
-// rows drift apart by enough for attention to find a token's neighbours. In a short run they may
-// not: on the simulated Allegro hand, 1500 steps left the table at std 0.018 (weight decay shrank
-// it) against tokens of unit scale. Rows built from the graph give attention that locality from
-// step 0:
+// The reference initializes the table e_i ∈ R^d with N(0, 0.02²) and learns it, so at first
+// attention cannot tell a token's neighbours from the rest. Rows built from the graph give it that
+// locality from step 0:
 //
 //   A        adjacency of the graph, unweighted (1 per edge: works the same for any layout's units)
 //   L        = I − D^{-1/2} A D^{-1/2}, the symmetric normalized Laplacian (isolated nodes: 0 rows)
@@ -18,10 +16,8 @@
 //
 // E's rows are what graph_positions returns; JepaModel::set_positions writes them into the context
 // and target position tables, which then train as before (init only: checkpoints are unchanged).
-// Measured on the simulated Allegro hand (demo data, 1500 steps, RMS 1, k = 32): with the plain
-// MSE objective the encoder fell back on embedding each taxel by its position alone (loss 1e-4,
-// spread of the embeddings over samples 0.048 → 0.006), and frozen probes read raw embeddings
-// whose per-token offsets they could not see past (center_token_embeddings); it is off by default.
+// Off by default: with rows this informative, the MSE objective can be met from the position alone
+// (docs/findings.md has the run that showed it).
 // Cost: a dense N×N symmetric eigendecomposition, O(N³): a few ms at N = 368, seconds at N = 2124.
 #include <algorithm>
 #include <cmath>

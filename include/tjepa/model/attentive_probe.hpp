@@ -24,7 +24,7 @@ struct ProbeConfig {
   double mlp_ratio = 4.0;
   int head_hidden = 192;
   int out_dim = 1;
-  double eps = layer_norm_eps;
+  double eps = kernels::layer_norm_eps;
 };
 
 template <class T>
@@ -88,15 +88,17 @@ struct AttentiveProbe {
     for (int b = 0; b < B; ++b) std::copy(ps.value(query), ps.value(query) + d, q0 + std::size_t(b) * d);
     T* q1 = buf(&ProbeCache<T>::q1, ws.x, std::size_t(B) * d);
     std::copy(q0, q0 + std::size_t(B) * d, q1);
-    xattn.forward(ps, q0, xn, B, L, key_valid, buf(&ProbeCache<T>::qbuf, ws.att, std::size_t(B) * d),
-                  buf(&ProbeCache<T>::kv, ws.qkv, M * 2 * d), buf(&ProbeCache<T>::att, ws.branch, std::size_t(B) * d),
-                  cache ? detail::grow(cache->lse, std::size_t(B) * H) : nullptr, q1, true, ws);
+    const AttentionSaved<T> saved{.q = buf(&ProbeCache<T>::qbuf, ws.att, std::size_t(B) * d),
+                                  .kv = buf(&ProbeCache<T>::kv, ws.qkv, M * 2 * d),
+                                  .att = buf(&ProbeCache<T>::att, ws.branch, std::size_t(B) * d),
+                                  .lse = cache ? detail::grow(cache->lse, std::size_t(B) * H) : nullptr};
+    xattn.forward(ps, AttentionRows{B, L, key_valid}, q0, xn, saved, q1, ws, q1);
     T* qn = buf(&ProbeCache<T>::qn, ws.rows2, std::size_t(B) * d);
     norm2.forward(ps, q1, qn, cache ? detail::grow(cache->mean2, std::size_t(B)) : nullptr,
                   cache ? detail::grow(cache->rstd2, std::size_t(B)) : nullptr, B);
     std::copy(q1, q1 + std::size_t(B) * d, q2);
     T* h = buf(&ProbeCache<T>::h, ws.hidden, std::size_t(B) * hid);
-    mlp.forward(ps, qn, h, detail::grow(ws.hidden2, std::size_t(B) * hid), q2, B, true);
+    mlp.forward(ps, qn, h, detail::grow(ws.hidden2, std::size_t(B) * hid), q2, B, q2);
   }
 
   // x [B, L, d] → y [B, out]. key_valid [B, L] or nullptr. cache == nullptr: inference.
@@ -111,7 +113,7 @@ struct AttentiveProbe {
     pool(ps, x, B, L, key_valid, q2, cache, ws);
     T* z = detail::grow(cache ? cache->z : ws.dhidden, std::size_t(B) * hh);
     T* zact = detail::grow(ws.hidden2, std::size_t(B) * hh);
-    head.forward(ps, q2, z, zact, y, B, false);
+    head.forward(ps, q2, z, zact, y, B);
   }
 
   // dy [B, out] → parameter gradients and dx [B, L, d] += (may be nullptr).
@@ -153,8 +155,10 @@ struct AttentiveProbe {
     T* dqs = detail::grow(ws.drows, std::size_t(B) * d);
     T* dkv = detail::grow(ws.dqkv, M * 2 * d);
     T* datt = detail::grow(ws.att, std::size_t(B) * d);
-    xattn.backward(ps, dq, c.q0.data(), c.xn.data(), B, L, kv, c.qbuf.data(), c.kv.data(), c.att.data(), c.lse.data(),
-                   dqs, dkv, datt, dq, dxn, ws);
+    const AttentionSaved<T> saved{.q = const_cast<T*>(c.qbuf.data()), .kv = const_cast<T*>(c.kv.data()),
+                                  .att = const_cast<T*>(c.att.data()), .lse = const_cast<T*>(c.lse.data())};
+    xattn.backward(ps, AttentionRows{B, L, kv}, dq, c.q0.data(), c.xn.data(), saved,
+                   AttentionScratch<T>{.dq = dqs, .dkv = dkv, .datt = datt}, dq, dxn, ws);
     T* du = ps.grad(query);
     for (int b = 0; b < B; ++b)
       for (int i = 0; i < d; ++i) du[i] += dq[std::size_t(b) * d + i];

@@ -23,7 +23,7 @@ struct BlockConfig {
   int heads = 3;
   double mlp_ratio = 4.0;
   bool qkv_bias = true, proj_bias = true, ffn_bias = true;
-  double eps = layer_norm_eps;
+  double eps = kernels::layer_norm_eps;
   int hidden() const { return static_cast<int>(dim * mlp_ratio); }
 };
 
@@ -103,7 +103,7 @@ struct BlockStack {
     T* scales = nullptr;
     if (drop) {
       scales = detail::grow(cache ? cache->scales : ws.scales, std::size_t(D) * 2 * B);
-      drop_path_sample(scales, 2 * D, B, dp.rate, dp.seed);
+      kernels::drop_path_sample(scales, 2 * D, B, dp.rate, dp.seed);
     } else if (cache) {
       cache->scales.clear();
     }
@@ -204,11 +204,12 @@ struct BlockStack {
         const T* g2 = gq + q * d;
         if (s2) {
           detail::parallel_fill(dbranch + q * d, dbranch + (q + rows) * d, T(0));
-          drop_path_backward(dbranch + q * d, gq + q * d, s2 + b0, n, per_sample);
+          kernels::drop_path_backward(dbranch + q * d, gq + q * d, s2 + b0, n, per_sample);
           g2 = dbranch + q * d;
         }
+        detail::parallel_fill(dln + q * d, dln + (q + rows) * d, T(0));
         blk.mlp.backward(ps, g2, c.ln2.data() + o + q * d, c.h_pre.data() + std::size_t(i) * M * hid + q * hid,
-                         h + q * hid, dh + q * hid, dln + q * d, rows, false);
+                         h + q * hid, dh + q * hid, dln + q * d, rows);
         blk.norm2.backward(ps, dln + q * d, c.x_mid.data() + o + q * d, c.mean2.data() + r + q,
                            c.rstd2.data() + r + q, gq + q * d, rows);
       });
@@ -223,12 +224,17 @@ struct BlockStack {
         const T* g1 = gq + q * d;
         if (s1) {
           detail::parallel_fill(dbranch + q * d, dbranch + (q + std::size_t(n) * Lq) * d, T(0));
-          drop_path_backward(dbranch + q * d, gq + q * d, s1 + b0, n, per_sample);
+          kernels::drop_path_backward(dbranch + q * d, gq + q * d, s1 + b0, n, per_sample);
           g1 = dbranch + q * d;
         }
-        blk.attn.backward(ps, g1, c.ln1.data() + o + f * d, n, L, kv ? kv + f : nullptr, c.qkv.data() + 3 * o + f * 3 * d,
-                          c.att.data() + o + q * d, c.lse.data() + std::size_t(i) * B * H * L + std::size_t(b0) * H * L,
-                          dqkv + f * 3 * d, datt + q * d, dln + f * d, ws, q_from, false);
+        const AttentionRows rows{n, L, kv ? kv + f : nullptr, q_from};
+        const AttentionSaved<T> saved{.qkv = const_cast<T*>(c.qkv.data()) + 3 * o + f * 3 * d,
+                                      .att = const_cast<T*>(c.att.data()) + o + q * d,
+                                      .lse = const_cast<T*>(c.lse.data()) + std::size_t(i) * B * H * L +
+                                             std::size_t(b0) * H * L};
+        detail::parallel_fill(dln + f * d, dln + (f + std::size_t(n) * L) * d, T(0));
+        blk.attn.backward(ps, rows, g1, c.ln1.data() + o + f * d, saved,
+                          AttentionScratch<T>{.dqkv = dqkv + f * 3 * d, .datt = datt + q * d}, dln + f * d, ws);
         blk.norm1.backward(ps, dln + f * d, c.xs.data() + o + f * d, c.mean1.data() + r + f, c.rstd1.data() + r + f,
                            dx + f * d, n * L);
       });
@@ -297,10 +303,13 @@ struct BlockStack {
                         buf.rstd1 ? buf.rstd1 + f : nullptr, n * L);
       ws.mark("norm1");
       T* y = buf.scale1 ? branch + q * d : buf.x_mid + q * d;
-      blk.attn.forward(ps, buf.ln1 + f * d, n, L, key_valid ? key_valid + f : nullptr, buf.qkv + f * 3 * d,
-                       buf.att + q * d, buf.lse ? buf.lse + std::size_t(b0) * H * L : nullptr, y,
-                       !buf.scale1 && !direct1, ws, q_from, direct1 ? x_in + f * d : nullptr);
-      if (buf.scale1) drop_path_forward(buf.x_mid + q * d, branch + q * d, buf.scale1 + b0, n, per_sample);
+      const AttentionSaved<T> saved{.qkv = buf.qkv + f * 3 * d, .att = buf.att + q * d,
+                                    .lse = buf.lse ? buf.lse + std::size_t(b0) * H * L : nullptr};
+      // y = x_in + attn (direct), x_mid += attn (x_mid holds the kept rows), or the bare branch
+      const T* residual = direct1 ? x_in + f * d : buf.scale1 ? nullptr : y;
+      blk.attn.forward(ps, AttentionRows{n, L, key_valid ? key_valid + f : nullptr, q_from}, buf.ln1 + f * d, saved, y,
+                       ws, residual);
+      if (buf.scale1) kernels::drop_path_forward(buf.x_mid + q * d, branch + q * d, buf.scale1 + b0, n, per_sample);
     });
     if (x_out != buf.x_mid && !direct2)
       detail::parallel_copy(buf.x_mid, buf.x_mid + std::size_t(B) * per_sample, x_out);
@@ -313,11 +322,11 @@ struct BlockStack {
       T* y = buf.scale2 ? branch + q * d : x_out + q * d;
       const T* residual = direct2 ? buf.x_mid + q * d : nullptr;
       if (buf.h)
-        blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, false, residual);
+        blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, residual);
       else
         blk.mlp.forward_tiled(ps, buf.ln2 + q * d, y, rows, residual, ws.mlp, ws.frozen());
       ws.mark("mlp");
-      if (buf.scale2) drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
+      if (buf.scale2) kernels::drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
     });
   }
 };

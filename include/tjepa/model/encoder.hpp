@@ -29,7 +29,7 @@ struct EncoderConfig {
   int heads = 3;
   double mlp_ratio = 4.0;
   bool bias = true;  // qkv / proj / fc1 / fc2 biases
-  double eps = layer_norm_eps;
+  double eps = kernels::layer_norm_eps;
 };
 
 struct EncoderOptions {
@@ -81,7 +81,7 @@ struct Encoder {
     const std::size_t M = std::size_t(B) * K;
     T* x = detail::grow(ws.x, M * d);
     if (context)
-      gather_rows(x, tokens, std::size_t(N) * d, context, B, K, d);
+      kernels::gather_rows(x, tokens, std::size_t(N) * d, context, B, K, d);
     else
       detail::parallel_copy(tokens, tokens + M * d, x);
     pos.forward(ps, x, context, B, K);
@@ -117,7 +117,7 @@ struct Encoder {
     pos.backward(ps, g, idx, B, K);
     if (!dtokens) return;
     if (idx)
-      scatter_add_rows(dtokens, std::size_t(N) * d, g, idx, B, K, d);
+      kernels::scatter_add_rows(dtokens, std::size_t(N) * d, g, idx, B, K, d);
     else
       for (std::size_t i = 0; i < M * d; ++i) dtokens[i] += g[i];
   }

@@ -10,7 +10,7 @@
 #include <cstdint>
 
 #include "tjepa/core/random.hpp"
-#include "tjepa/model/param_set.hpp"
+#include "tjepa/core/param_set.hpp"
 
 namespace tjepa {
 

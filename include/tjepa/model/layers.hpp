@@ -3,6 +3,16 @@
 // bias [out]) and a LayerNorm (weight [C], bias [C]), as ParamIds registered under a PyTorch name.
 // They hold no values: forward and backward read values and add gradients in a ParamSet of the
 // same layout (the context encoder's, or the EMA target encoder's).
+//
+// Every module's forward and backward (here, in model/ and in downstream/) keep one contract:
+// - forward writes its output; where it takes a `residual`, it writes y = residual + f(x) (the
+//   residual may be y itself: y += f(x));
+// - backward adds into every gradient it is given, the parameters' in the ParamSet and the
+//   inputs', and never overwrites: one ParamSet::zero_grad and zeroed input-gradient buffers serve
+//   a whole model. (BlockStack::backward, inside the encoder and predictor, is in place: its dx
+//   enters as ∂L/∂x_out and leaves as ∂L/∂x_in.)
+// Calls with many buffers take them in argument structs (AttentionRows, AttentionSaved,
+// PredictorInput), as the kernels take an AttentionShape.
 #include <cstdint>
 #include <string>
 #include <utility>
@@ -10,7 +20,7 @@
 
 #include "tjepa/model/kernels/layer_norm.hpp"
 #include "tjepa/model/kernels/linear.hpp"
-#include "tjepa/model/param_set.hpp"
+#include "tjepa/core/param_set.hpp"
 
 namespace tjepa {
 
@@ -51,39 +61,39 @@ struct LinearParams {
   template <class T>
   const T* b(const ParamSet<T>& ps) const { return has_bias ? ps.value(bias) : nullptr; }
 
-  // The weight packed once (PackedWeights), or nullptr without a cache.
+  // The weight packed once (kernels::PackedWeights), or nullptr without a cache.
   template <class T>
-  const T* packed(const ParamSet<T>& ps, PackedWeights<T>* cache) const {
+  const T* packed(const ParamSet<T>& ps, kernels::PackedWeights<T>* cache) const {
     return cache ? cache->get(ps.value(weight), out, in) : nullptr;
   }
   // out[M, out] = in[M, in] · Wᵀ + b. cache: packed weights (frozen inference) or nullptr.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, T* y, int M, PackedWeights<T>* cache = nullptr) const {
-    linear_forward(y, x, ps.value(weight), b(ps), M, in, out, packed(ps, cache));
+  void forward(const ParamSet<T>& ps, const T* x, T* y, int M, kernels::PackedWeights<T>* cache = nullptr) const {
+    kernels::linear_forward(y, x, ps.value(weight), b(ps), M, in, out, packed(ps, cache));
   }
   // y[M, out] += x · Wᵀ + b (residual add fused into the GEMM)
   template <class T>
   void forward_accumulate(const ParamSet<T>& ps, const T* x, T* y, int M) const {
-    linear_forward_accumulate(y, x, ps.value(weight), b(ps), M, in, out);
+    kernels::linear_forward_accumulate(y, x, ps.value(weight), b(ps), M, in, out);
   }
   // y[M, out] = r[M, out] + x · Wᵀ + b (r may equal y)
   template <class T>
   void forward_residual(const ParamSet<T>& ps, const T* x, const T* r, T* y, int M,
-                        PackedWeights<T>* cache = nullptr) const {
-    linear_forward_residual(y, r, x, ps.value(weight), b(ps), M, in, out, packed(ps, cache));
+                        kernels::PackedWeights<T>* cache = nullptr) const {
+    kernels::linear_forward_residual(y, r, x, ps.value(weight), b(ps), M, in, out, packed(ps, cache));
   }
-  // dx (may be nullptr) += dy · W (= when add_dx is false); dW += dyᵀ · x; db += Σ dy
+  // dx (may be nullptr) += dy · W; dW += dyᵀ · x; db += Σ dy
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dy, const T* x, T* dx, int M, bool add_dx = true) const {
-    linear_backward(dx, ps.grad(weight), has_bias ? ps.grad(bias) : nullptr, dy, x, ps.value(weight), M, in,
-                    out, add_dx);
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, T* dx, int M) const {
+    kernels::linear_backward(dx, ps.grad(weight), has_bias ? ps.grad(bias) : nullptr, dy, x, ps.value(weight), M, in,
+                             out, true);
   }
 };
 
 struct NormParams {
   ParamId weight, bias;
   int dim = 0;
-  double eps = layer_norm_eps;
+  double eps = kernels::layer_norm_eps;
 
   template <class T>
   static NormParams add(ParamSet<T>& ps, const std::string& name, int dim, double eps) {
@@ -97,11 +107,11 @@ struct NormParams {
   // mean, rstd [M] may be nullptr (inference).
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, T* y, T* mean, T* rstd, int M) const {
-    layer_norm_forward(y, mean, rstd, x, ps.value(weight), ps.value(bias), M, dim, T(eps));
+    kernels::layer_norm_forward(y, mean, rstd, x, ps.value(weight), ps.value(bias), M, dim, T(eps));
   }
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* mean, const T* rstd, T* dx, int M) const {
-    layer_norm_backward(dx, ps.grad(weight), ps.grad(bias), dy, x, ps.value(weight), mean, rstd, M, dim);
+    kernels::layer_norm_backward(dx, ps.grad(weight), ps.grad(bias), dy, x, ps.value(weight), mean, rstd, M, dim);
   }
 };
 

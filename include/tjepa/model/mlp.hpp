@@ -24,14 +24,12 @@ struct Mlp {
   int hidden() const { return fc1.out; }
   int out() const { return fc2.out; }
 
-  // x [M, d] → y [M, out] (y += when accumulate: the residual add). h_pre [M, hidden] receives
-  // fc1's output + bias (kept for backward), h [M, hidden] the activation; h may equal h_pre.
-  // residual [M, out] (with accumulate false) or nullptr: y = residual + the output.
+  // x [M, d] → y [M, out] = residual + mlp(x) (residual may equal y: y +=; nullptr: y = mlp(x)).
+  // h_pre [M, hidden] receives fc1's output + bias (kept for backward), h [M, hidden] the
+  // activation; h may equal h_pre.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, bool accumulate,
-               const T* residual = nullptr) const {
-    linear_bias_gelu_forward(h, h_pre, x, ps.value(fc1.weight), fc1.b(ps), M, fc1.in, fc1.out);
-    if (accumulate) residual = y;
+  void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, const T* residual = nullptr) const {
+    kernels::linear_bias_gelu_forward(h, h_pre, x, ps.value(fc1.weight), fc1.b(ps), M, fc1.in, fc1.out);
     if (residual)
       fc2.forward_residual(ps, h, residual, y, M);
     else
@@ -39,26 +37,25 @@ struct Mlp {
   }
 
   // Inference: y [M, out] = (residual +) mlp(x), row-tiled (kernels/linear.hpp's
-  // mlp_forward_tiled): no [M, hidden] buffer. residual may equal y, or be nullptr. cache: packed
+  // kernels::mlp_forward_tiled): no [M, hidden] buffer. residual may equal y, or be nullptr. cache: packed
   // weights (frozen inference) or nullptr.
   template <class T>
   void forward_tiled(const ParamSet<T>& ps, const T* x, T* y, int M, const T* residual, AlignedVector<T>& scratch,
-                     PackedWeights<T>* cache = nullptr) const {
-    mlp_forward_tiled(y, residual, x, ps.value(fc1.weight), fc1.b(ps), ps.value(fc2.weight), fc2.b(ps), M, fc1.in,
+                     kernels::PackedWeights<T>* cache = nullptr) const {
+    kernels::mlp_forward_tiled(y, residual, x, ps.value(fc1.weight), fc1.b(ps), ps.value(fc2.weight), fc2.b(ps), M, fc1.in,
                       fc1.out, fc2.out, scratch, fc1.packed(ps, cache), fc2.packed(ps, cache));
   }
 
-  // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]. h, dh [M, hidden] are scratch (h is recomputed from
-  // h_pre rather than kept: the largest activation of a block).
+  // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]; the parameters' gradients +=. h, dh
+  // [M, hidden] are scratch (h is recomputed from h_pre rather than kept: the largest activation
+  // of a block).
   template <class T>
-  // add_dx = false: dx = ∂L/∂x (overwritten).
-  void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M,
-                bool add_dx = true) const {
-    gelu_forward(h, h_pre, std::size_t(M) * std::size_t(fc1.out));
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M) const {
+    kernels::gelu_forward(h, h_pre, std::size_t(M) * std::size_t(fc1.out));
     fc2.backward(ps, dy, h, static_cast<T*>(nullptr), M);  // y = h · W2ᵀ + b2: dW2, db2
     // dh = ∂L/∂h_pre = (dy · W2) ⊙ gelu'(h_pre), one fused product.
-    linear_backward_input_gelu(dh, dy, ps.value(fc2.weight), h_pre, M, fc2.in, fc2.out);
-    fc1.backward(ps, dh, x, dx, M, add_dx);  // h_pre = x · W1ᵀ + b1
+    kernels::linear_backward_input_gelu(dh, dy, ps.value(fc2.weight), h_pre, M, fc2.in, fc2.out);
+    fc1.backward(ps, dh, x, dx, M);  // h_pre = x · W1ᵀ + b1
   }
 };
 

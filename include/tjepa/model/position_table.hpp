@@ -5,7 +5,7 @@
 #include <string>
 
 #include "tjepa/model/kernels/gather.hpp"
-#include "tjepa/model/param_set.hpp"
+#include "tjepa/core/param_set.hpp"
 
 namespace tjepa {
 
@@ -26,7 +26,7 @@ struct PositionTable {
   template <class T>
   void forward(const ParamSet<T>& ps, T* x, const int* idx, int B, int K) const {
     if (idx) {
-      gather_add_rows(x, ps.value(table), 0, idx, B, K, dim);
+      kernels::gather_add_rows(x, ps.value(table), 0, idx, B, K, dim);
       return;
     }
     const std::size_t n = std::size_t(rows) * dim;
@@ -38,7 +38,7 @@ struct PositionTable {
   template <class T>
   void backward(ParamSet<T>& ps, const T* dx, const int* idx, int B, int K) const {
     if (idx) {
-      scatter_add_rows(ps.grad(table), 0, dx, idx, B, K, dim);
+      kernels::scatter_add_rows(ps.grad(table), 0, dx, idx, B, K, dim);
       return;
     }
     const std::size_t n = std::size_t(rows) * dim;

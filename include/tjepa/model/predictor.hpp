@@ -33,7 +33,7 @@ struct PredictorConfig {
   int heads = 3;
   double mlp_ratio = 4.0;
   bool bias = false;  // biases inside the blocks (the reference has none)
-  double eps = layer_norm_eps;
+  double eps = kernels::layer_norm_eps;
   // Width of each output row; 0: in_dim (JEPA predicts embeddings). The MAE decoder
   // (train/mae.hpp) sets the token width m·τ: it reconstructs the tokenizer's input.
   int out_dim = 0;
@@ -48,6 +48,20 @@ struct PredictorCache {
   BlockStackCache<T> stack;
   AlignedVector<T> rows, normed;  // [B·t, pd] blocks' output at the targets, after norm
   AlignedVector<T> mean, rstd;    // [B·t]
+};
+
+// The predictor's input: the context encoder's output ctx [Bc, K, d_in]; the position table pos
+// [N, pd] whose rows mark the targets; the target token ids targets [B, t]. B is a multiple of Bc:
+// sample b reads context b mod Bc, so the targets of one batch run as one pass over the tiled
+// context.
+template <class T>
+struct PredictorInput {
+  const T* ctx = nullptr;
+  int Bc = 0, K = 0;
+  const T* pos = nullptr;
+  int N = 0;
+  const int* targets = nullptr;
+  int B = 0, t = 0;
 };
 
 struct Predictor {
@@ -71,12 +85,15 @@ struct Predictor {
     output_projection = LinearParams::add(ps, prefix + "output_projection", c.dim, c.output_width(), true);
   }
 
-  // ctx [Bc, K, d_in], pos [N, pd], targets [B, t] with B a multiple of Bc → out [B, t, d_out].
-  // cache == nullptr: inference.
+  // in → out [B, t, d_out]. cache == nullptr: inference.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* ctx, int Bc, int K, const T* pos, int N, const int* targets, int B,
-               int t, T* out, std::type_identity_t<PredictorCache<T>>* cache, Workspace<T>& ws) const {
+  void forward(const ParamSet<T>& ps, const PredictorInput<T>& in, T* out,
+               std::type_identity_t<PredictorCache<T>>* cache, Workspace<T>& ws) const {
     const int pd = config.dim, din = config.in_dim;
+    const T* ctx = in.ctx;
+    const T* pos = in.pos;
+    const int* targets = in.targets;
+    const int Bc = in.Bc, K = in.K, N = in.N, B = in.B, t = in.t;
     check_params(ps, output_projection.weight, "Predictor::forward");
     require<ShapeError>(ctx && pos && targets && out, "Predictor::forward: a null ctx, pos, targets or out");
     require<ShapeError>(Bc > 0 && K > 0 && t > 0 && N > 0, "Predictor::forward: Bc = ", Bc, ", K = ", K,

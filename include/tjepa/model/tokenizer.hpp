@@ -41,7 +41,7 @@ struct Tokenizer {
 
   // Per-taxel tokenizer for N taxels with m axes × τ frames each (rows axis-major, m·τ values).
   template <class T>
-  static Tokenizer per_taxel(ParamSet<T>& ps, int N, int axes, int frames, int dim, double eps = layer_norm_eps,
+  static Tokenizer per_taxel(ParamSet<T>& ps, int N, int axes, int frames, int dim, double eps = kernels::layer_norm_eps,
                              const std::string& prefix = "patch_embed.") {
     require<ConfigError>(N > 0 && axes > 0 && frames > 0 && dim > 0, "Tokenizer::per_taxel: N = ", N,
                          ", axes = ", axes, ", frames = ", frames, ", dim = ", dim, ", expected all > 0");
@@ -57,7 +57,7 @@ struct Tokenizer {
   // Grouped tokenizer: group_size[g] taxels in token g, k values per taxel.
   template <class T>
   static Tokenizer grouped(ParamSet<T>& ps, const std::vector<int>& group_size, int k, int dim,
-                           double eps = layer_norm_eps, const std::string& prefix = "tokenizer.") {
+                           double eps = kernels::layer_norm_eps, const std::string& prefix = "tokenizer.") {
     require<ConfigError>(!group_size.empty() && k > 0 && dim > 0, "Tokenizer::grouped: ", group_size.size(),
                          " groups, k = ", k, ", dim = ", dim, ", expected all > 0");
     Tokenizer t;

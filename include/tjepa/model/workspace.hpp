@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "tjepa/core/aligned.hpp"
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 #include "tjepa/model/kernels/attention.hpp"
 #include "tjepa/model/kernels/linear.hpp"
 #include "tjepa/model/stage_clock.hpp"
@@ -42,20 +42,20 @@ struct Workspace {
   // attentive probe's cross-attention pack each weight once, into `packed`, instead of on every
   // call. Clear `packed` when the values change (its entries are keyed by address).
   bool frozen_weights = false;
-  PackedWeights<T> packed;
-  PackedWeights<T>* frozen() { return frozen_weights ? &packed : nullptr; }
+  kernels::PackedWeights<T> packed;
+  kernels::PackedWeights<T>* frozen() { return frozen_weights ? &packed : nullptr; }
   // Times the stages of inference calls when set (StageClock); nullptr: off.
   StageClock* clock = nullptr;
   void mark(const char* stage) {
     if (clock) clock->mark(stage);
   }
   // One attention workspace per OpenMP thread.
-  std::vector<AttentionWorkspace<T>> attention;
+  std::vector<kernels::AttentionWorkspace<T>> attention;
 
   // Every thread's workspace, each reserved for `shape` here, before the parallel loop: which
   // thread runs which (dynamically scheduled) task varies from call to call, so a workspace
   // left to grow on its thread's first task could allocate in any later call.
-  AttentionWorkspace<T>* attention_per_thread(const AttentionShape& shape) {
+  kernels::AttentionWorkspace<T>* attention_per_thread(const kernels::AttentionShape& shape) {
     const auto n = static_cast<std::size_t>(detail::max_threads());
     if (attention.size() < n) attention.resize(n);
     for (auto& a : attention) a.reserve(shape);

@@ -18,9 +18,9 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
-#include "tjepa/model/detail/parallel.hpp"
-#include "tjepa/model/param_set.hpp"
-#include "tjepa/model/prefixed_params.hpp"
+#include "tjepa/core/detail/parallel.hpp"
+#include "tjepa/core/param_set.hpp"
+#include "tjepa/core/prefixed_params.hpp"
 
 namespace tjepa {
 

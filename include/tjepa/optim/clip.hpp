@@ -11,10 +11,10 @@
 #include <span>
 
 #include "tjepa/core/error.hpp"
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 #include "tjepa/optim/detail/deterministic_sum.hpp"
-#include "tjepa/model/param_set.hpp"
-#include "tjepa/model/prefixed_params.hpp"
+#include "tjepa/core/param_set.hpp"
+#include "tjepa/core/prefixed_params.hpp"
 
 namespace tjepa {
 

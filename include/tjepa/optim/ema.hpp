@@ -5,8 +5,8 @@
 #include <cstddef>
 
 #include "tjepa/core/error.hpp"
-#include "tjepa/model/detail/parallel.hpp"
-#include "tjepa/model/param_set.hpp"
+#include "tjepa/core/detail/parallel.hpp"
+#include "tjepa/core/param_set.hpp"
 
 namespace tjepa {
 

@@ -31,7 +31,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/data/recording.hpp"
-#include "tjepa/layout/allegro_xela.hpp"
+#include "tjepa/sensors/allegro_xela.hpp"
 #include "tjepa/layout/taxel_layout.hpp"
 #include "tjepa/sim/contact_model.hpp"
 #include "tjepa/sim/grasp_objects.hpp"

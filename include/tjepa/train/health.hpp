@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 
 namespace tjepa {
 

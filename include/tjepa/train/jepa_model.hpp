@@ -21,7 +21,7 @@
 #include "tjepa/model/encoder.hpp"
 #include "tjepa/model/init.hpp"
 #include "tjepa/model/predictor.hpp"
-#include "tjepa/model/prefixed_params.hpp"
+#include "tjepa/core/prefixed_params.hpp"
 #include "tjepa/model/tokenizer.hpp"
 
 namespace tjepa {

@@ -193,10 +193,10 @@ class JepaStep {
       T* y = detail::grow(g.y, R * rows * d);
       T* dpred = detail::grow(g.dpred, R * rows * d);
       // Row r·B + b of the tiled batch predicts target r of sample b from context b.
-      model.predictor.forward(model.predictor_params, z, B, K, position_rows(), N, idx, R * B, t, pred, &g.cache,
+      model.predictor.forward(model.predictor_params, {z, B, K, position_rows(), N, idx, R * B, t}, pred, &g.cache,
                               w_.ws);
       for (int r = 0; r < R; ++r)
-        gather_rows(y + r * rows * d, h, static_cast<std::size_t>(N) * d, idx + r * rows, B, t, d);
+        kernels::gather_rows(y + r * rows * d, h, static_cast<std::size_t>(N) * d, idx + r * rows, B, t, d);
       for (int r = 0; r < R; ++r) {
         const std::size_t off = r * rows * d, n = rows * d;
         const double l = loss_(std::span<const T>(pred + off, n), std::span<const T>(y + off, n), rows, d,

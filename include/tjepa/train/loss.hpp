@@ -14,7 +14,7 @@
 #include <functional>
 #include <span>
 
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 #include "tjepa/optim/detail/deterministic_sum.hpp"
 
 namespace tjepa {

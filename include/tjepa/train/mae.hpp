@@ -229,9 +229,9 @@ double mae_forward(MaeModel<T>& model, const T* x, int B, const MaskBatch& masks
   T* pred = detail::grow(w.pred, rows * W);
   T* y = detail::grow(w.y, rows * W);
   T* dpred = detail::grow(w.dpred, rows * W);
-  model.decoder.forward(model.decoder_params, z, B, K, model.decoder_pos_rows(), N, masked, B, M, pred,
+  model.decoder.forward(model.decoder_params, {z, B, K, model.decoder_pos_rows(), N, masked, B, M}, pred,
                         &w.decoder_cache, w.ws);
-  gather_rows(y, x, static_cast<std::size_t>(N) * W, masked, B, M, W);
+  kernels::gather_rows(y, x, static_cast<std::size_t>(N) * W, masked, B, M, W);
   if (model.config.norm_targets) normalize_rows(y, rows, W, mae_target_norm_eps);
   // dpred = ∂L/∂pred, kept for mae_backward.
   const double loss = regression_loss(pred, y, dpred, rows * W, JepaLossKind::mse);

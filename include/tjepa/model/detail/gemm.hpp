@@ -12,7 +12,7 @@
 #include "tjepa/core/detail/vendor.hpp"
 
 #include "tjepa/core/aligned.hpp"
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 
 namespace tjepa::detail {
 

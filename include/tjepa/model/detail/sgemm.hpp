@@ -19,7 +19,7 @@
 #include "tjepa/core/detail/vendor.hpp"
 
 #include "tjepa/core/aligned.hpp"
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 #include "tjepa/model/kernels/gelu.hpp"
 
 namespace tjepa::detail::sgemm {
@@ -53,7 +53,7 @@ inline V gelu_grad(V x) { return detail::gelu_grad<float>(x); }
 inline float gelu_grad(float x) { return detail::gelu_grad(x); }
 inline float gelu(float x) {
   float y;
-  ref::gelu_forward(&y, &x, 1);
+  kernels::ref::gelu_forward(&y, &x, 1);
   return y;
 }
 

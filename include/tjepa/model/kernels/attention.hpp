@@ -47,7 +47,7 @@
 
 #include "tjepa/model/kernels/detail/attention_simd.hpp"
 
-namespace tjepa {
+namespace tjepa::kernels {
 
 struct AttentionShape {
   int Lq = 0, Lk = 0, H = 0, Dh = 0;
@@ -80,25 +80,29 @@ inline void check_attention_shape(const AttentionShape& s, const char* where) {
   require<ShapeError>(s.ldo >= d, where, ": ldo = ", s.ldo, ", expected >= H*Dh = ", d);
 }
 
-namespace detail {
+}  // namespace tjepa::kernels
+
+namespace tjepa::detail {
 // Throws ShapeError naming the first null buffer among (pointer, name) pairs.
 inline void require_buffers(const char* where, std::initializer_list<std::pair<const void*, const char*>> buffers) {
   for (const auto& [p, name] : buffers)
     require<ShapeError>(p != nullptr, where, ": ", name, " is null, expected a buffer");
 }
 template <class T>
-void check_forward_args(const char* where, const AttentionShape& s, const T* q, const T* k, const T* v, const T* out) {
-  check_attention_shape(s, where);
+void check_forward_args(const char* where, const kernels::AttentionShape& s, const T* q, const T* k, const T* v, const T* out) {
+  kernels::check_attention_shape(s, where);
   require_buffers(where, {{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"}});
 }
 template <class T>
-void check_backward_args(const char* where, const AttentionShape& s, const T* q, const T* k, const T* v, const T* out,
+void check_backward_args(const char* where, const kernels::AttentionShape& s, const T* q, const T* k, const T* v, const T* out,
                          const T* lse, const T* dout, const T* dq, const T* dk, const T* dv) {
-  check_attention_shape(s, where);
+  kernels::check_attention_shape(s, where);
   require_buffers(where, {{q, "q"}, {k, "k"}, {v, "v"}, {out, "out"}, {lse, "lse"}, {dout, "dout"},
                           {dq, "dq"}, {dk, "dk"}, {dv, "dv"}});
 }
-}  // namespace detail
+}  // namespace tjepa::detail
+
+namespace tjepa::kernels {
 
 // Caller-owned scratch of the fast kernels. It grows on demand and never shrinks, so after one
 // call with the largest shape (or reserve(shape)) no call of the same or a smaller shape allocates.
@@ -232,11 +236,13 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
 // ---------------------------------------------------------------------------------------------
 // Fast path
 
-namespace detail::attn {
+}  // namespace tjepa::kernels
+
+namespace tjepa::detail::attn {
 
 // Indices of the valid keys (all of them without a mask), in ws.keys[0, n); returns n.
 template <class T>
-int compact_keys(const AttentionShape& s, const std::uint8_t* key_valid, AttentionWorkspace<T>& ws) {
+int compact_keys(const kernels::AttentionShape& s, const std::uint8_t* key_valid, kernels::AttentionWorkspace<T>& ws) {
   if (ws.keys.size() < static_cast<std::size_t>(s.Lk)) ws.keys.resize(static_cast<std::size_t>(s.Lk));
   int n = 0;
   for (int j = 0; j < s.Lk; ++j)
@@ -247,7 +253,9 @@ int compact_keys(const AttentionShape& s, const std::uint8_t* key_valid, Attenti
 inline constexpr double log2e = 1.4426950408889634074;
 inline constexpr double ln2 = 0.6931471805599453094;
 
-}  // namespace detail::attn
+}  // namespace tjepa::detail::attn
+
+namespace tjepa::kernels {
 
 template <class T>
 void AttentionWorkspace<T>::reserve(const AttentionShape& shape) {
@@ -431,7 +439,7 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
   }
 }
 
-}  // namespace tjepa
+}  // namespace tjepa::kernels
 
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop

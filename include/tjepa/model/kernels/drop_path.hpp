@@ -9,9 +9,9 @@
 
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 
-namespace tjepa {
+namespace tjepa::kernels {
 
 // scale[site, b] for `sites` residual branches (2 per block) of B samples. Sample b draws one
 // uniform per site, in site order, from its own stream Rng(seed, b).
@@ -64,4 +64,4 @@ void drop_path_backward(T* dbranch, const T* dx, const T* scale, int B, std::siz
   }
 }
 
-}  // namespace tjepa
+}  // namespace tjepa::kernels

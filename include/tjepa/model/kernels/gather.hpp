@@ -6,9 +6,9 @@
 #include <algorithm>
 #include <cstddef>
 
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 
-namespace tjepa {
+namespace tjepa::kernels {
 
 template <class T>
 void gather_rows(T* out, const T* src, std::size_t src_batch, const int* idx, int B, int K, int C) {
@@ -44,4 +44,4 @@ void scatter_add_rows(T* dsrc, std::size_t src_batch, const T* dout, const int* 
     }
 }
 
-}  // namespace tjepa
+}  // namespace tjepa::kernels

@@ -5,12 +5,14 @@
 #include <cstddef>
 #include <numbers>
 
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 #include "tjepa/core/detail/simd.hpp"
 
-namespace tjepa {
+namespace tjepa::kernels {
 
-namespace detail {
+}  // namespace tjepa::kernels
+
+namespace tjepa::detail {
 template <class T>
 inline constexpr T inv_sqrt2 = T(0.70710678118654752440084436210484903928);
 template <class T>
@@ -29,7 +31,9 @@ simd<T> gelu_grad(simd<T> x) {
   return T(0.5) * (T(1) + xsimd::erf(x * simd<T>(inv_sqrt2<T>))) +
          x * simd<T>(inv_sqrt_2pi<T>) * xsimd::exp(T(-0.5) * x * x);
 }
-}  // namespace detail
+}  // namespace tjepa::detail
+
+namespace tjepa::kernels {
 
 namespace ref {
 template <class T>
@@ -93,4 +97,4 @@ void bias_gelu_forward(T* out, T* pre, const T* b, int M, int N) {
   }
 }
 
-}  // namespace tjepa
+}  // namespace tjepa::kernels

@@ -6,10 +6,10 @@
 #include <cmath>
 #include <cstddef>
 
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 #include "tjepa/core/detail/simd.hpp"
 
-namespace tjepa {
+namespace tjepa::kernels {
 
 // The reference's LayerNorm eps (ViT-Tiny, partial(nn.LayerNorm, eps=1e-6)).
 inline constexpr double layer_norm_eps = 1e-6;
@@ -178,4 +178,4 @@ void layer_norm_backward(T* din, T* dw, T* db, const T* dout, const T* in, const
   }
 }
 
-}  // namespace tjepa
+}  // namespace tjepa::kernels

@@ -17,7 +17,7 @@
 #include "tjepa/model/detail/sgemm.hpp"
 #include "tjepa/model/kernels/gelu.hpp"
 
-namespace tjepa {
+namespace tjepa::kernels {
 
 namespace ref {
 // Scalar reference, the spec for the fast path.
@@ -78,7 +78,9 @@ class PackedWeights {
   std::vector<Entry> entries_;
 };
 
-namespace detail {
+}  // namespace tjepa::kernels
+
+namespace tjepa::detail {
 // out[M, N] = in[M, K] · wᵀ through the float GEMM with epilogue e, from w packed beforehand
 // (PackedWeights) when packed is not nullptr.
 inline void forward_gemm(float* out, const float* in, const float* w, const float* packed, int M, int K, int N,
@@ -89,7 +91,9 @@ inline void forward_gemm(float* out, const float* in, const float* w, const floa
   else
     sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, e);
 }
-}  // namespace detail
+}  // namespace tjepa::detail
+
+namespace tjepa::kernels {
 
 // out[M, N] = in[M, K] · wᵀ (+ b); b may be nullptr. packed: w from PackedWeights, or nullptr.
 template <class T>
@@ -245,4 +249,4 @@ void linear_backward_input_gelu(T* dpre, const T* dout, const T* w, const T* pre
   }
 }
 
-}  // namespace tjepa
+}  // namespace tjepa::kernels

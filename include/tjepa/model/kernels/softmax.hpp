@@ -7,10 +7,10 @@
 #include <cstddef>
 #include <limits>
 
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 #include "tjepa/core/detail/simd.hpp"
 
-namespace tjepa {
+namespace tjepa::kernels {
 
 namespace ref {
 template <class T>
@@ -88,4 +88,4 @@ void softmax_backward(T* din, const T* dout, const T* out, int M, int N) {
   }
 }
 
-}  // namespace tjepa
+}  // namespace tjepa::kernels

@@ -4,7 +4,7 @@
 #include <cstddef>
 #include <vector>
 
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 
 namespace tjepa::detail {
 

@@ -23,7 +23,7 @@
 #include <vector>
 
 #include "tjepa/graph/skin.hpp"
-#include "tjepa/layout/layout_builder.hpp"
+#include "tjepa/sensors/layout_builder.hpp"
 
 namespace tjepa::layouts {
 

@@ -24,7 +24,7 @@
 #include "tjepa/graph/grouping.hpp"
 #include "tjepa/graph/join.hpp"
 #include "tjepa/graph/skin.hpp"
-#include "tjepa/layout/layout_builder.hpp"
+#include "tjepa/sensors/layout_builder.hpp"
 
 namespace tjepa::layouts {
 

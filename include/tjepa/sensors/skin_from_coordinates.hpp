@@ -14,7 +14,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/data/text_reader.hpp"
 #include "tjepa/graph/skin.hpp"
-#include "tjepa/layout/layout_builder.hpp"
+#include "tjepa/sensors/layout_builder.hpp"
 
 namespace tjepa {
 

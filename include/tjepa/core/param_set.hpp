@@ -19,7 +19,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
-#include "tjepa/model/detail/parallel.hpp"
+#include "tjepa/core/detail/parallel.hpp"
 
 namespace tjepa {
 

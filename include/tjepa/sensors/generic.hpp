@@ -12,8 +12,8 @@
 
 #include "tjepa/core/error.hpp"
 #include "tjepa/graph/skin.hpp"
-#include "tjepa/layout/grid_pad.hpp"
-#include "tjepa/layout/layout_builder.hpp"
+#include "tjepa/sensors/grid_pad.hpp"
+#include "tjepa/sensors/layout_builder.hpp"
 
 namespace tjepa::layouts {
 

@@ -20,7 +20,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/graph/bridges.hpp"
 #include "tjepa/graph/skin.hpp"
-#include "tjepa/layout/grid_pad.hpp"
+#include "tjepa/sensors/grid_pad.hpp"
 #include "tjepa/layout/taxel_layout.hpp"
 
 namespace tjepa {

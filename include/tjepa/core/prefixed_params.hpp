@@ -8,7 +8,7 @@
 #include <unordered_set>
 
 #include "tjepa/core/error.hpp"
-#include "tjepa/model/param_set.hpp"
+#include "tjepa/core/param_set.hpp"
 
 namespace tjepa {
 
