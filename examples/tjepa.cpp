@@ -15,6 +15,10 @@
 #include "cli/commands.hpp"
 #include "cli/eval.hpp"
 
+#ifdef TJEPA_WITH_MPI
+#include <tjepa/dist/mpi.hpp>
+#endif
+
 namespace {
 
 // --<flag> VALUE sets key in the JSON of TrainConfig overrides.
@@ -45,6 +49,10 @@ void add_run_overrides(CLI::App* app, nlohmann::json& j) {
 
 int main(int argc, char** argv) {
   using namespace tjepa::cli;
+#ifdef TJEPA_WITH_MPI
+  // Under mpirun every rank runs this program; `tjepa pretrain` shares each batch among them.
+  tjepa::dist::MpiSession mpi(&argc, &argv);
+#endif
   CLI::App app{"tjepa: Tactile-JEPA for distributed tactile skins"};
   app.set_version_flag("--version", std::string(tjepa::version_string));
   app.require_subcommand(1);
@@ -174,7 +182,14 @@ int main(int argc, char** argv) {
 #ifdef _OPENMP
   if (threads > 0) omp_set_num_threads(threads);
 #endif
-  try {
+  const auto dispatch = [&]() -> int {
+#ifdef TJEPA_WITH_MPI
+    if (mpi.size() > 1) {
+      tjepa::require<tjepa::ConfigError>(pretrain->parsed(), "only `tjepa pretrain` runs on more than one MPI rank (this is "
+                                         "rank ", mpi.rank(), " of ", mpi.size(), ")");
+      po.parallel = tjepa::dist::mpi_data_parallel<float>(mpi.comm());
+    }
+#endif
     if (*layout) return run_layout(lo, std::cout);
     if (*pretrain) return run_pretrain(po, std::cout);
     if (*probe) return run_probe(pb, std::cout);
@@ -193,6 +208,13 @@ int main(int argc, char** argv) {
       dm.eval.train.update(demo_overrides, "command line");
       return run_eval(dm, std::cout);
     }
+    return 0;
+  };
+#ifdef TJEPA_WITH_MPI
+  if (mpi.size() > 1) return mpi.run_or_abort(dispatch);  // one rank's error stops them all
+#endif
+  try {
+    return dispatch();
   } catch (const std::exception& e) {
     std::fflush(stdout);
     std::fprintf(stderr, "%stjepa: error: %s\n", ::isatty(::fileno(stderr)) ? "\r\033[K" : "", e.what());

@@ -117,9 +117,13 @@ struct PretrainOptions {
   bool quiet = false;
   std::string resume;                 // continue the run of this checkpoint (its config, then overrides)
   std::int64_t stop_after = -1;       // stop (and save) after this many steps of the schedule (< 0: at its end)
+  DataParallel<float> parallel;       // under mpirun: this rank's share of each batch (rank 0 prints and writes)
 };
 
-inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
+inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
+  const bool lead = o.parallel.rank == 0;
+  NullStream null;
+  std::ostream& out = lead ? out_lead : null;
   TrainConfig run = !o.config.empty()   ? TrainConfig::from_file(o.config)
                     : !o.resume.empty() ? load_trained_model(o.resume).config
                                         : TrainConfig{};
@@ -136,8 +140,10 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
     recs.push_back(sim.record(o.simulate_frames, o.simulate_contacts).recording);
     if (mode.empty()) mode = "magnetic";
   } else {
-    for (const auto& p : o.data) recs.push_back(read_recording(p, o.axes));
-    if (!o.baseline.empty()) baseline = read_recording(o.baseline, o.axes);
+    // Data parallel: each rank maps the recordings and touches only the windows it trains on.
+    const bool map = o.parallel.active();
+    for (const auto& p : o.data) recs.push_back(read_recording(p, o.axes, map));
+    if (!o.baseline.empty()) baseline = read_recording(o.baseline, o.axes, map);
     if (mode.empty()) mode = baseline ? "magnetic" : "standardize";
   }
   for (std::size_t r = 0; r < recs.size(); ++r)
@@ -154,18 +160,21 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out) {
   OutputFiles files;
   const std::filesystem::path dir = o.out;
   OutputFiles::check_new(dir / "checkpoint.safetensors", o.force);
-  files.make_dir(dir);
+  if (lead) files.make_dir(dir);
   const auto owned = make_jepa_model(run, skin.graph, axes, run.seed);
   JepaModel<float>& model = *owned;
   Trainer<float> trainer(model, src, skin.graph, run);
+  trainer.parallel = o.parallel;
   trainer.extras = data_state(pre, drift ? &*drift : nullptr);
   if (!o.resume.empty()) trainer.resume(o.resume);
   require<ConfigError>(o.stop_after < 0 || o.stop_after > trainer.step(), "--stop-after ", o.stop_after,
                        ", expected a step after the run's current ", trainer.step());
   out << "pre-training on " << src.size() << " windows (" << skin.size() << " taxels, tau " << run.tau << "), "
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
-      << run.steps << " steps of " << run.batch << "\n";
-  const PretrainOutcome r = pretrain(trainer, o.quiet, o.stop_after);
+      << run.steps << " steps of " << run.batch
+      << (o.parallel.active() ? " on " + std::to_string(o.parallel.ranks) + " MPI ranks" : std::string()) << "\n";
+  const PretrainOutcome r = pretrain(trainer, o.quiet || !lead, o.stop_after);
+  if (!lead) return 0;
   write_pretrain_outputs(dir, trainer, r, files);
   files.commit();
   out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "

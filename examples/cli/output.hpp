@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <limits>
+#include <ostream>
 #include <sstream>
 #include <string>
 #include <system_error>
@@ -22,6 +23,11 @@ namespace tjepa::cli {
 // The files (and directories) one command creates. Unless commit() is called, the destructor
 // removes them again, so a command that fails leaves nothing half-done behind. Each file itself
 // is written atomically (write_file_atomic or the library's writers).
+// An ostream that discards everything (what ranks other than 0 would print under mpirun).
+struct NullStream : std::ostream {
+  NullStream() : std::ostream(nullptr) {}
+};
+
 class OutputFiles {
  public:
   OutputFiles() = default;

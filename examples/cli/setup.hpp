@@ -56,12 +56,14 @@ inline Preprocessor fit_preprocessor(const std::string& mode, const Recording* b
 }
 
 // A recording from .npy ([T, N, m] or [T, N·m] with axes given) or text/CSV (axes given). A .npy
-// is read into memory, not mapped: the command runs for hours and the file may change under it.
-inline Recording read_recording(const std::filesystem::path& path, int axes) {
+// is read into memory, not mapped (the command runs for hours and the file may change under it),
+// unless map is set: data-parallel ranks map it and read only the windows of their shards (the
+// file must then not be truncated or rewritten in place during the run).
+inline Recording read_recording(const std::filesystem::path& path, int axes, bool map = false) {
   require<FileError>(std::filesystem::exists(path), "no such file '", path.string(), "'");
-  NpyReadOptions copy;
-  copy.map = false;
-  if (path.extension() == ".npy") return read_recording_npy(path, axes > 0 ? axes : 0, copy);
+  NpyReadOptions opt;
+  opt.map = map;
+  if (path.extension() == ".npy") return read_recording_npy(path, axes > 0 ? axes : 0, opt);
   TextFormat f;
   f.axes = axes > 0 ? axes : 3;
   return read_text_recording(path, f);

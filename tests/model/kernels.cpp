@@ -405,6 +405,11 @@ TEST_SUITE("nn") {
     kernels::drop_path_sample(b.data(), 3, 5, 0.3, 77);
     for (int s = 0; s < 3; ++s)
       for (int i = 0; i < 5; ++i) CHECK(a[std::size_t(s) * 8 + i] == b[std::size_t(s) * 5 + i]);
+    // A shard [5, 8) of the batch, drawn alone with its offset, equals the batch's samples 5..7.
+    std::vector<float> c(3 * 3);
+    kernels::drop_path_sample(c.data(), 3, 3, 0.3, 77, 5);
+    for (int s = 0; s < 3; ++s)
+      for (int i = 0; i < 3; ++i) CHECK(c[std::size_t(s) * 3 + i] == a[std::size_t(s) * 8 + 5 + i]);
     CHECK_THROWS_AS(kernels::drop_path_sample(a.data(), 1, 2, 1.0, 0), ConfigError);
   }
 }

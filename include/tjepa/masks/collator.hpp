@@ -83,6 +83,31 @@ struct MaskBatch {
     return {context.data() + static_cast<std::size_t>(b) * K, static_cast<std::size_t>(K)};
   }
   int num_targets() const { return static_cast<int>(targets.size()); }
+
+  // Samples [first, first + count) as a batch of their own, into out (its buffers reused). A data
+  // parallel rank draws the whole batch, whose shared sizes and context cut depend on every
+  // sample, and keeps its shard: the masks of sample i do not depend on the number of ranks.
+  void slice_into(MaskBatch& out, int first, int count) const {
+    require<ShapeError>(first >= 0 && count > 0 && first + count <= B, "MaskBatch::slice: samples [", first, ", ",
+                        first + count, ") of a batch of ", B);
+    out.B = count;
+    out.K = K;
+    const auto rows = [](const std::vector<int>& v, int width, int b0, int n) {
+      return std::span<const int>(v).subspan(static_cast<std::size_t>(b0) * width, static_cast<std::size_t>(n) * width);
+    };
+    const auto ctx = rows(context, K, first, count);
+    out.context.assign(ctx.begin(), ctx.end());
+    out.targets.resize(targets.size());
+    for (std::size_t j = 0; j < targets.size(); ++j) {
+      const TargetSet& src = targets[j];
+      TargetSet& dst = out.targets[j];
+      dst.size = src.size;
+      dst.kind = src.kind;
+      dst.part = src.part;
+      const auto t = rows(src.indices, src.size, first, count);
+      dst.indices.assign(t.begin(), t.end());
+    }
+  }
 };
 
 // The sizes a batch uses (drawn from Rng(seed, batch_index)).

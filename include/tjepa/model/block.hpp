@@ -30,7 +30,8 @@ struct BlockConfig {
 // Stochastic depth of one forward: rate 0 (the default) costs nothing.
 struct DropPath {
   double rate = 0.0;
-  std::uint64_t seed = 0;  // sample b draws from Rng(seed, b): pass a new seed every step
+  std::uint64_t seed = 0;  // sample b draws from Rng(seed, first_sample + b): pass a new seed every step
+  std::uint64_t first_sample = 0;  // the batch's offset in a larger batch (data parallel shards)
 };
 
 struct Block {
@@ -103,7 +104,7 @@ struct BlockStack {
     T* scales = nullptr;
     if (drop) {
       scales = detail::grow(cache ? cache->scales : ws.scales, std::size_t(D) * 2 * B);
-      kernels::drop_path_sample(scales, 2 * D, B, dp.rate, dp.seed);
+      kernels::drop_path_sample(scales, 2 * D, B, dp.rate, dp.seed, dp.first_sample);
     } else if (cache) {
       cache->scales.clear();
     }

@@ -37,6 +37,7 @@
 #include "tjepa/optim/clip.hpp"
 #include "tjepa/optim/ema.hpp"
 #include "tjepa/optim/schedule.hpp"
+#include "tjepa/train/data_parallel.hpp"
 #include "tjepa/train/health.hpp"
 #include "tjepa/train/jepa_model.hpp"
 #include "tjepa/train/loss.hpp"
@@ -131,8 +132,10 @@ class JepaStep {
   }
 
   // The JEPA loss of batch x [B, N, W] (W = model.token_width()) with its masks; keeps what
-  // backward needs. noise_seed drives drop-path: the same seed gives the same result.
-  const JepaLossResult& forward(const T* x, int B, const MaskBatch& masks, std::uint64_t noise_seed) {
+  // backward needs. noise_seed drives drop-path: the same seed gives the same result. A shard of
+  // a larger batch passes its offset first_sample, so its samples draw the batch's noise.
+  const JepaLossResult& forward(const T* x, int B, const MaskBatch& masks, std::uint64_t noise_seed,
+                                std::uint64_t first_sample = 0) {
     JepaModel<T>& model = model_;
     const int N = model.num_tokens(), d = model.dim(), K = masks.K;
     require<ShapeError>(B > 0, "JepaStep::forward: B = ", B, ", expected > 0");
@@ -143,8 +146,8 @@ class JepaStep {
     K_ = K;
     const std::size_t BN = static_cast<std::size_t>(B) * N;
     Rng noise(noise_seed);
-    const DropPath context_dp{cfg_.drop_path, noise()};
-    const DropPath target_dp{cfg_.target_drop_path ? cfg_.drop_path : 0.0, noise()};
+    const DropPath context_dp{cfg_.drop_path, noise(), first_sample};
+    const DropPath target_dp{cfg_.target_drop_path ? cfg_.drop_path : 0.0, noise(), first_sample};
 
     // Target encoder on every token: no cache, no gradient.
     T* h = detail::grow(w_.h, BN * d);
@@ -232,6 +235,34 @@ class JepaStep {
     model.encoder.backward(model.context, dz, dtokens, w_.context_cache, w_.ws);
     model.tokenizer.backward(model.context, dtokens, static_cast<T*>(nullptr), w_.tokenizer_cache, w_.ws);
     backward_ready_ = false;  // the token buffer now holds gradients
+  }
+
+  // Data parallel (train/data_parallel.hpp): this rank's forward and backward covered `count` of
+  // the global batch's B samples. Scales the gradients by count / B and sums them over the ranks,
+  // and the loss and statistics likewise, so that update() sees the global batch's gradient and
+  // loss on every rank. target_std and target_sample_std become the share-weighted means of the
+  // ranks' values (the loss and the gradients are exact; these two are diagnostics).
+  void all_reduce(const DataParallel<T>& dp, int count, int B) {
+    require<ConfigError>(dp.sum && dp.sum_stats, "JepaStep::all_reduce: the DataParallel has no sum functions");
+    require<ConfigError>(!cfg_.standardize_targets,
+                         "JepaStep::all_reduce: standardize_targets uses the whole batch's statistics; a shard "
+                         "cannot compute them");
+    const double share = static_cast<double>(count) / B;
+    for (const auto& part : model_.trainable()) {
+      const std::span<T> g = part.params->grads();
+      const T sc = static_cast<T>(share);
+      for (T& v : g) v *= sc;
+      dp.sum(g);
+    }
+    JepaLossResult& r = result_;
+    std::vector<double> stats{r.loss, r.target_std, r.target_sample_std};
+    stats.insert(stats.end(), r.target_losses.begin(), r.target_losses.end());
+    for (double& v : stats) v *= share;
+    dp.sum_stats(std::span<double>(stats));
+    r.loss = stats[0];
+    r.target_std = stats[1];
+    r.target_sample_std = stats[2];
+    std::copy(stats.begin() + 3, stats.end(), r.target_losses.begin());
   }
 
   // Optimizer step s (0-based) on the gradients: the non-finite check, clipping, AdamW with the

@@ -19,6 +19,11 @@
 //   {"train": TrainConfig::to_json(), "model": JepaConfig::to_json()}
 // which load_trained_model (train/trained_model.hpp) reads back.
 //
+// Data parallel (train/data_parallel.hpp, dist/mpi.hpp): with `parallel` set, each rank gathers
+// only its shard of each global batch, draws the whole batch's masks and keeps its rows, runs
+// forward and backward on its shard, and JepaStep::all_reduce sums the gradients before the
+// update; rank 0 alone logs and writes checkpoints, and any rank count resumes any checkpoint.
+//
 // Every piece works alone: the model, JepaStep, AdamW, the schedules, the checkpoint functions;
 // this class only strings them together.
 #include <cstdint>
@@ -43,6 +48,7 @@
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/schedule.hpp"
 #include "tjepa/train/config.hpp"
+#include "tjepa/train/data_parallel.hpp"
 #include "tjepa/train/jepa_step.hpp"
 
 namespace tjepa {
@@ -101,6 +107,7 @@ class Trainer {
   std::filesystem::path checkpoint;          // where run() saves; empty: no checkpoints
   std::int64_t checkpoint_every = 0;         // steps between checkpoints; 0: at each epoch's end
   CheckpointState extras;                    // stored with every checkpoint: normalization statistics, metadata
+  DataParallel<T> parallel;                  // this process's rank among the data-parallel ranks (default: alone)
 
   std::int64_t step() const { return step_; }
   std::int64_t steps_per_epoch() const { return steps_per_epoch_; }
@@ -120,12 +127,13 @@ class Trainer {
       const JepaStepStats& st = out.back();
       ++step_;
       if (on_step) on_step(st);
-      if (log && log_every > 0 && (st.step % log_every == 0 || step_ == total_steps()))
+      const bool lead = parallel.rank == 0;
+      if (lead && log && log_every > 0 && (st.step % log_every == 0 || step_ == total_steps()))
         *log << "step " << st.step + 1 << "/" << total_steps() << " epoch " << st.step / steps_per_epoch_
              << " loss " << st.loss << " lr " << st.lr << " wd " << st.weight_decay << " ema " << st.momentum
              << " grad_norm " << st.grad_norm << " target_std " << st.target_std << "\n";
       const std::int64_t every = checkpoint_every > 0 ? checkpoint_every : steps_per_epoch_;
-      if (!checkpoint.empty() && (step_ % every == 0 || step_ == total_steps())) save(checkpoint);
+      if (lead && !checkpoint.empty() && (step_ % every == 0 || step_ == total_steps())) save(checkpoint);
     }
     return out;
   }
@@ -175,19 +183,29 @@ class Trainer {
       order_epoch_ = epoch;
     }
     const std::size_t B = static_cast<std::size_t>(cfg_.batch);
-    source_.gather(std::span<const std::int64_t>(order_).subspan(static_cast<std::size_t>(b) * B, B), batch_);
+    const Shard shard = parallel.active() ? parallel.shard(cfg_.batch) : Shard{0, cfg_.batch};
+    const std::size_t n = static_cast<std::size_t>(shard.count);
+    source_.gather(std::span<const std::int64_t>(order_).subspan(static_cast<std::size_t>(b) * B + shard.first, n),
+                   batch_);
     if (to_tokens) {
       to_tokens(batch_, input_);
     } else {
       require<ConfigError>(model_.config.group_size.empty(), "Trainer: a grouped tokenizer needs its own to_tokens");
       windows_to_tokens(batch_, input_);
     }
-    require<ShapeError>(input_.size() == B * model_.num_tokens() * model_.token_width(), "Trainer: to_tokens gave ",
-                        input_.size(), " values, expected B·N·W = ", B, "·", model_.num_tokens(), "·",
+    require<ShapeError>(input_.size() == n * model_.num_tokens() * model_.token_width(), "Trainer: to_tokens gave ",
+                        input_.size(), " values, expected B·N·W = ", n, "·", model_.num_tokens(), "·",
                         model_.token_width());
     collator_.sample_into(masks_, cfg_.batch, cfg_.seed ^ kMaskSalt, static_cast<std::uint64_t>(s));
-    return step_fn_.train(optimizer_, schedule_, s, input_.data(), cfg_.batch, masks_,
-                          Rng(cfg_.seed ^ kNoiseSalt, static_cast<std::uint64_t>(s))());
+    const std::uint64_t noise = Rng(cfg_.seed ^ kNoiseSalt, static_cast<std::uint64_t>(s))();
+    if (!parallel.active())
+      return step_fn_.train(optimizer_, schedule_, s, input_.data(), cfg_.batch, masks_, noise);
+    masks_.slice_into(shard_masks_, shard.first, shard.count);
+    step_fn_.zero_grad();
+    step_fn_.forward(input_.data(), shard.count, shard_masks_, noise, static_cast<std::uint64_t>(shard.first));
+    step_fn_.backward();
+    step_fn_.all_reduce(parallel, shard.count, cfg_.batch);
+    return step_fn_.update(optimizer_, schedule_, s);
   }
 
   JepaModel<T>& model_;
@@ -204,7 +222,7 @@ class Trainer {
   std::int64_t order_epoch_ = -1;
   WindowBatch batch_;
   AlignedVector<T> input_;
-  MaskBatch masks_;
+  MaskBatch masks_, shard_masks_;
 };
 
 }  // namespace tjepa

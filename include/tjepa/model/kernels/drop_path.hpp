@@ -14,13 +14,14 @@
 namespace tjepa::kernels {
 
 // scale[site, b] for `sites` residual branches (2 per block) of B samples. Sample b draws one
-// uniform per site, in site order, from its own stream Rng(seed, b).
+// uniform per site, in site order, from its own stream Rng(seed, first_sample + b): a shard of a
+// batch (first_sample its offset) draws what the same samples draw in the whole batch.
 template <class T>
-void drop_path_sample(T* scale, int sites, int B, double rate, std::uint64_t seed) {
+void drop_path_sample(T* scale, int sites, int B, double rate, std::uint64_t seed, std::uint64_t first_sample = 0) {
   require<ConfigError>(rate >= 0.0 && rate < 1.0, "drop_path_sample: rate ", rate, ", expected [0, 1)");
   const double keep = 1.0 - rate;
   for (int b = 0; b < B; ++b) {
-    Rng rng(seed, std::uint64_t(b));
+    Rng rng(seed, first_sample + std::uint64_t(b));
     for (int s = 0; s < sites; ++s) scale[std::size_t(s) * B + b] = rng.uniform() < keep ? T(1.0 / keep) : T(0);
   }
 }
