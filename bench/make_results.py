@@ -221,3 +221,9 @@ if latency_note:
 print("\nAttention memory is O(L·d) by construction: the forward and backward run over query and key "
       "tiles with an online softmax and keep only the per-row log-sum-exp, never an L×L matrix "
       "(include/tjepa/model/kernels/attention.hpp).")
+# The data-parallel section is bench/dist.sh's (it needs mpirun); keep it from the current file.
+_previous = pathlib.Path(__file__).with_name("RESULTS.md")
+if _previous.exists():
+    _m = re.search(r"<!-- dist:begin -->.*?<!-- dist:end -->", _previous.read_text(), flags=re.S)
+    if _m:
+        print("\n" + _m.group(0))
