@@ -9,11 +9,14 @@
 #include <tjepa/train/jepa_model.hpp>
 #include <tjepa/train/jepa_step.hpp>
 
+#include <barrier>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <sstream>
+#include <thread>
 #include <vector>
 
 #include "../model/gradcheck.hpp"
@@ -493,6 +496,84 @@ TEST_SUITE("train") {
     JepaModel<float> m2(blob_config(), 1);
     Trainer<float> t2(m2, source, graph, other);
     CHECK_THROWS_WITH_AS(t2.resume(ckpt.path), doctest::Contains("was written with train.steps = 18"), ConfigError);
+  }
+
+  TEST_CASE("data parallel: 2 ranks (threads) gather only their shards and follow the 1-process curve") {
+    // The MPI-free core of issue 20's design: two Trainers in two threads, their sums over a
+    // barrier (rank 0's value plus rank 1's, in float, as MPI_Allreduce of two ranks computes it).
+    const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
+    const auto graph = blob_graph();
+    TrainConfig tc = blob_trainer_config(8, 2, 5);
+    tc.drop_path = 0.2;  // per-sample noise must not depend on the shard
+    JepaModel<float> single_model(blob_config(), 7);
+    Trainer<float> single(single_model, source, graph, tc);
+    std::vector<double> single_loss;
+    for (const auto& st : single.run()) single_loss.push_back(st.loss);
+
+    struct GatherLog {  // a Source that remembers which windows it served
+      const WindowSource& src;
+      mutable std::vector<std::int64_t> ids;
+      std::int64_t size() const { return src.size(); }
+      std::int64_t batches_per_epoch(int b) const { return src.batches_per_epoch(b); }
+      std::vector<std::int64_t> epoch_order(std::uint64_t s, std::uint64_t e) const { return src.epoch_order(s, e); }
+      void gather(std::span<const std::int64_t> w, WindowBatch& out) const {
+        ids.insert(ids.end(), w.begin(), w.end());
+        src.gather(w, out);
+      }
+    };
+    std::barrier sync(2);
+    std::vector<float> slot[2];
+    std::vector<double> stat_slot[2];
+    auto sum = [&](auto& slots, int rank, auto v) {
+      using V = typename decltype(v)::value_type;
+      slots[rank].assign(v.begin(), v.end());
+      sync.arrive_and_wait();
+      for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<V>(slots[0][i] + slots[1][i]);
+      sync.arrive_and_wait();
+    };
+    std::vector<std::unique_ptr<JepaModel<float>>> models;
+    std::vector<GatherLog> logs;
+    for (int r = 0; r < 2; ++r) {
+      models.push_back(std::make_unique<JepaModel<float>>(blob_config(), 7));
+      logs.push_back(GatherLog{source, {}});
+    }
+    std::vector<double> loss[2];
+    auto rank_main = [&](int r) {
+      Trainer<float, GatherLog> t(*models[static_cast<std::size_t>(r)], logs[static_cast<std::size_t>(r)], graph, tc);
+      t.parallel.rank = r;
+      t.parallel.ranks = 2;
+      t.parallel.sum = [&, r](std::span<float> v) { sum(slot, r, v); };
+      t.parallel.sum_stats = [&, r](std::span<double> v) { sum(stat_slot, r, v); };
+      for (const auto& st : t.run()) loss[r].push_back(st.loss);
+    };
+    std::thread rank1(rank_main, 1);
+    rank_main(0);
+    rank1.join();
+    REQUIRE(loss[0].size() == single_loss.size());
+    for (std::size_t s = 0; s < single_loss.size(); ++s) {
+      CHECK(loss[0][s] == loss[1][s]);
+      CHECK(loss[0][s] == doctest::Approx(single_loss[s]).epsilon(1e-6));
+    }
+    CHECK(std::memcmp(models[0]->context.values().data(), models[1]->context.values().data(),
+                      models[0]->context.values().size_bytes()) == 0);
+    // Rank r gathered samples [8r, 8r + 8) of each global batch, and nothing else.
+    for (int r = 0; r < 2; ++r) {
+      std::vector<std::int64_t> expect;
+      for (std::int64_t s = 0; s < tc.steps; ++s) {
+        const auto order = source.epoch_order(tc.seed ^ Trainer<float>::kDataSalt, static_cast<std::uint64_t>(s / 6));
+        const auto b = static_cast<std::size_t>((s % 6) * 16 + 8 * r);
+        expect.insert(expect.end(), order.begin() + static_cast<std::ptrdiff_t>(b),
+                      order.begin() + static_cast<std::ptrdiff_t>(b + 8));
+      }
+      CHECK(logs[static_cast<std::size_t>(r)].ids == expect);
+    }
+    // Shards of a batch: ⌊r·B/R⌋ boundaries; a batch smaller than the rank count is refused.
+    DataParallel<float> dp;
+    dp.ranks = 3;
+    dp.rank = 2;
+    CHECK(dp.shard(16).first == 10);
+    CHECK(dp.shard(16).count == 6);
+    CHECK_THROWS_AS(dp.shard(2), ConfigError);
   }
 
   TEST_CASE("a NaN stops the trainer with NumericError and leaves the last checkpoint intact") {
