@@ -140,7 +140,9 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
     recs.push_back(sim.record(o.simulate_frames, o.simulate_contacts).recording);
     if (mode.empty()) mode = "magnetic";
   } else {
-    // Data parallel: each rank maps the recordings and touches only the windows it trains on.
+    // Data parallel: each rank maps the recordings, so training reads only the pages of its
+    // shards' windows; fitting the preprocessing (and the drift tracker, which writes a private
+    // copy) still reads every recording once on every rank.
     const bool map = o.parallel.active();
     for (const auto& p : o.data) recs.push_back(read_recording(p, o.axes, map));
     if (!o.baseline.empty()) baseline = read_recording(o.baseline, o.axes, map);

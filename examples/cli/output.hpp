@@ -20,14 +20,14 @@
 
 namespace tjepa::cli {
 
-// The files (and directories) one command creates. Unless commit() is called, the destructor
-// removes them again, so a command that fails leaves nothing half-done behind. Each file itself
-// is written atomically (write_file_atomic or the library's writers).
 // An ostream that discards everything (what ranks other than 0 would print under mpirun).
 struct NullStream : std::ostream {
   NullStream() : std::ostream(nullptr) {}
 };
 
+// The files (and directories) one command creates. Unless commit() is called, the destructor
+// removes them again, so a command that fails leaves nothing half-done behind. Each file itself
+// is written atomically (write_file_atomic or the library's writers).
 class OutputFiles {
  public:
   OutputFiles() = default;

@@ -18,16 +18,6 @@
 
 using namespace tjepa;
 
-namespace {
-
-std::uint64_t fnv1a(std::span<const float> v, std::uint64_t h = 1469598103934665603ull) {
-  const auto* p = reinterpret_cast<const unsigned char*>(v.data());
-  for (std::size_t i = 0; i < v.size_bytes(); ++i) h = (h ^ p[i]) * 1099511628211ull;
-  return h;
-}
-
-}  // namespace
-
 int main(int argc, char** argv) {
   dist::MpiSession mpi(&argc, &argv);
   return mpi.run_or_abort([&] {
@@ -61,6 +51,7 @@ int main(int argc, char** argv) {
     auto model = make_jepa_model(cfg, skin.graph, rec.axes(), cfg.seed);
     Trainer<float> trainer(*model, source, skin.graph, cfg);
     trainer.parallel = dist::mpi_data_parallel<float>(mpi.comm());
+    trainer.parallel.check_every = 5;  // the fingerprint check in the Trainer runs too
     trainer.checkpoint = checkpoint;
     trainer.checkpoint_every = 1;
     if (!resume.empty()) trainer.resume(resume);
@@ -76,12 +67,10 @@ int main(int argc, char** argv) {
     };
     trainer.run(stop_after < 0 ? -1 : stop_after - trainer.step());
     // Every rank applied the same update: the parameters must be bitwise equal across ranks.
-    std::uint64_t h = 1469598103934665603ull;
-    for (const auto& part : model->parts()) h = fnv1a(part.params->values(), h);
-    std::uint64_t lo = h, hi = h;
-    MPI_Allreduce(MPI_IN_PLACE, &lo, 1, MPI_UINT64_T, MPI_MIN, mpi.comm());
-    MPI_Allreduce(MPI_IN_PLACE, &hi, 1, MPI_UINT64_T, MPI_MAX, mpi.comm());
-    require<NumericError>(lo == hi, "tjepa_dist_check: the ranks' parameters differ after step ", trainer.step());
+    std::uint64_t h = fingerprint<float>({});
+    for (const auto& part : model->parts()) h = fingerprint<float>(part.params->values(), h);
+    require<NumericError>(trainer.parallel.agree(h), "tjepa_dist_check: the ranks' parameters differ after step ",
+                          trainer.step());
     if (mpi.rank() == 0)
       std::printf("%d rank(s): %lld steps, the ranks' parameters are equal\n", mpi.size(),
                   static_cast<long long>(trainer.step()));

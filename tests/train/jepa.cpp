@@ -498,17 +498,22 @@ TEST_SUITE("train") {
     CHECK_THROWS_WITH_AS(t2.resume(ckpt.path), doctest::Contains("was written with train.steps = 18"), ConfigError);
   }
 
-  TEST_CASE("data parallel: 2 ranks (threads) gather only their shards and follow the 1-process curve") {
-    // The MPI-free core of issue 20's design: two Trainers in two threads, their sums over a
-    // barrier (rank 0's value plus rank 1's, in float, as MPI_Allreduce of two ranks computes it).
+  TEST_CASE("data parallel: 3 ranks (threads) gather only their shards and follow the 1-process curve") {
+    // The MPI-free core of the data-parallel design: three Trainers in three threads, their sums
+    // over a barrier (ranks' values added in rank order, in T). A batch of 16 on 3 ranks gives
+    // uneven shards of 5, 5 and 6 samples, so the count / B scaling is exercised.
+    constexpr int R = 3;
     const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
     const auto graph = blob_graph();
     TrainConfig tc = blob_trainer_config(8, 2, 5);
     tc.drop_path = 0.2;  // per-sample noise must not depend on the shard
     JepaModel<float> single_model(blob_config(), 7);
     Trainer<float> single(single_model, source, graph, tc);
-    std::vector<double> single_loss;
-    for (const auto& st : single.run()) single_loss.push_back(st.loss);
+    std::vector<double> single_loss, single_spread;
+    for (const auto& st : single.run()) {
+      single_loss.push_back(st.loss);
+      single_spread.push_back(st.target_sample_std);
+    }
 
     struct GatherLog {  // a Source that remembers which windows it served
       const WindowSource& src;
@@ -521,49 +526,63 @@ TEST_SUITE("train") {
         src.gather(w, out);
       }
     };
-    std::barrier sync(2);
-    std::vector<float> slot[2];
-    std::vector<double> stat_slot[2];
+    std::barrier sync(R);
+    std::vector<float> slot[R];
+    std::vector<double> stat_slot[R];
     auto sum = [&](auto& slots, int rank, auto v) {
       using V = typename decltype(v)::value_type;
       slots[rank].assign(v.begin(), v.end());
       sync.arrive_and_wait();
-      for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<V>(slots[0][i] + slots[1][i]);
+      for (std::size_t i = 0; i < v.size(); ++i) {
+        V acc = slots[0][i];
+        for (int q = 1; q < R; ++q) acc = static_cast<V>(acc + slots[q][i]);
+        v[i] = acc;
+      }
       sync.arrive_and_wait();
     };
     std::vector<std::unique_ptr<JepaModel<float>>> models;
     std::vector<GatherLog> logs;
-    for (int r = 0; r < 2; ++r) {
+    for (int r = 0; r < R; ++r) {
       models.push_back(std::make_unique<JepaModel<float>>(blob_config(), 7));
       logs.push_back(GatherLog{source, {}});
     }
-    std::vector<double> loss[2];
+    std::vector<double> loss[R], spread;
     auto rank_main = [&](int r) {
       Trainer<float, GatherLog> t(*models[static_cast<std::size_t>(r)], logs[static_cast<std::size_t>(r)], graph, tc);
       t.parallel.rank = r;
-      t.parallel.ranks = 2;
+      t.parallel.ranks = R;
       t.parallel.sum = [&, r](std::span<float> v) { sum(slot, r, v); };
       t.parallel.sum_stats = [&, r](std::span<double> v) { sum(stat_slot, r, v); };
-      for (const auto& st : t.run()) loss[r].push_back(st.loss);
+      for (const auto& st : t.run()) {
+        loss[r].push_back(st.loss);
+        if (r == 0) spread.push_back(st.target_sample_std);
+      }
     };
-    std::thread rank1(rank_main, 1);
+    std::vector<std::thread> others;
+    for (int r = 1; r < R; ++r) others.emplace_back(rank_main, r);
     rank_main(0);
-    rank1.join();
+    for (auto& t : others) t.join();
     REQUIRE(loss[0].size() == single_loss.size());
     for (std::size_t s = 0; s < single_loss.size(); ++s) {
-      CHECK(loss[0][s] == loss[1][s]);
+      for (int r = 1; r < R; ++r) CHECK(loss[r][s] == loss[0][s]);
       CHECK(loss[0][s] == doctest::Approx(single_loss[s]).epsilon(1e-6));
+      // The spread over the batch's samples, from the ranks' summed moments, is the batch's.
+      CHECK(spread[s] == doctest::Approx(single_spread[s]).epsilon(1e-6));
     }
-    CHECK(std::memcmp(models[0]->context.values().data(), models[1]->context.values().data(),
-                      models[0]->context.values().size_bytes()) == 0);
-    // Rank r gathered samples [8r, 8r + 8) of each global batch, and nothing else.
-    for (int r = 0; r < 2; ++r) {
+    // Every rank applied the same updates: all three parameter sets bitwise equal across ranks.
+    for (int r = 1; r < R; ++r)
+      for (const auto& [a, b] : {std::pair{&models[0]->context, &models[r]->context},
+                                 std::pair{&models[0]->target, &models[r]->target},
+                                 std::pair{&models[0]->predictor_params, &models[r]->predictor_params}})
+        CHECK(std::memcmp(a->values().data(), b->values().data(), a->values().size_bytes()) == 0);
+    // Rank r gathered samples [⌊16r/3⌋, ⌊16(r+1)/3⌋) of each global batch, and nothing else.
+    for (int r = 0; r < R; ++r) {
       std::vector<std::int64_t> expect;
+      const int first = 16 * r / R, last = 16 * (r + 1) / R;
       for (std::int64_t s = 0; s < tc.steps; ++s) {
         const auto order = source.epoch_order(tc.seed ^ Trainer<float>::kDataSalt, static_cast<std::uint64_t>(s / 6));
-        const auto b = static_cast<std::size_t>((s % 6) * 16 + 8 * r);
-        expect.insert(expect.end(), order.begin() + static_cast<std::ptrdiff_t>(b),
-                      order.begin() + static_cast<std::ptrdiff_t>(b + 8));
+        const auto b = static_cast<std::ptrdiff_t>((s % 6) * 16);
+        expect.insert(expect.end(), order.begin() + b + first, order.begin() + b + last);
       }
       CHECK(logs[static_cast<std::size_t>(r)].ids == expect);
     }

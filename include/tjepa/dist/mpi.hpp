@@ -26,6 +26,7 @@
 
 #include <algorithm>
 #include <climits>
+#include <cstdint>
 #include <cstdio>
 #include <exception>
 #include <span>
@@ -72,7 +73,12 @@ class MpiSession {
       int provided = 0;
       detail::check(MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided), "MPI_Init_thread");
       owner_ = true;
+      require<ConfigError>(provided >= MPI_THREAD_FUNNELED, "MPI: this MPI library provides thread level ",
+                           provided, ", tjepa needs MPI_THREAD_FUNNELED (OpenMP threads beside the main thread)");
     }
+    // Errors come back as codes (and then as tjepa::Error, which run_or_abort reports with the
+    // rank) instead of MPI's default abort without a word.
+    MPI_Comm_set_errhandler(comm_, MPI_ERRORS_RETURN);
     MPI_Comm_rank(comm_, &rank_);
     MPI_Comm_size(comm_, &size_);
   }
@@ -111,8 +117,9 @@ class MpiSession {
   bool owner_ = false;
 };
 
-// A DataParallel over comm: this process's rank and size, sums by MPI_Allreduce (Open MPI's
-// reductions give every rank the same sum for a given count and rank count).
+// A DataParallel over comm: this process's rank and size, sums by MPI_Allreduce, and a check of
+// the parameters' fingerprint every check_every steps (the MPI standard only advises that a
+// reduction give every rank the same result; Open MPI's do for a given count and rank count).
 template <class T>
 DataParallel<T> mpi_data_parallel(MPI_Comm comm = MPI_COMM_WORLD) {
   DataParallel<T> dp;
@@ -120,6 +127,12 @@ DataParallel<T> mpi_data_parallel(MPI_Comm comm = MPI_COMM_WORLD) {
   MPI_Comm_size(comm, &dp.ranks);
   dp.sum = [comm](std::span<T> v) { detail::allreduce_sum(v, comm); };
   dp.sum_stats = [comm](std::span<double> v) { detail::allreduce_sum(v, comm); };
+  dp.agree = [comm](std::uint64_t h) {
+    std::uint64_t lo = h, hi = h;
+    detail::check(MPI_Allreduce(MPI_IN_PLACE, &lo, 1, MPI_UINT64_T, MPI_MIN, comm), "MPI_Allreduce");
+    detail::check(MPI_Allreduce(MPI_IN_PLACE, &hi, 1, MPI_UINT64_T, MPI_MAX, comm), "MPI_Allreduce");
+    return lo == hi;
+  };
   return dp;
 }
 

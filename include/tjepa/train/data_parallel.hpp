@@ -12,6 +12,7 @@
 // The one-process default (ranks = 1) changes nothing. dist/mpi.hpp builds one over
 // MPI_Allreduce; any transport that sums in place, with the same result on every rank, fits.
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <span>
 
@@ -29,6 +30,11 @@ struct DataParallel {
   // Sums values over all ranks, in place; every rank must get the same result.
   std::function<void(std::span<T>)> sum;
   std::function<void(std::span<double>)> sum_stats;
+  // True when every rank passes the same value. The Trainer passes a hash of all parameters
+  // every check_every steps and stops with NumericError if the ranks have drifted apart (a
+  // transport whose sums differ between ranks). Empty or check_every 0: no check.
+  std::function<bool(std::uint64_t)> agree;
+  std::int64_t check_every = 100;
 
   bool active() const { return ranks > 1; }
 
@@ -41,5 +47,13 @@ struct DataParallel {
     return {at(rank), at(rank + 1) - at(rank)};
   }
 };
+
+// FNV-1a over the bytes of values, continuing from h: a cheap fingerprint of parameters.
+template <class T>
+std::uint64_t fingerprint(std::span<const T> values, std::uint64_t h = 1469598103934665603ull) {
+  const auto bytes = std::as_bytes(values);
+  for (std::byte b : bytes) h = (h ^ static_cast<std::uint64_t>(b)) * 1099511628211ull;
+  return h;
+}
 
 }  // namespace tjepa

@@ -25,18 +25,36 @@ struct JepaStepStats {
   std::vector<double> target_losses;  // [num targets]
 };
 
-// Std over the M rows of each of the d columns of x [M, d], averaged over the columns: a
-// collapsed encoder (every token embedded alike) drives it to 0. Summed in double in fixed
-// row chunks, so the result does not depend on the thread count.
+// Per-column moments of M rows: mean[j] and m2[j] = Σ_m (x[m, j] − mean[j])².
+struct ColumnMoments {
+  std::size_t rows = 0;
+  std::vector<double> mean, m2;
+
+  // Std over the rows of each column (unbiased, as torch.std), averaged over the columns; 0 for
+  // fewer than 2 rows.
+  double mean_std() const {
+    if (rows < 2 || mean.empty()) return 0.0;
+    double total = 0;
+    for (double v : m2) total += std::sqrt(v / static_cast<double>(rows - 1));
+    return total / static_cast<double>(mean.size());
+  }
+};
+
+// The moments of the d columns of x [M, d]. Summed in double in fixed row chunks, so the result
+// does not depend on the thread count; two passes (mean, then squared deviations), stable for
+// large offsets.
 template <class T>
-double embedding_std(const T* x, std::size_t M, int d) {
-  if (M < 2) return 0.0;
+ColumnMoments column_moments(const T* x, std::size_t M, int d) {
+  ColumnMoments out;
+  out.rows = M;
+  const std::size_t D = static_cast<std::size_t>(d);
+  out.mean.assign(D, 0.0);
+  out.m2.assign(D, 0.0);
+  if (M == 0) return out;
   constexpr std::size_t chunk = 256;
   const std::size_t chunks = (M + chunk - 1) / chunk;
-  const std::size_t D = static_cast<std::size_t>(d);
   std::vector<double> s1(chunks * D, 0.0), s2(chunks * D, 0.0);
   const auto count = static_cast<std::ptrdiff_t>(chunks);
-  // Pass 1: column means; pass 2: squared deviations (stable for large offsets).
   TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
   for (std::ptrdiff_t c = 0; c < count; ++c) {
     double* acc = s1.data() + static_cast<std::size_t>(c) * D;
@@ -44,7 +62,7 @@ double embedding_std(const T* x, std::size_t M, int d) {
     for (std::size_t m = static_cast<std::size_t>(c) * chunk; m < end; ++m)
       for (std::size_t j = 0; j < D; ++j) acc[j] += static_cast<double>(x[m * D + j]);
   }
-  std::vector<double> mean(D, 0.0);
+  std::vector<double>& mean = out.mean;
   for (std::size_t c = 0; c < chunks; ++c)
     for (std::size_t j = 0; j < D; ++j) mean[j] += s1[c * D + j];
   for (auto& v : mean) v /= static_cast<double>(M);
@@ -58,13 +76,17 @@ double embedding_std(const T* x, std::size_t M, int d) {
         acc[j] += e * e;
       }
   }
-  double total = 0;
-  for (std::size_t j = 0; j < D; ++j) {
-    double v = 0;
-    for (std::size_t c = 0; c < chunks; ++c) v += s2[c * D + j];
-    total += std::sqrt(v / static_cast<double>(M - 1));  // unbiased, as torch.std
-  }
-  return total / static_cast<double>(d);
+  for (std::size_t j = 0; j < D; ++j)
+    for (std::size_t c = 0; c < chunks; ++c) out.m2[j] += s2[c * D + j];
+  return out;
+}
+
+// Std over the M rows of each of the d columns of x [M, d], averaged over the columns: a
+// collapsed encoder (every token embedded alike) drives it to 0.
+template <class T>
+double embedding_std(const T* x, std::size_t M, int d) {
+  if (M < 2) return 0.0;
+  return column_moments(x, M, d).mean_std();
 }
 
 }  // namespace tjepa

@@ -85,6 +85,8 @@ struct JepaWorkspace {
   AlignedVector<T> z, dz;       // [B, K, d] context embeddings and their gradient
   std::vector<TargetGroup> groups;
   std::size_t num_groups = 0;   // groups[0, num_groups) belong to the last forward
+  ColumnMoments token_moments;  // of the target embeddings as [B·N, d] (target_std)
+  ColumnMoments sample_moments; // as [B, N·d] (target_sample_std)
 };
 
 // What the forward pass found.
@@ -155,9 +157,11 @@ class JepaStep {
     model.tokenizer.forward(model.target, x, B, tokens, nullptr, w_.ws);
     model.encoder.forward(model.target, tokens, B, nullptr, N, h, nullptr, w_.ws, EncoderOptions{target_dp, nullptr});
     JepaLossResult& result = result_;
-    result.target_std = embedding_std(h, BN, d);
+    w_.token_moments = column_moments(h, BN, d);
+    result.target_std = w_.token_moments.mean_std();
     // h as [B, N·d]: the spread over the batch at each token and dimension.
-    result.target_sample_std = embedding_std(h, static_cast<std::size_t>(B), N * d);
+    w_.sample_moments = column_moments(h, static_cast<std::size_t>(B), N * d);
+    result.target_sample_std = w_.sample_moments.mean_std();
     if (cfg_.normalize_targets) normalize_rows(h, BN, d);
     if (cfg_.standardize_targets) {
       require<ConfigError>(B >= 2, "JepaStep: standardize_targets needs a batch of at least 2 samples, got ", B);
@@ -239,9 +243,10 @@ class JepaStep {
 
   // Data parallel (train/data_parallel.hpp): this rank's forward and backward covered `count` of
   // the global batch's B samples. Scales the gradients by count / B and sums them over the ranks,
-  // and the loss and statistics likewise, so that update() sees the global batch's gradient and
-  // loss on every rank. target_std and target_sample_std become the share-weighted means of the
-  // ranks' values (the loss and the gradients are exact; these two are diagnostics).
+  // the loss likewise, so that update() sees the global batch's gradient and loss on every rank;
+  // target_std and target_sample_std are recomputed from the ranks' summed column moments. Exact
+  // for a loss that is a plain mean over the rows of a target (MSE, smooth-L1, a user's per-row
+  // loss): it must not use statistics over the batch.
   void all_reduce(const DataParallel<T>& dp, int count, int B) {
     require<ConfigError>(dp.sum && dp.sum_stats, "JepaStep::all_reduce: the DataParallel has no sum functions");
     require<ConfigError>(!cfg_.standardize_targets,
@@ -255,14 +260,32 @@ class JepaStep {
       dp.sum(g);
     }
     JepaLossResult& r = result_;
-    std::vector<double> stats{r.loss, r.target_std, r.target_sample_std};
+    std::vector<double> stats{r.loss};
     stats.insert(stats.end(), r.target_losses.begin(), r.target_losses.end());
     for (double& v : stats) v *= share;
     dp.sum_stats(std::span<double>(stats));
     r.loss = stats[0];
-    r.target_std = stats[1];
-    r.target_sample_std = stats[2];
-    std::copy(stats.begin() + 3, stats.end(), r.target_losses.begin());
+    std::copy(stats.begin() + 1, stats.end(), r.target_losses.begin());
+    // Moments over all ranks' rows: Σ n·mean and Σ (m2 + n·mean²) per column, and Σ n.
+    const auto combine = [&](ColumnMoments& m) {
+      const std::size_t D = m.mean.size();
+      const double n = static_cast<double>(m.rows);
+      std::vector<double> v(2 * D + 1);
+      for (std::size_t j = 0; j < D; ++j) {
+        v[j] = n * m.mean[j];
+        v[D + j] = m.m2[j] + n * m.mean[j] * m.mean[j];
+      }
+      v[2 * D] = n;
+      dp.sum_stats(std::span<double>(v));
+      m.rows = static_cast<std::size_t>(v[2 * D]);
+      for (std::size_t j = 0; j < D; ++j) {
+        m.mean[j] = v[j] / v[2 * D];
+        m.m2[j] = std::max(0.0, v[D + j] - v[2 * D] * m.mean[j] * m.mean[j]);
+      }
+      return m.mean_std();
+    };
+    r.target_std = combine(w_.token_moments);
+    r.target_sample_std = combine(w_.sample_moments);
   }
 
   // Optimizer step s (0-based) on the gradients: the non-finite check, clipping, AdamW with the

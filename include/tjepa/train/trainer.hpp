@@ -200,12 +200,21 @@ class Trainer {
     const std::uint64_t noise = Rng(cfg_.seed ^ kNoiseSalt, static_cast<std::uint64_t>(s))();
     if (!parallel.active())
       return step_fn_.train(optimizer_, schedule_, s, input_.data(), cfg_.batch, masks_, noise);
+    require<ConfigError>(!cfg_.standardize_targets, "Trainer: standardize_targets uses the whole batch's "
+                         "statistics, which a data-parallel shard does not have");
     masks_.slice_into(shard_masks_, shard.first, shard.count);
     step_fn_.zero_grad();
     step_fn_.forward(input_.data(), shard.count, shard_masks_, noise, static_cast<std::uint64_t>(shard.first));
     step_fn_.backward();
     step_fn_.all_reduce(parallel, shard.count, cfg_.batch);
-    return step_fn_.update(optimizer_, schedule_, s);
+    JepaStepStats st = step_fn_.update(optimizer_, schedule_, s);
+    if (parallel.agree && parallel.check_every > 0 && (s + 1) % parallel.check_every == 0) {
+      std::uint64_t h = fingerprint<T>({});
+      for (const auto& part : model_.parts()) h = fingerprint<T>(part.params->values(), h);
+      require<NumericError>(parallel.agree(h), "Trainer: after step ", s, " the data-parallel ranks hold different "
+                            "parameters (their gradient sums differ); stopped before the next checkpoint");
+    }
+    return st;
   }
 
   JepaModel<T>& model_;
