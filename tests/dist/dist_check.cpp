@@ -67,7 +67,7 @@ int main(int argc, char** argv) {
     };
     trainer.run(stop_after < 0 ? -1 : stop_after - trainer.step());
     // Every rank applied the same update: the parameters must be bitwise equal across ranks.
-    std::uint64_t h = fingerprint<float>({});
+    std::uint64_t h = fingerprint_seed;
     for (const auto& part : model->parts()) h = fingerprint<float>(part.params->values(), h);
     require<NumericError>(trainer.parallel.agree(h), "tjepa_dist_check: the ranks' parameters differ after step ",
                           trainer.step());

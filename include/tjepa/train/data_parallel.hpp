@@ -48,9 +48,11 @@ struct DataParallel {
   }
 };
 
-// FNV-1a over the bytes of values, continuing from h: a cheap fingerprint of parameters.
+// FNV-1a over the bytes of values, continuing from h (start: fingerprint_seed): a cheap
+// fingerprint of parameters.
+inline constexpr std::uint64_t fingerprint_seed = 1469598103934665603ull;
 template <class T>
-std::uint64_t fingerprint(std::span<const T> values, std::uint64_t h = 1469598103934665603ull) {
+std::uint64_t fingerprint(std::span<const T> values, std::uint64_t h = fingerprint_seed) {
   const auto bytes = std::as_bytes(values);
   for (std::byte b : bytes) h = (h ^ static_cast<std::uint64_t>(b)) * 1099511628211ull;
   return h;

@@ -209,7 +209,7 @@ class Trainer {
     step_fn_.all_reduce(parallel, shard.count, cfg_.batch);
     JepaStepStats st = step_fn_.update(optimizer_, schedule_, s);
     if (parallel.agree && parallel.check_every > 0 && (s + 1) % parallel.check_every == 0) {
-      std::uint64_t h = fingerprint<T>({});
+      std::uint64_t h = fingerprint_seed;
       for (const auto& part : model_.parts()) h = fingerprint<T>(part.params->values(), h);
       require<NumericError>(parallel.agree(h), "Trainer: after step ", s, " the data-parallel ranks hold different "
                             "parameters (their gradient sums differ); stopped before the next checkpoint");
