@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Runs tjepa's benchmarks and PyTorch's (bench/compare_torch.py) side by side, at 1 and 2
-# threads, and the streaming latency runs, and writes bench/RESULTS.md: the tables and each of
-# issue 8's goals, met or the distance to it. Run it on a quiet machine: `bench/compare.sh`.
+# threads (the kernels, the encoder, and the whole JEPA step at N 368 and at the DECO-50 scale,
+# 528 grouped tokens; bf16 where tjepa_bench has it), and the streaming latency runs, and writes
+# bench/RESULTS.md: the tables and each of issues 8's and 22's goals, met or the distance to it.
+# Run it on a quiet machine: `bench/compare.sh`.
 # (Earlier sessions' hand-written analyses are kept in bench/HISTORY.md.)
 # PyTorch comes from Debian's python3-torch (installed here if missing, as root); it is never a
 # dependency of the library or its tests. libopenblas0-pthread is ensured too: without it Debian's
@@ -15,8 +17,12 @@ cmake --build --preset release --target tjepa_bench tjepa_streaming -j "$(nproc)
 
 out=build/compare
 mkdir -p "$out"
-filter='BM_FmaPeak|BM_EncoderForward/|BM_EncoderForwardBackward/.*/0/|BM_AttentionForward/|BM_AttentionForwardBackward/'
+kernels='BM_FmaPeak|BM_EncoderForward/|BM_EncoderForwardBf16/|BM_EncoderForwardBackward/.*/0/|BM_AttentionForward/|BM_AttentionForwardBackward/'
 for t in 1 2; do
+  # The whole JEPA step (bench/train.cpp: BM_JepaTrainStep, BM_JepaTrainStepDeco and their Bf16
+  # variants) takes its thread count as the first argument: run the one of this pass (a variant
+  # without arguments runs on the OpenMP threads set here).
+  filter="$kernels|BM_JepaTrainStep[A-Za-z0-9]*(/$t/|/[a-z]|\$)"
   echo "tjepa, $t thread(s)" >&2
   OMP_NUM_THREADS=$t OMP_PROC_BIND=false build/release/bench/tjepa_bench --benchmark_filter="$filter" \
     --benchmark_repetitions=3 --benchmark_report_aggregates_only=true --benchmark_format=json \

@@ -24,9 +24,34 @@ def sh(cmd):
         return "?"
 
 
+def bench_args(run_name):
+    """A run name's arguments: "BM_X/368/1/iterations:4/real_time" -> [368, 1] (named "L:368" too)."""
+    out = []
+    for part in run_name.split("/")[1:]:
+        m = re.fullmatch(r"(?:([A-Za-z_]\w*):)?(\d+)", part)
+        if m and m.group(1) not in ("iterations", "repeats", "threads", "min_time", "min_warmup_time"):
+            out.append(int(m.group(2)))
+    return out
+
+
+def jepa_key(run_name, t):
+    """BM_JepaTrainStep[Deco][Bf16]/<threads> -> ("jepa_step/368" or "/528", threads, bf16); the thread
+    count is the first argument (bench/train.cpp), or the run's OpenMP threads t without one."""
+    m = re.match(r"BM_JepaTrainStep(\w*)", run_name)
+    if not m:
+        return None
+    variant = m.group(1)
+    if variant.replace("Deco", "").replace("Bf16", ""):
+        return None  # another benchmark of that prefix
+    args = bench_args(run_name)
+    return (f"jepa_step/{528 if 'Deco' in variant else 368}", args[0] if args else t, "Bf16" in variant)
+
+
 def tjepa_key(run_name):
     """Maps a Google Benchmark run name to the key compare_torch.py uses."""
     nums = [int(x) for x in re.findall(r"(?::|/)(\d+)", run_name)]
+    if run_name.startswith("BM_EncoderForwardBf16/"):
+        return None  # the bf16 table's (bf16_key)
     if run_name.startswith("BM_EncoderForwardBackward/"):
         return f"train_step/B{nums[1]}/L{nums[0]}"
     if run_name.startswith("BM_EncoderForward/"):
@@ -38,21 +63,61 @@ def tjepa_key(run_name):
     return None
 
 
+def bf16_key(run_name):
+    """BM_EncoderForwardBf16/<L>/<B> -> the fp32 key encoder_forward/B<B>/L<L>."""
+    if run_name.startswith("BM_EncoderForwardBf16/"):
+        a = bench_args(run_name)
+        return f"encoder_forward/B{a[1]}/L{a[0]}" if len(a) >= 2 else None
+    return None
+
+
 scale = {"ns": 1e-6, "us": 1e-3, "ms": 1.0, "s": 1e3}
 rows = {}
+torch_info = {}
 for t in (1, 2):
-    for b in json.loads((d / f"tjepa_t{t}.json").read_text())["benchmarks"]:
+    path = d / f"tjepa_t{t}.json"
+    for b in (json.loads(path.read_text())["benchmarks"] if path.exists() else []):
         if b.get("aggregate_name") != "median":
             continue
+        ms_ = b["real_time"] * scale[b["time_unit"]]
         if t == 1 and b["run_name"].startswith("BM_FmaPeak"):
             PEAK_PER_CORE = b["GFLOP/s"]  # a rate counter: Google Benchmark writes it per second
+        jk = jepa_key(b["run_name"], t)
+        if jk:
+            key, threads, bf16 = jk
+            e = rows.setdefault((key, threads), {})
+            e["tjepa_bf16_ms" if bf16 else "tjepa_ms"] = ms_
+            if not bf16 and "K" in b:
+                e["tjepa_K"] = int(b["K"])
+            if not bf16 and "GFLOP/s" in b:
+                e["tjepa_gflops"] = b["GFLOP/s"] / 1e9  # Google Benchmark writes the rate per second
+            continue
+        key = bf16_key(b["run_name"])
+        if key:
+            rows.setdefault((key, t), {})["tjepa_bf16_ms"] = ms_
+            continue
         key = tjepa_key(b["run_name"])
         if key:
-            rows.setdefault((key, t), {})["tjepa_ms"] = b["real_time"] * scale[b["time_unit"]]
-    for line in (d / f"torch_t{t}.jsonl").read_text().splitlines():
+            rows.setdefault((key, t), {})["tjepa_ms"] = ms_
+    path = d / f"torch_t{t}.jsonl"
+    for line in (path.read_text().splitlines() if path.exists() else []):
+        if not line.strip():
+            continue
         r = json.loads(line)
-        e = rows.setdefault((r["name"], t), {})
+        if "ms" not in r:  # {"info": "torch", "blas": [...]}
+            torch_info[t] = r
+            continue
+        name = r["name"]
+        if name.startswith("jepa_step_dinov2/"):  # the reference's DINOv2 drop-path: its own column
+            rows.setdefault(("jepa_step/" + name.split("/")[1], t), {})["torch_dinov2_ms"] = r["ms"]
+            continue
+        e = rows.setdefault((name, t), {})
         e["torch_ms"], e["gflop"] = r["ms"], r["gflop"]
+        for k in ("B", "K", "targets"):
+            if k in r:
+                e[k] = r[k]
+blas = sorted({b for i in torch_info.values() for b in i.get("blas", [])})
+blas_name = ", ".join(blas) if blas else "not recorded"
 
 print("# Benchmark results\n")
 print(f"- date: {datetime.date.today().isoformat()}")
@@ -64,7 +129,8 @@ print(f"- tjepa: git {sh('git rev-parse --short HEAD')}, {sh('c++ --version | he
       "preset `release` (-O3 -march=native), OpenMP threads = column 'threads'")
 print(f"- PyTorch: {torch_version} "
       "(Debian python3-torch), plain nn modules with manual attention (bench/compare_torch.py), "
-      "torch.set_num_threads(threads), OMP_WAIT_POLICY=PASSIVE, OPENBLAS_NUM_THREADS=threads")
+      "torch.set_num_threads(threads), OMP_WAIT_POLICY=PASSIVE, OPENBLAS_NUM_THREADS=threads; "
+      f"BLAS that ran: {blas_name}")
 print("- command: `bench/compare.sh` (medians of 3 repetitions for tjepa; median of >= 2 s of runs for PyTorch)")
 print(f"- FLOPs: matmul FLOPs only; encoder forward 12·(24·L·d² + 4·L²·d); training step = 3× forward; "
       f"attention forward 4·L²·d, forward+backward 3.5× that. Peak: {PEAK_PER_CORE:.1f} GFLOP/s per core, "
@@ -73,13 +139,65 @@ print(f"- FLOPs: matmul FLOPs only; encoder forward 12·(24·L·d² + 4·L²·d)
 print("| benchmark | threads | tjepa ms | tjepa GFLOP/s | % of peak | PyTorch ms | PyTorch GFLOP/s | speed-up |")
 print("|---|---|---|---|---|---|---|---|")
 for (key, t), e in sorted(rows.items(), key=lambda kv: (kv[0][0].split("/")[0], kv[0][0], kv[0][1])):
-    if "tjepa_ms" not in e or "torch_ms" not in e:
+    if "tjepa_ms" not in e or "torch_ms" not in e or key.startswith("jepa_step/"):
         continue
     g = e["gflop"]
     ours = g / (e["tjepa_ms"] / 1e3)
     theirs = g / (e["torch_ms"] / 1e3)
     print(f"| {key} | {t} | {e['tjepa_ms']:.2f} | {ours:.0f} | {100 * ours / (PEAK_PER_CORE * t):.0f}% | "
           f"{e['torch_ms']:.2f} | {theirs:.0f} | {e['torch_ms'] / e['tjepa_ms']:.2f}× |")
+
+
+# --- The whole JEPA step (issue 22) ---------------------------------------------------------------
+
+def windows(e, ms_):
+    return e.get("B", 8) / (ms_ / 1e3)
+
+
+jepa = sorted(((k, t), e) for (k, t), e in rows.items() if k.startswith("jepa_step/") and
+              ("tjepa_ms" in e or "torch_ms" in e))
+if jepa:
+    print("\n## Whole JEPA step\n")
+    print("One Tactile-JEPA pre-training step, batch 8, fp32: the target encoder (EMA copy, drop-path too) "
+          "on all N tokens, the context encoder on the K context tokens, the 4-block predictor on each "
+          "target (the targets of one size in one pass), MSE, backward, clipping at 10, AdamW, EMA; "
+          "ViT-Tiny d 192, 12 blocks, drop-path 0.3; the masks tjepa's MaskCollator draws (seed 3, "
+          "batch 0; PyTorch gets fixed masks of the same sizes). N 368: the Allegro/Xela skin, m·τ = 30 "
+          "per token (`BM_JepaTrainStep/<threads>`); N 528: DECO-50, 2124 taxels in groups of 4 and 5, "
+          "τ = 3 (`BM_JepaTrainStepDeco/<threads>`). PyTorch (`jepa_step/<N>` in bench/compare_torch.py) "
+          "is written the way the reference's XelaJEPAModule runs the step, with timm-style drop-path "
+          "(every sample's branch computed, then masked); tjepa skips a dropped sample's branch. "
+          "The last columns time the reference's own DINOv2 NestedTensorBlock drop-path (at rates > 0.1 "
+          "each branch runs on int(0.7·B) = 5 of the 8 samples), when measured. GFLOP: bench/train.cpp's "
+          "convention (target encoder 1× forward, context encoder and predictor 3×), the same for both.\n")
+    print("| N | threads | K | targets | tjepa ms | tjepa windows/s | tjepa GFLOP/s | % of peak | PyTorch ms | "
+          "PyTorch windows/s | speed-up | PyTorch ms, DINOv2 drop-path | speed-up over it |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for (key, t), e in jepa:
+        a, b, c = e.get("tjepa_ms"), e.get("torch_ms"), e.get("torch_dinov2_ms")
+        g = e.get("gflop")
+        f = lambda v, spec: "" if v is None else format(v, spec)
+        gf = g / (a / 1e3) if g and a else e.get("tjepa_gflops")
+        print(f"| {key.split('/')[1]} | {t} | {e.get('tjepa_K', e.get('K', ''))} | "
+              f"{','.join(map(str, e.get('targets', [])))} | {f(a, '.0f')} | {f(a and windows(e, a), '.2f')} | "
+              f"{f(gf, '.0f')} | {f(gf and 100 * gf / (PEAK_PER_CORE * t), '.0f')}{'%' if gf else ''} | "
+              f"{f(b, '.0f')} | {f(b and windows(e, b), '.2f')} | {f(a and b and b / a, '.2f')}{'×' if a and b else ''} | "
+              f"{f(c, '.0f')} | {f(a and c and c / a, '.2f')}{'×' if a and c else ''} |")
+
+bf16 = sorted(((k, t), e) for (k, t), e in rows.items() if "tjepa_bf16_ms" in e)
+if bf16:
+    print("\n## bf16\n")
+    print("tjepa's bf16 precision policy (AVX512-BF16 `vdpbf16ps`, fp32 accumulation and master weights) "
+          "against its own fp32 run of the same benchmark and against PyTorch fp32 "
+          "(`BM_EncoderForwardBf16/<L>/<B>` against `BM_EncoderForward/<L>/<B>`, "
+          "`BM_JepaTrainStep[Deco]Bf16` against `BM_JepaTrainStep[Deco]`).\n")
+    print("| benchmark | threads | tjepa bf16 ms | tjepa fp32 ms | speed-up over fp32 | PyTorch ms | speed-up over PyTorch |")
+    print("|---|---|---|---|---|---|---|")
+    for (key, t), e in bf16:
+        a, f32, b = e["tjepa_bf16_ms"], e.get("tjepa_ms"), e.get("torch_ms")
+        f = lambda v, spec: "?" if v is None else format(v, spec)
+        print(f"| {key} | {t} | {a:.2f} | {f(f32, '.2f')} | {f(f32 and f32 / a, '.2f')}× | {f(b, '.2f')} | "
+              f"{f(b and b / a, '.2f')}× |")
 
 
 # --- Inference latency (tjepa_streaming outputs) -------------------------------------------------
@@ -218,6 +336,44 @@ for name, value, ok in goals:
     print(f"| {name} | {value} | {ok} |")
 if latency_note:
     print("\n" + latency_note)
+
+# --- The goals of issue 22 (whole JEPA step, bf16) ---------------------------------------------------
+goals22 = []
+
+
+def goal22(name, value, ok):
+    goals22.append((name, value, "met" if ok else "not measured" if value.startswith("?") else "**not met**"))
+
+
+def ratio(key, t, num, den):
+    e = rows.get((key, t), {})
+    return e[num] / e[den] if e.get(num) and e.get(den) else None
+
+
+enc = [peak_fraction(f"encoder_forward/B1/L{L}", 1) for L in (368, 528, 2124)]
+enc = [v for v in enc if v is not None]
+goal22("fp32 encoder forward B1, 1 thread: ≥ 85% of the FMA peak (L 368, 528, 2124; lowest)",
+       f"{100 * min(enc):.0f}%" if enc else "?", bool(enc) and min(enc) >= 0.85)
+for N in (368, 528):
+    for t in (1, 2):
+        x = ratio(f"jepa_step/{N}", t, "torch_ms", "tjepa_ms")
+        goal22(f"JEPA step N {N}, {t} thread(s), fp32: ≥ 1.5× PyTorch", f"{fmt(x, '.2f')}×", x is not None and x >= 1.5)
+for L in (368, 528):
+    x = ratio(f"encoder_forward/B1/L{L}", 1, "tjepa_ms", "tjepa_bf16_ms")
+    goal22(f"bf16 encoder forward B1 L{L}, 1 thread: ≥ 1.7× tjepa fp32", f"{fmt(x, '.2f')}×", x is not None and x >= 1.7)
+for N in (368, 528):
+    for t in (1, 2):
+        x = ratio(f"jepa_step/{N}", t, "tjepa_ms", "tjepa_bf16_ms")
+        goal22(f"bf16 JEPA step N {N}, {t} thread(s): ≥ 1.5× tjepa fp32", f"{fmt(x, '.2f')}×", x is not None and x >= 1.5)
+        x = ratio(f"jepa_step/{N}", t, "torch_ms", "tjepa_bf16_ms")
+        goal22(f"bf16 JEPA step N {N}, {t} thread(s): ≥ 2.5× PyTorch", f"{fmt(x, '.2f')}×", x is not None and x >= 2.5)
+print("\n## Goals (issue 22)\n")
+print("Computed from the tables above by bench/make_results.py ('?': not measured in this run). "
+      "PyTorch is the timm-style drop-path column of the JEPA step table.\n")
+print("| goal | measured | |")
+print("|---|---|---|")
+for name, value, ok in goals22:
+    print(f"| {name} | {value} | {ok} |")
 print("\nAttention memory is O(L·d) by construction: the forward and backward run over query and key "
       "tiles with an online softmax and keep only the per-row log-sum-exp, never an L×L matrix "
       "(include/tjepa/model/kernels/attention.hpp).")

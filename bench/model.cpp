@@ -52,10 +52,12 @@ struct EncoderSetup {
   }
 };
 
-// Encoder inference (target-encoder path: all tokens, no cache), batch B.
-void BM_EncoderForward(benchmark::State& state) {
+// Encoder inference (target-encoder path: all tokens, no cache), batch B, products in the given
+// precision (Workspace::precision). The FLOP count is the same for both.
+void encoder_forward(benchmark::State& state, Precision precision) {
   const int L = int(state.range(0)), B = int(state.range(1));
   EncoderSetup e(B, L);
+  e.ws.precision = precision;
   for (auto _ : state) {
     e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), nullptr, e.ws);
     benchmark::DoNotOptimize(e.out.data());
@@ -63,7 +65,16 @@ void BM_EncoderForward(benchmark::State& state) {
   state.counters["GFLOP/s"] =
       benchmark::Counter(encoder_forward_flops(B, L) * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
 }
+void BM_EncoderForward(benchmark::State& state) { encoder_forward(state, Precision::fp32); }
 BENCHMARK(BM_EncoderForward)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The same with bf16 products (AVX512-BF16, fp32 accumulation): qkv, proj and the MLP in bf16,
+// attention and norms fp32.
+void BM_EncoderForwardBf16(benchmark::State& state) {
+  if (!detail::bgemm::native) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
+  encoder_forward(state, Precision::bf16);
+}
+BENCHMARK(BM_EncoderForwardBf16)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Training-shaped encoder: forward with cache and backward to parameters and tokens, batch 8, at
 // drop-path rate arg 2 / 10: 0 is PyTorch's comparison model (bench/compare.sh), 3 the reference's

@@ -3,6 +3,13 @@
 // (two backward passes give exactly twice the gradient).
 #include <doctest/doctest.h>
 
+#include <array>
+#include <bit>
+#include <initializer_list>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
 #include <tjepa/kernels.hpp>
 #include <tjepa/tjepa.hpp>
 
@@ -19,6 +26,27 @@ std::vector<T> random_vector(std::size_t n, Rng& rng, double std = 1.0) {
   std::vector<T> v(n);
   test::fill_normal(v, rng, std);
   return v;
+}
+
+// The operands of a GEMM test of shape M × K × N: x [M, K], W [N, K], b [N], g and r [M, N].
+struct GemmOperands {
+  int M, K, N;
+  std::vector<float> x, W, b, g, r;
+  GemmOperands(int M_, int K_, int N_, Rng& rng)
+      : M(M_),
+        K(K_),
+        N(N_),
+        x(random_vector<float>(std::size_t(M) * K, rng)),
+        W(random_vector<float>(std::size_t(N) * K, rng)),
+        b(random_vector<float>(std::size_t(N), rng)),
+        g(random_vector<float>(std::size_t(M) * N, rng)),
+        r(random_vector<float>(std::size_t(M) * N, rng)) {}
+};
+// Operands for each {M, K, N}, drawn in order from rng.
+std::vector<GemmOperands> gemm_cases(std::initializer_list<std::array<int, 3>> shapes, Rng& rng) {
+  std::vector<GemmOperands> cases;
+  for (const auto& s : shapes) cases.emplace_back(s[0], s[1], s[2], rng);
+  return cases;
 }
 
 // max |a - b| / max(1, max |b|)
@@ -161,15 +189,10 @@ TEST_SUITE("nn") {
     // block, and products large enough to be split over threads; all three transpositions.
     using detail::sgemm::Order;
     Rng rng(24);
-    const int shapes[][3] = {{1, 1, 1}, {7, 3, 17}, {13, 67, 131}, {301, 300, 70}, {97, 513, 64}, {5, 19, 200}};
-    for (const auto& sh : shapes) {
-      const int M = sh[0], K = sh[1], N = sh[2];
-      CAPTURE(M);
-      CAPTURE(K);
-      CAPTURE(N);
-      auto x = random_vector<float>(std::size_t(M) * K, rng), W = random_vector<float>(std::size_t(N) * K, rng);
-      auto b = random_vector<float>(std::size_t(N), rng), g = random_vector<float>(std::size_t(M) * N, rng);
-      auto c0 = random_vector<float>(std::size_t(M) * N, rng);
+    for (const GemmOperands& o : gemm_cases({{1, 1, 1}, {7, 3, 17}, {13, 67, 131}, {301, 300, 70}, {97, 513, 64}, {5, 19, 200}}, rng)) {
+      const int M = o.M, K = o.K, N = o.N;
+      INFO("M ", M, ", K ", K, ", N ", N);
+      const auto &x = o.x, &W = o.W, &b = o.b, &g = o.g, &c0 = o.r;
       // References in double: y = x·Wᵀ, dx = g·W, dW = gᵀ·x.
       std::vector<double> y(std::size_t(M) * N, 0.0), dx(x.size(), 0.0), dW(W.size(), 0.0);
       for (int m = 0; m < M; ++m)
@@ -261,11 +284,11 @@ TEST_SUITE("nn") {
       CHECK(z == y);
       // Weights packed once (kernels::PackedWeights; float only) give the same values as packing per call.
       kernels::PackedWeights<T> cache;
-      const T* p1 = cache.get(w1.data(), H, K);
-      const T* p2 = cache.get(w2.data(), N, H);
-      CHECK(cache.get(w1.data(), H, K) == p1);
+      const kernels::WeightPlan p1 = cache.get(w1.data(), H, K);
+      const kernels::WeightPlan p2 = cache.get(w2.data(), N, H);
+      CHECK(cache.get(w1.data(), H, K).packed == p1.packed);
       CHECK(cache.size() == (std::is_same_v<T, float> ? 2u : 0u));
-      CHECK((p1 == nullptr) == std::is_same_v<T, double>);
+      CHECK((p1.packed == nullptr) == std::is_same_v<T, double>);
       z = r;
       kernels::mlp_forward_tiled(z.data(), z.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch,
                         p1, p2);
@@ -276,6 +299,135 @@ TEST_SUITE("nn") {
       CHECK(hr == h2);
       kernels::linear_forward_residual(y2.data(), r.data(), h.data(), w2.data(), b2.data(), M, H, N, p2);
       CHECK(y2 == fast);
+      if constexpr (std::is_same_v<T, float>) {
+        // bf16 products: tiled, untiled and from weights packed once agree bit for bit; close
+        // to fp32 (a bf16 operand carries 8 significant bits).
+        const kernels::WeightPlan bf16{Precision::bf16};
+        std::vector<T> hb(h.size()), yb(r.size());
+        kernels::linear_bias_gelu_forward(hb.data(), hb.data(), x.data(), w1.data(), b1.data(), M, K, H, bf16);
+        kernels::linear_forward_residual(yb.data(), r.data(), hb.data(), w2.data(), b2.data(), M, H, N, bf16);
+        CHECK(max_rel_diff(yb, fast) < 2e-2);
+        if (detail::bgemm::native) CHECK(yb != fast);
+        kernels::mlp_forward_tiled(z.data(), r.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N,
+                                   scratch, bf16, bf16);
+        CHECK(z == yb);
+        kernels::PackedWeights<T> bcache;
+        bcache.precision = Precision::bf16;
+        const kernels::WeightPlan q1 = bcache.get(w1.data(), H, K), q2 = bcache.get(w2.data(), N, H);
+        CHECK(q1.precision == detail::bgemm::resolve(Precision::bf16));
+        kernels::mlp_forward_tiled(z.data(), r.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N,
+                                   scratch, q1, q2);
+        CHECK(z == yb);
+      }
+    }
+  }
+
+  TEST_CASE("bf16 conversion: round to nearest even / denormals to zero / NaN and overflow as vcvtneps2bf16") {
+    using detail::bgemm::to_bf16;
+    CHECK(to_bf16(1.0f) == 0x3f80);
+    CHECK(to_bf16(1.0f + 0x1p-8f) == 0x3f80);        // a tie rounds to the even neighbour
+    CHECK(to_bf16(1.0f + 3 * 0x1p-8f) == 0x3f82);    // a tie rounds up to the even one
+    CHECK(to_bf16(1.0f + 0x1p-8f + 0x1p-20f) == 0x3f81);
+    CHECK(to_bf16(-2.5f) == 0xc020);
+    CHECK(to_bf16(0x1p-130f) == 0x0000);             // denormal → +0
+    CHECK(to_bf16(-0x1p-140f) == 0x8000);            // → -0
+    CHECK(to_bf16(3.4e38f) == 0x7f80);               // rounds past the largest bf16 → inf
+    CHECK(to_bf16(-std::numeric_limits<float>::infinity()) == 0xff80);
+    const std::uint16_t nan = to_bf16(std::numeric_limits<float>::quiet_NaN());
+    CHECK(std::isnan(detail::bgemm::from_bf16(nan)));
+    CHECK(std::isnan(detail::bgemm::from_bf16(to_bf16(std::bit_cast<float>(0x7f800001u)))));  // signalling stays NaN
+    CHECK(detail::bgemm::round_bf16(0.1f) == 0.10009765625f);
+#if TJEPA_BF16_NATIVE
+    // The vector conversion of A's rows (vcvtne2ps2bf16) gives the scalar bits, tails included.
+    Rng rng(5);
+    std::vector<float> row = random_vector<float>(77, rng, 3.0);
+    row[3] = 0x1p-131f;
+    row[4] = 1.0f + 0x1p-8f;
+    row[5] = -std::numeric_limits<float>::infinity();
+    alignas(64) std::uint32_t packed[40] = {};
+    detail::bgemm::pack_a(packed, 1, 77, row.data(), 77, 1);
+    for (int q = 0; q < 39; ++q)
+      CHECK(packed[q] == detail::bgemm::pair(row[std::size_t(2 * q)], 2 * q + 1 < 77 ? row[std::size_t(2 * q + 1)] : 0.0f));
+#endif
+  }
+
+  TEST_CASE("the bf16 GEMM and its epilogues match a reference on bf16-rounded operands (awkward sizes)") {
+    // Products of bf16-rounded operands are exact in fp32; only the order of the fp32 sums
+    // differs from the reference's double sum, so |C - ref| stays within a few ulp of Σ|a·b|.
+    // Depths past one KC block and odd, partial panels, short row blocks, thread splits, all
+    // transpositions. Without AVX512-BF16 the same calls are the float GEMM, bit for bit.
+    using detail::sgemm::Order;
+    namespace bg = detail::bgemm;
+    CHECK(bg::resolve(Precision::bf16, false) == Precision::fp32);
+    CHECK(bg::resolve(Precision::bf16, true) == Precision::bf16);
+    CHECK(bg::resolve(Precision::fp32, true) == Precision::fp32);
+    Rng rng(41);
+    for (const GemmOperands& o : gemm_cases({{1, 1, 1}, {7, 3, 17}, {13, 67, 131}, {301, 192, 70}, {97, 1025, 64}, {5, 19, 200}}, rng)) {
+      const int M = o.M, K = o.K, N = o.N;
+      INFO("M ", M, ", K ", K, ", N ", N);
+      const auto &x = o.x, &W = o.W, &b = o.b, &g = o.g, &r = o.r;
+      // Fallback: the float GEMM itself.
+      std::vector<float> c1(r.size()), c2(r.size());
+      bg::gemm<false>(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c1.data(), N, {false, b.data()});
+      detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c2.data(), N,
+                          {false, b.data()});
+      CHECK(c1 == c2);
+      if constexpr (bg::native) {
+        // reference: y = bf16(x)·bf16(W)ᵀ, dx = bf16(g)·bf16(W), dW = bf16(g)ᵀ·bf16(x), and Σ|·|
+        std::vector<double> y(r.size(), 0.0), ya(r.size(), 0.0), dx(x.size(), 0.0), dxa(x.size(), 0.0),
+            dW(W.size(), 0.0), dWa(W.size(), 0.0);
+        for (int m = 0; m < M; ++m)
+          for (int n = 0; n < N; ++n)
+            for (int k = 0; k < K; ++k) {
+              const std::size_t mk = std::size_t(m) * K + k, nk = std::size_t(n) * K + k, mn = std::size_t(m) * N + n;
+              const double xv = bg::round_bf16(x[mk]), wv = bg::round_bf16(W[nk]), gv = bg::round_bf16(g[mn]);
+              y[mn] += xv * wv, ya[mn] += std::abs(xv * wv);
+              dx[mk] += gv * wv, dxa[mk] += std::abs(gv * wv);
+              dW[nk] += gv * xv, dWa[nk] += std::abs(gv * xv);
+            }
+        // max |c - want| / (Σ|a·b| + |added terms|)
+        auto err = [](const std::vector<float>& c, const std::vector<double>& want, const std::vector<double>& mag) {
+          double e = 0;
+          for (std::size_t i = 0; i < c.size(); ++i) e = std::max(e, std::abs(c[i] - want[i]) / (mag[i] + 1e-30));
+          return e;
+        };
+        const double tol = 1e-6;
+        // C = r + x·Wᵀ + b; then C = x·Wᵀ + b with GELU into h
+        std::vector<double> want(y.size()), mag(y.size());
+        for (std::size_t i = 0; i < y.size(); ++i) {
+          want[i] = y[i] + b[i % std::size_t(N)] + r[i];
+          mag[i] = ya[i] + std::abs(b[i % std::size_t(N)]) + std::abs(r[i]);
+        }
+        bg::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c1.data(), N,
+                 {false, b.data(), nullptr, nullptr, r.data()});
+        CHECK(err(c1, want, mag) < tol);
+        std::vector<float> h(y.size());
+        bg::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c1.data(), N,
+                 {false, b.data(), h.data()});
+        for (std::size_t i = 0; i < y.size(); ++i) {
+          want[i] = y[i] + b[i % std::size_t(N)];
+          mag[i] = ya[i] + std::abs(b[i % std::size_t(N)]);
+        }
+        CHECK(err(c1, want, mag) < tol);
+        std::vector<float> hr(c1.size());
+        kernels::ref::gelu_forward(hr.data(), c1.data(), hr.size());
+        CHECK(max_rel_diff(h, hr) < 1e-6);
+        // The weight packed once (gemm_packed) gives the per-call product bit for bit.
+        AlignedVector<std::uint32_t> packed(bg::packed_size(N, K));
+        bg::pack(packed.data(), W.data(), K, Order::col_major, K, N);
+        bg::gemm_packed(M, N, K, x.data(), K, Order::row_major, packed.data(), c2.data(), N, {false, b.data(), h.data()});
+        CHECK(c2 == c1);
+        // dx += g·W (B row-major), dW += gᵀ·x (A column-major), onto starting values
+        std::vector<float> dx2(x.size(), 0.5f), dW2(W.size(), -0.25f);
+        bg::gemm(M, K, N, g.data(), N, Order::row_major, W.data(), K, Order::row_major, dx2.data(), K, {true});
+        bg::gemm(N, K, M, g.data(), N, Order::col_major, x.data(), K, Order::row_major, dW2.data(), K, {true});
+        for (auto& v : dx) v += 0.5;
+        for (auto& v : dxa) v += 0.5;
+        for (auto& v : dW) v -= 0.25;
+        for (auto& v : dWa) v += 0.25;
+        CHECK(err(dx2, dx, dxa) < tol);
+        CHECK(err(dW2, dW, dWa) < tol);
+      }
     }
   }
 

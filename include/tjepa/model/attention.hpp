@@ -83,7 +83,7 @@ struct SelfAttention {
                Workspace<T>& ws, const T* residual = nullptr) const {
     const int d = dim(), Dh = d / heads, B = r.B, L = r.L, q_from = r.q_from, Lq = r.Lq();
     T* qkv_buf = saved.qkv;
-    qkv.forward(ps, x, qkv_buf, B * L, ws.frozen());
+    qkv.forward(ps, x, qkv_buf, B * L, ws.weights());
     ws.mark("qkv");
     // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
     // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads).
@@ -106,9 +106,9 @@ struct SelfAttention {
     }
     ws.mark("attention");
     if (residual)
-      proj.forward_residual(ps, saved.att, residual, y, B * Lq, ws.frozen());
+      proj.forward_residual(ps, saved.att, residual, y, B * Lq, ws.weights());
     else
-      proj.forward(ps, saved.att, y, B * Lq, ws.frozen());
+      proj.forward(ps, saved.att, y, B * Lq, ws.weights());
     ws.mark("proj");
   }
 
@@ -167,8 +167,8 @@ struct CrossAttention {
                const AttentionSaved<T>& saved, T* y, Workspace<T>& ws, const T* residual = nullptr) const {
     const int d = dim(), B = r.B, L = r.L;
     require<ShapeError>(r.q_from == 0, "CrossAttention::forward: q_from = ", r.q_from, ", expected 0");
-    q.forward(ps, query, saved.q, B, ws.frozen());
-    kv.forward(ps, x, saved.kv, B * L, ws.frozen());
+    q.forward(ps, query, saved.q, B, ws.weights());
+    kv.forward(ps, x, saved.kv, B * L, ws.weights());
     const kernels::AttentionShape s = shape(L);
     kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(s);
     TJEPA_OMP(omp parallel for schedule(static) if (B > 1))

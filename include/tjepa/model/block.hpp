@@ -323,9 +323,9 @@ struct BlockStack {
       T* y = buf.scale2 ? branch + q * d : x_out + q * d;
       const T* residual = direct2 ? buf.x_mid + q * d : nullptr;
       if (buf.h)
-        blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, residual);
+        blk.mlp.forward(ps, buf.ln2 + q * d, buf.h_pre + q * hid, buf.h + q * hid, y, rows, residual, ws.weights());
       else
-        blk.mlp.forward_tiled(ps, buf.ln2 + q * d, y, rows, residual, ws.mlp, ws.frozen());
+        blk.mlp.forward_tiled(ps, buf.ln2 + q * d, y, rows, residual, ws.mlp, ws.weights());
       ws.mark("mlp");
       if (buf.scale2) kernels::drop_path_forward(x_out + q * d, branch + q * d, buf.scale2 + b0, n, per_sample);
     });

@@ -61,15 +61,17 @@ struct LinearParams {
   template <class T>
   const T* b(const ParamSet<T>& ps) const { return has_bias ? ps.value(bias) : nullptr; }
 
-  // The weight packed once (kernels::PackedWeights), or nullptr without a cache.
+  // How the forward products read the weight (kernels::PackedWeights: precision, packed once);
+  // without a cache, fp32 packed per call.
   template <class T>
-  const T* packed(const ParamSet<T>& ps, kernels::PackedWeights<T>* cache) const {
-    return cache ? cache->get(ps.value(weight), out, in) : nullptr;
+  kernels::WeightPlan plan(const ParamSet<T>& ps, kernels::PackedWeights<T>* cache) const {
+    return cache ? cache->get(ps.value(weight), out, in) : kernels::WeightPlan{};
   }
-  // out[M, out] = in[M, in] · Wᵀ + b. cache: packed weights (frozen inference) or nullptr.
+  // out[M, out] = in[M, in] · Wᵀ + b. cache: Workspace::weights() (precision, frozen inference) or
+  // nullptr (fp32).
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, T* y, int M, kernels::PackedWeights<T>* cache = nullptr) const {
-    kernels::linear_forward(y, x, ps.value(weight), b(ps), M, in, out, packed(ps, cache));
+    kernels::linear_forward(y, x, ps.value(weight), b(ps), M, in, out, plan(ps, cache));
   }
   // y[M, out] += x · Wᵀ + b (residual add fused into the GEMM)
   template <class T>
@@ -80,7 +82,7 @@ struct LinearParams {
   template <class T>
   void forward_residual(const ParamSet<T>& ps, const T* x, const T* r, T* y, int M,
                         kernels::PackedWeights<T>* cache = nullptr) const {
-    kernels::linear_forward_residual(y, r, x, ps.value(weight), b(ps), M, in, out, packed(ps, cache));
+    kernels::linear_forward_residual(y, r, x, ps.value(weight), b(ps), M, in, out, plan(ps, cache));
   }
   // dx (may be nullptr) += dy · W; dW += dyᵀ · x; db += Σ dy
   template <class T>

@@ -26,24 +26,26 @@ struct Mlp {
 
   // x [M, d] → y [M, out] = residual + mlp(x) (residual may equal y: y +=; nullptr: y = mlp(x)).
   // h_pre [M, hidden] receives fc1's output + bias (kept for backward), h [M, hidden] the
-  // activation; h may equal h_pre.
+  // activation; h may equal h_pre. cache: Workspace::weights() or nullptr (fp32).
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, const T* residual = nullptr) const {
-    kernels::linear_bias_gelu_forward(h, h_pre, x, ps.value(fc1.weight), fc1.b(ps), M, fc1.in, fc1.out);
+  void forward(const ParamSet<T>& ps, const T* x, T* h_pre, T* h, T* y, int M, const T* residual = nullptr,
+               kernels::PackedWeights<T>* cache = nullptr) const {
+    kernels::linear_bias_gelu_forward(h, h_pre, x, ps.value(fc1.weight), fc1.b(ps), M, fc1.in, fc1.out,
+                                      fc1.plan(ps, cache));
     if (residual)
-      fc2.forward_residual(ps, h, residual, y, M);
+      fc2.forward_residual(ps, h, residual, y, M, cache);
     else
-      fc2.forward(ps, h, y, M);
+      fc2.forward(ps, h, y, M, cache);
   }
 
   // Inference: y [M, out] = (residual +) mlp(x), row-tiled (kernels/linear.hpp's
-  // kernels::mlp_forward_tiled): no [M, hidden] buffer. residual may equal y, or be nullptr. cache: packed
-  // weights (frozen inference) or nullptr.
+  // kernels::mlp_forward_tiled): no [M, hidden] buffer. residual may equal y, or be nullptr. cache:
+  // Workspace::weights() (precision, frozen inference) or nullptr (fp32).
   template <class T>
   void forward_tiled(const ParamSet<T>& ps, const T* x, T* y, int M, const T* residual, AlignedVector<T>& scratch,
                      kernels::PackedWeights<T>* cache = nullptr) const {
     kernels::mlp_forward_tiled(y, residual, x, ps.value(fc1.weight), fc1.b(ps), ps.value(fc2.weight), fc2.b(ps), M, fc1.in,
-                      fc1.out, fc2.out, scratch, fc1.packed(ps, cache), fc2.packed(ps, cache));
+                      fc1.out, fc2.out, scratch, fc1.plan(ps, cache), fc2.plan(ps, cache));
   }
 
   // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]; the parameters' gradients +=. h, dh

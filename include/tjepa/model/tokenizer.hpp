@@ -102,7 +102,7 @@ struct Tokenizer {
         xm = buf;
       }
       T* pre = detail::grow(cache ? cache->pre[i] : ws.rows2, std::size_t(M) * dim);
-      m.proj.forward(ps, xm, pre, M, ws.frozen());
+      m.proj.forward(ps, xm, pre, M, ws.weights());
       T* mean = cache ? detail::grow(cache->mean[i], std::size_t(M)) : nullptr;
       T* rstd = cache ? detail::grow(cache->rstd[i], std::size_t(M)) : nullptr;
       if (m.tokens.empty()) {

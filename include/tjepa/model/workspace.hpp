@@ -37,13 +37,24 @@ struct Workspace {
   AlignedVector<T> hidden2;  // [M, hidden] recomputed activation
   AlignedVector<T> drows;    // [rows, ·]
   AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
-  // Inference on weights that do not change between calls (a frozen encoder in a control loop):
-  // set frozen_weights and the products of the tokenizer, the encoder (qkv, proj, MLP) and the
-  // attentive probe's cross-attention pack each weight once, into `packed`, instead of on every
-  // call. Clear `packed` when the values change (its entries are keyed by address).
+  // How the forward products of the tokenizer, the encoder (qkv, proj, MLP), the predictor's
+  // blocks and the attentive probe's cross-attention read their weights:
+  // - frozen_weights: inference on weights that do not change between calls (a frozen encoder in
+  //   a control loop): each weight is packed once, into `packed`, instead of on every call. Clear
+  //   `packed` when the values change (its entries are keyed by address).
+  // - precision: Precision::bf16 runs those products with bf16 operands and fp32 accumulation
+  //   (AVX512-BF16; a build without it computes fp32). Attention, norms, activations between the
+  //   products, backward passes and the parameters stay fp32.
   bool frozen_weights = false;
+  Precision precision = Precision::fp32;
   kernels::PackedWeights<T> packed;
-  kernels::PackedWeights<T>* frozen() { return frozen_weights ? &packed : nullptr; }
+  // The cache the modules pass to their products; nullptr: fp32, packed per call.
+  kernels::PackedWeights<T>* weights() {
+    if (!frozen_weights && precision == Precision::fp32) return nullptr;
+    packed.keep = frozen_weights;
+    packed.precision = precision;
+    return &packed;
+  }
   // Times the stages of inference calls when set (StageClock); nullptr: off.
   StageClock* clock = nullptr;
   void mark(const char* stage) {

@@ -101,19 +101,19 @@ template <Order AO, int R, int NK>
     for (int j = 0; j < NK; ++j) acc[i][j].store_aligned(acc_out + i * NR + j * W);
 }
 
-// C[R, cols ≤ NK·W] from one depth block (see depth_loop). c_in [R, ldc]: what the product is added
-// to (C itself holding a partial sum or the value accumulated into, or the residual) or nullptr;
-// bias on the first depth block, g (gelu output) and gg (gelu_grad input) on the last.
-// depth_loop writes the tile's first NK·W columns of each row; the edge path reads only
-// cols <= NK·W of them. GCC cannot see that bound and warns (maybe-uninitialized) in some
-// inlining contexts: silenced here, for this function only.
+// The epilogue of an R × (cols ≤ NK·W) tile of C whose product (of one depth block) is in tile
+// [R][NR]: c_in [R, ldc] is what the product is added to (C itself holding a partial sum or the
+// value accumulated into, or the residual) or nullptr; bias on the first depth block, g (gelu
+// output) and gg (gelu_grad input) on the last. The product kernels write the tile's first NK·W
+// columns of each row; the edge path reads only cols <= NK·W of them. GCC cannot see that bound
+// and warns (maybe-uninitialized) in some inlining contexts: silenced here, for these functions
+// only. Shared by the float kernel below and the bf16 one (bgemm.hpp).
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
-template <Order AO, int R, int NK>
-void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, float* c, std::ptrdiff_t ldc, int cols,
-                  const float* c_in, const float* bias, float* g, const float* gg, const float* pf) {
+template <int R, int NK>
+inline void prefetch_tile(const float* c, std::ptrdiff_t ldc, const float* c_in, const float* gg) {
   // The tile's C (and GELU input) lines arrive while the depth loop runs.
   for (int i = 0; i < R; ++i)
     for (int j = 0; j < NK; ++j) {
@@ -121,8 +121,10 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, fl
       if (c_in && c_in != c) __builtin_prefetch(c_in + i * ldc + j * W);
       if (gg) __builtin_prefetch(gg + i * ldc + j * W);
     }
-  alignas(64) float tile[R * NR];
-  depth_loop<AO, R, NK>(kc, a, lda, b, pf, tile);
+}
+template <int R, int NK>
+inline void finish_tile(const float* tile, float* c, std::ptrdiff_t ldc, int cols, const float* c_in,
+                        const float* bias, float* g, const float* gg) {
   if (cols == NK * W) {
 #pragma GCC unroll 8
     for (int i = 0; i < R; ++i) {
@@ -150,6 +152,16 @@ void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, fl
       if (g) g[i * ldc + j] = gelu(v);
     }
   }
+}
+
+// C[R, cols ≤ NK·W] from one depth block (depth_loop, then finish_tile).
+template <Order AO, int R, int NK>
+void micro_kernel(int kc, const float* a, std::ptrdiff_t lda, const float* b, float* c, std::ptrdiff_t ldc, int cols,
+                  const float* c_in, const float* bias, float* g, const float* gg, const float* pf) {
+  prefetch_tile<R, NK>(c, ldc, c_in, gg);
+  alignas(64) float tile[R * NR];
+  depth_loop<AO, R, NK>(kc, a, lda, b, pf, tile);
+  finish_tile<R, NK>(tile, c, ldc, cols, c_in, bias, g, gg);
 }
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
@@ -252,17 +264,26 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
   }
 }
 
-// Threads for a product: one below parallel_min_flops, never more than MR-row blocks.
-inline int gemm_threads(int rows, int cols, int depth) {
+// Runs one product over the rows of C: pack(task) for tasks [0, tasks) (B's panels; none when B
+// was packed beforehand), then compute(r0, r1) for rows [r0, r1), on this thread below
+// parallel_min_flops, else split over the threads in whole MR-row blocks as even as possible (the
+// packing shared among them first). Serves the float and the bf16 GEMM.
+template <class Pack, class Compute>
+void run_product(int rows, int cols, int depth, int tasks, Pack&& pack, Compute&& compute) {
   const double flops = 2.0 * double(rows) * double(cols) * double(depth);
-  return flops > parallel_min_flops ? std::min(max_threads(), (rows + MR - 1) / MR) : 1;
-}
-// Inside a parallel region: this thread's rows of C, whole MR-row blocks as even as possible.
-inline void compute_share(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
-                          const float* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
-  const int blocks = (rows + MR - 1) / MR, t = thread_id(), n = team_size();
-  const int b0 = blocks * t / n, b1 = blocks * (t + 1) / n;
-  compute_rows(std::min(rows, b0 * MR), std::min(rows, b1 * MR), cols, depth, A, lda, a_order, packed, C, ldc, e);
+  const int threads = flops > parallel_min_flops ? std::min(max_threads(), (rows + MR - 1) / MR) : 1;
+  if (threads <= 1) {
+    for (int task = 0; task < tasks; ++task) pack(task);
+    compute(0, rows);
+    return;
+  }
+  TJEPA_OMP(omp parallel num_threads(threads)) {
+    TJEPA_OMP(omp for schedule(static))
+    for (int task = 0; task < tasks; ++task) pack(task);
+    const int blocks = (rows + MR - 1) / MR, t = thread_id(), n = team_size();
+    const int b0 = blocks * t / n, b1 = blocks * (t + 1) / n;
+    compute(std::min(rows, b0 * MR), std::min(rows, b1 * MR));
+  }
 }
 
 // C (+)= A · B per the epilogue with B packed beforehand (pack(), packed_size(cols, depth)):
@@ -270,13 +291,21 @@ inline void compute_share(int rows, int cols, int depth, const float* A, std::pt
 inline void gemm_packed(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
                         const float* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e = {}) {
   if (rows <= 0 || cols <= 0) return;
-  const int threads = gemm_threads(rows, cols, depth);
-  if (threads <= 1) {
-    compute_rows(0, rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
-    return;
-  }
-  TJEPA_OMP(omp parallel num_threads(threads))
-  compute_share(rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
+  run_product(rows, cols, depth, 0, [](int) {}, [&](int r0, int r1) {
+    compute_rows(r0, r1, cols, depth, A, lda, a_order, packed, C, ldc, e);
+  });
+}
+
+// The epilogue alone, for depth 0: C = (C or residual or 0) + bias (then 0 under gelu_grad, and
+// gelu(C) into gelu).
+inline void empty_product(int rows, int cols, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
+  for (int i = 0; i < rows; ++i)
+    for (int j = 0; j < cols; ++j) {
+      float& c = C[std::ptrdiff_t(i) * ldc + j];
+      c = (e.accumulate ? c : e.residual ? e.residual[std::ptrdiff_t(i) * ldc + j] : 0.0f) + (e.bias ? e.bias[j] : 0.0f);
+      if (e.gelu_grad) c = 0.0f;
+      if (e.gelu) e.gelu[std::ptrdiff_t(i) * ldc + j] = gelu(c);
+    }
 }
 
 // C[rows, cols] (ldc) (+)= A · B per the epilogue; A(i, k) = A[i·lda + k] (row-major) or
@@ -285,38 +314,19 @@ inline void gemm_packed(int rows, int cols, int depth, const float* A, std::ptrd
 inline void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order, const float* B,
                  std::ptrdiff_t ldb, Order b_order, float* C, std::ptrdiff_t ldc, const Epilogue& e = {}) {
   if (rows <= 0 || cols <= 0) return;
-  if (depth <= 0) {
-    for (int i = 0; i < rows; ++i)
-      for (int j = 0; j < cols; ++j) {
-        float& c = C[std::ptrdiff_t(i) * ldc + j];
-        c = (e.accumulate ? c : e.residual ? e.residual[std::ptrdiff_t(i) * ldc + j] : 0.0f) +
-            (e.bias ? e.bias[j] : 0.0f);
-        if (e.gelu_grad) c = 0.0f;
-        if (e.gelu) e.gelu[std::ptrdiff_t(i) * ldc + j] = gelu(c);
-      }
-    return;
-  }
-  const int panels = (cols + NR - 1) / NR;
+  if (depth <= 0) return empty_product(rows, cols, C, ldc, e);
   thread_local AlignedVector<float> pack_buffer;
   float* packed = grow(pack_buffer, packed_size(cols, depth));
-  const int threads = gemm_threads(rows, cols, depth);
-  if (threads <= 1) {
-    pack(packed, B, ldb, b_order, depth, cols);
-    compute_rows(0, rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
-    return;
-  }
-  TJEPA_OMP(omp parallel num_threads(threads))
-  {
-    // Packing tasks of one panel × one depth block: a long depth (dW) with few panels still
-    // splits evenly.
-    const int kblocks = (depth + KC - 1) / KC;
-    TJEPA_OMP(omp for schedule(static))
-    for (int task = 0; task < panels * kblocks; ++task) {
-      const int kb = task % kblocks;
-      pack_panel(packed, B, ldb, b_order, depth, cols, task / kblocks, kb * KC, std::min(depth, (kb + 1) * KC));
-    }
-    compute_share(rows, cols, depth, A, lda, a_order, packed, C, ldc, e);
-  }
+  // Packing tasks of one panel × one depth block: a long depth (dW) with few panels still splits
+  // evenly.
+  const int kblocks = (depth + KC - 1) / KC, panels = (cols + NR - 1) / NR;
+  run_product(
+      rows, cols, depth, panels * kblocks,
+      [&](int task) {
+        const int kb = task % kblocks;
+        pack_panel(packed, B, ldb, b_order, depth, cols, task / kblocks, kb * KC, std::min(depth, (kb + 1) * KC));
+      },
+      [&](int r0, int r1) { compute_rows(r0, r1, cols, depth, A, lda, a_order, packed, C, ldc, e); });
 }
 
 }  // namespace tjepa::detail::sgemm

@@ -13,6 +13,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/eigen.hpp"
+#include "tjepa/model/detail/bgemm.hpp"
 #include "tjepa/model/detail/gemm.hpp"
 #include "tjepa/model/detail/sgemm.hpp"
 #include "tjepa/model/kernels/gelu.hpp"
@@ -45,25 +46,90 @@ void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* 
 }
 }  // namespace ref
 
-// Weights packed once for the float GEMM (detail/sgemm.hpp) and reused by later products. Every
-// forward product otherwise packs its weight again (a transposing copy: about 150 µs of a 3.5 ms
-// streaming tick at d = 96 with 4 blocks); inference on weights that do not change
-// (Workspace::frozen_weights) skips that. Keyed by the weight's address: clear() when the values
-// change. Nothing is packed for double (Eigen's path): get() returns nullptr.
+// How a forward product reads its weight: in which precision (Precision::bf16 where the build has
+// AVX512-BF16, else fp32: bgemm::resolve), and packed beforehand for it (PackedWeights) or, with
+// packed = nullptr, packed by the product itself. double ignores it (Eigen's path).
+struct WeightPlan {
+  Precision precision = Precision::fp32;
+  const void* packed = nullptr;  // float panels (fp32) or bf16 pairs (bgemm::pack)
+};
+
+}  // namespace tjepa::kernels
+
+namespace tjepa::detail {
+inline const std::uint32_t* bf16_panels(const void* p) { return static_cast<const std::uint32_t*>(p); }
+inline const float* fp32_panels(const void* p) { return static_cast<const float*>(p); }
+
+// A weight w [out, in] packed for products in precision p (resolved): the floats it takes, and
+// the packing into dst (bf16 pairs are 32-bit words, kept in float storage).
+inline std::size_t packed_weight_size(Precision p, int out, int in) {
+  return p == Precision::bf16 ? bgemm::packed_size(out, in) : sgemm::packed_size(out, in);
+}
+inline void pack_weight(float* dst, Precision p, const float* w, int out, int in) {
+  if (p == Precision::bf16)
+    bgemm::pack(reinterpret_cast<std::uint32_t*>(dst), w, in, sgemm::Order::col_major, in, out);
+  else
+    sgemm::pack(dst, w, in, sgemm::Order::col_major, in, out);
+}
+// Rows [0, rows) of C[rows, cols] = A[rows, depth] · B per e, from B packed in precision p.
+inline void compute_rows(Precision p, int rows, int cols, int depth, const float* A, const void* packed, float* C,
+                         const sgemm::Epilogue& e) {
+  using sgemm::Order;
+#if TJEPA_BF16_NATIVE
+  if (p == Precision::bf16) {
+    bgemm::compute_rows(0, rows, cols, depth, A, depth, Order::row_major, bf16_panels(packed), C, cols, e);
+    return;
+  }
+#endif
+  (void)p;
+  sgemm::compute_rows(0, rows, cols, depth, A, depth, Order::row_major, fp32_panels(packed), C, cols, e);
+}
+
+// out[M, N] = in[M, K] · wᵀ through the GEMM of the plan's precision with epilogue e, from w
+// packed beforehand when plan.packed is not nullptr.
+inline void forward_gemm(float* out, const float* in, const float* w, kernels::WeightPlan plan, int M, int K, int N,
+                         const sgemm::Epilogue& e) {
+  using sgemm::Order;
+  if (bgemm::resolve(plan.precision) == Precision::bf16) {
+    if (plan.packed)
+      bgemm::gemm_packed(M, N, K, in, K, Order::row_major, bf16_panels(plan.packed), out, N, e);
+    else
+      bgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, e);
+  } else if (plan.packed) {
+    sgemm::gemm_packed(M, N, K, in, K, Order::row_major, fp32_panels(plan.packed), out, N, e);
+  } else {
+    sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, e);
+  }
+}
+}  // namespace tjepa::detail
+
+namespace tjepa::kernels {
+
+// Weights packed once for the GEMMs (detail/sgemm.hpp, detail/bgemm.hpp) and reused by later
+// products. Every forward product otherwise packs its weight again (a transposing copy: about
+// 150 µs of a 3.5 ms streaming tick at d = 96 with 4 blocks); inference on weights that do not
+// change (Workspace::frozen_weights) skips that. Keyed by the weight's address and precision:
+// clear() when the values change. keep = false packs nothing and only carries the precision
+// (each product then packs per call). Nothing is packed for double.
 template <class T>
 class PackedWeights {
  public:
-  // w [out, in] packed, made on the first call for this w.
-  const T* get(const T* w, int out, int in) {
+  Precision precision = Precision::fp32;
+  bool keep = true;
+
+  // w [out, in] as the products read it; packed on the first call for this w and precision.
+  WeightPlan get(const T* w, int out, int in) {
+    const Precision p = detail::bgemm::resolve(precision);
     if constexpr (!std::is_same_v<T, float>) {
-      return nullptr;
+      return {p, nullptr};
     } else {
+      if (!keep) return {p, nullptr};
       for (const Entry& e : entries_)
-        if (e.w == w && e.out == out && e.in == in) return e.packed.data();
-      Entry& e = entries_.emplace_back(Entry{w, out, in, {}});
-      e.packed.resize(detail::sgemm::packed_size(out, in));
-      detail::sgemm::pack(e.packed.data(), w, in, detail::sgemm::Order::col_major, in, out);
-      return e.packed.data();
+        if (e.w == w && e.out == out && e.in == in && e.precision == p) return {p, e.packed.data()};
+      Entry& e = entries_.emplace_back(Entry{w, out, in, p, {}});
+      e.packed.resize(detail::packed_weight_size(p, out, in));
+      detail::pack_weight(e.packed.data(), p, w, out, in);
+      return {p, e.packed.data()};
     }
   }
   void clear() { entries_.clear(); }
@@ -73,33 +139,18 @@ class PackedWeights {
   struct Entry {
     const T* w;
     int out, in;
+    Precision precision;
     AlignedVector<T> packed;
   };
   std::vector<Entry> entries_;
 };
 
-}  // namespace tjepa::kernels
-
-namespace tjepa::detail {
-// out[M, N] = in[M, K] · wᵀ through the float GEMM with epilogue e, from w packed beforehand
-// (PackedWeights) when packed is not nullptr.
-inline void forward_gemm(float* out, const float* in, const float* w, const float* packed, int M, int K, int N,
-                         const sgemm::Epilogue& e) {
-  using sgemm::Order;
-  if (packed)
-    sgemm::gemm_packed(M, N, K, in, K, Order::row_major, packed, out, N, e);
-  else
-    sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, e);
-}
-}  // namespace tjepa::detail
-
-namespace tjepa::kernels {
-
-// out[M, N] = in[M, K] · wᵀ (+ b); b may be nullptr. packed: w from PackedWeights, or nullptr.
+// out[M, N] = in[M, K] · wᵀ (+ b); b may be nullptr. plan: the precision, and w packed beforehand
+// (PackedWeights::get), or {}: fp32, packed per call.
 template <class T>
-void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, int N, const T* packed = nullptr) {
+void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, int N, WeightPlan plan = {}) {
   if constexpr (std::is_same_v<T, float>) {
-    detail::forward_gemm(out, in, w, packed, M, K, N, {false, b, nullptr});
+    detail::forward_gemm(out, in, w, plan, M, K, N, {false, b, nullptr});
     return;
   }
   // The bias is the GEMM's starting value, so bias and product are one pass over out.
@@ -115,9 +166,9 @@ void linear_forward(T* out, const T* in, const T* w, const T* b, int M, int K, i
 // epilogue. residual may equal out (out += ...).
 template <class T>
 void linear_forward_residual(T* out, const T* residual, const T* in, const T* w, const T* b, int M, int K, int N,
-                             const T* packed = nullptr) {
+                             WeightPlan plan = {}) {
   if constexpr (std::is_same_v<T, float>) {
-    detail::forward_gemm(out, in, w, packed, M, K, N, {false, b, nullptr, nullptr, residual});
+    detail::forward_gemm(out, in, w, plan, M, K, N, {false, b, nullptr, nullptr, residual});
     return;
   }
   MatrixMap<T> o(out, M, N);
@@ -162,11 +213,12 @@ void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* 
 }
 
 // fc1's forward with its epilogue fused: pre[M, N] = in · wᵀ + b, out[M, N] = gelu(pre) (out may
-// alias pre: inference keeps only the activation).
+// alias pre: inference keeps only the activation). plan: as linear_forward's.
 template <class T>
-void linear_bias_gelu_forward(T* out, T* pre, const T* in, const T* w, const T* b, int M, int K, int N) {
+void linear_bias_gelu_forward(T* out, T* pre, const T* in, const T* w, const T* b, int M, int K, int N,
+                              WeightPlan plan = {}) {
   if constexpr (std::is_same_v<T, float>) {
-    detail::forward_gemm(pre, in, w, nullptr, M, K, N, {false, b, out});
+    detail::forward_gemm(pre, in, w, plan, M, K, N, {false, b, out});
   } else {
     linear_forward(pre, in, w, static_cast<const T*>(nullptr), M, K, N);
     bias_gelu_forward(out, pre, b, M, N);
@@ -182,41 +234,41 @@ inline constexpr int mlp_tile_rows = 48;
 // consumed at once, so the [M, H] activation (the largest of a block) never goes to memory, and
 // both weights are packed once per call (float). Same values as linear_bias_gelu_forward then
 // linear_forward(_residual) on whole matrices. residual may equal out, or be nullptr. scratch
-// grows to the packed weights plus one [tile, H] activation per thread and is reused. packed1,
-// packed2: w1 and w2 from PackedWeights (then not packed here), or nullptr.
+// grows to the packed weights plus one [tile, H] activation per thread and is reused. plan1,
+// plan2: the precision (plan1's serves both) and w1, w2 packed beforehand (PackedWeights; then
+// not packed here), or {}.
 template <class T>
 void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, const T* b1, const T* w2, const T* b2,
-                       int M, int K, int H, int N, AlignedVector<T>& scratch, const T* packed1 = nullptr,
-                       const T* packed2 = nullptr) {
+                       int M, int K, int H, int N, AlignedVector<T>& scratch, WeightPlan plan1 = {},
+                       WeightPlan plan2 = {}) {
   if (M <= 0) return;
   const int tiles = (M + mlp_tile_rows - 1) / mlp_tile_rows;
   const double flops = 4.0 * double(M) * double(H) * (double(K) + double(N));
   const int threads = flops > detail::parallel_min_flops ? std::min(detail::max_threads(), tiles) : 1;
   const std::size_t tile_size = std::size_t(mlp_tile_rows) * std::size_t(H);
+  const Precision p = detail::bgemm::resolve(plan1.precision);
   // Scratch: [packed w1][packed w2] unless given, then one activation tile per thread.
   std::size_t size1 = 0, size2 = 0;
   if constexpr (std::is_same_v<T, float>) {
-    if (!packed1) size1 = detail::sgemm::packed_size(H, K);
-    if (!packed2) size2 = detail::sgemm::packed_size(N, H);
+    if (!plan1.packed) size1 = detail::packed_weight_size(p, H, K);
+    if (!plan2.packed || detail::bgemm::resolve(plan2.precision) != p) size2 = detail::packed_weight_size(p, N, H);
   }
   T* const base = detail::grow(scratch, size1 + size2 + std::size_t(threads) * tile_size);
   T* const tile_base = base + size1 + size2;
+  const void* p1 = size1 ? base : plan1.packed;
+  const void* p2 = size2 ? base + size1 : plan2.packed;
   if constexpr (std::is_same_v<T, float>) {
-    using detail::sgemm::Order;
-    if (!packed1) detail::sgemm::pack(base, w1, K, Order::col_major, K, H);
-    if (!packed2) detail::sgemm::pack(base + size1, w2, H, Order::col_major, H, N);
+    if (size1) detail::pack_weight(base, p, w1, H, K);
+    if (size2) detail::pack_weight(base + size1, p, w2, N, H);
   }
-  const T* const p1 = packed1 ? packed1 : base;
-  const T* const p2 = packed2 ? packed2 : base + size1;
   auto run_tile = [&](int t, T* h) {
     const int i0 = t * mlp_tile_rows, r = std::min(mlp_tile_rows, M - i0);
     const T* x = in + std::size_t(i0) * K;
     T* y = out + std::size_t(i0) * N;
     const T* res = residual ? residual + std::size_t(i0) * N : nullptr;
     if constexpr (std::is_same_v<T, float>) {
-      using detail::sgemm::Order;
-      detail::sgemm::compute_rows(0, r, H, K, x, K, Order::row_major, p1, h, H, {false, b1, h});
-      detail::sgemm::compute_rows(0, r, N, H, h, H, Order::row_major, p2, y, N, {false, b2, nullptr, nullptr, res});
+      detail::compute_rows(p, r, H, K, x, p1, h, {false, b1, h});
+      detail::compute_rows(p, r, N, H, h, p2, y, {false, b2, nullptr, nullptr, res});
     } else {
       linear_bias_gelu_forward(h, h, x, w1, b1, r, K, H);
       if (res)

@@ -1,0 +1,238 @@
+#pragma once
+// bf16 GEMM: C[rows, cols] (+)= bf16(A) · bf16(B) with fp32 accumulation and sgemm's epilogues
+// (bias, residual, GELU, GELU'), on AVX512-BF16's vdpbf16ps, which does two multiply-adds per
+// fp32 lane per instruction: twice an fp32 FMA's.
+//
+// Operands are rounded to bfloat16 (round to nearest even, denormals to zero: what
+// vcvtneps2bf16 does) and their products summed in fp32. B is packed into panels of NR columns
+// whose entries are pairs of consecutive depths, [depth/2][NR] 32-bit words (low half: the even
+// depth); A is converted per MR-row × KC-depth block into [MR][KC/2] pairs, then each pair is
+// broadcast against the panel: acc[i][j] += a(i, 2p)·b(2p, j) + a(i, 2p+1)·b(2p+1, j).
+// Blocking, threading and the epilogue are sgemm's (sgemm.hpp).
+//
+// Where the translation unit is compiled without AVX512-BF16 (`native` is false), the bf16
+// products fall back to the float GEMM at compile time: Precision::bf16 then computes in fp32
+// (resolve()).
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+
+#include "tjepa/core/error.hpp"
+#include "tjepa/model/detail/sgemm.hpp"
+
+#if defined(__AVX512BF16__) && defined(__AVX512F__) && defined(__AVX512BW__)
+#include <immintrin.h>
+#define TJEPA_BF16_NATIVE 1
+#else
+#define TJEPA_BF16_NATIVE 0
+#endif
+
+namespace tjepa {
+
+// The arithmetic of the forward products: fp32, or bf16 operands with fp32 accumulation (master
+// weights, activations between the products and everything else stay fp32).
+enum class Precision { fp32, bf16 };
+
+inline const char* precision_name(Precision p) { return p == Precision::bf16 ? "bf16" : "fp32"; }
+
+}  // namespace tjepa
+
+namespace tjepa::detail::bgemm {
+
+using sgemm::Epilogue;
+using sgemm::Order;
+
+inline constexpr bool native = TJEPA_BF16_NATIVE != 0;
+
+// The precision a product runs in on this build: bf16 without the instructions runs fp32.
+constexpr Precision resolve(Precision p, bool have_bf16 = native) {
+  return p == Precision::bf16 && have_bf16 ? Precision::bf16 : Precision::fp32;
+}
+
+// bfloat16 bits of x as vcvtneps2bf16 makes them: round to nearest even, a denormal to a zero of
+// its sign, a NaN to a quiet NaN, overflow to infinity.
+inline std::uint16_t to_bf16(float x) {
+  std::uint32_t u = std::bit_cast<std::uint32_t>(x);
+  if ((u & 0x7f800000u) == 0) return std::uint16_t((u >> 16) & 0x8000u);
+  if ((u & 0x7fffffffu) > 0x7f800000u) return std::uint16_t((u >> 16) | 0x40u);
+  u += 0x7fffu + ((u >> 16) & 1u);
+  return std::uint16_t(u >> 16);
+}
+inline float from_bf16(std::uint16_t h) { return std::bit_cast<float>(std::uint32_t(h) << 16); }
+inline float round_bf16(float x) { return from_bf16(to_bf16(x)); }
+// Two depths of one column (or row) as the 32-bit word vdpbf16ps reads: lo in the low half.
+inline std::uint32_t pair(float lo, float hi) { return std::uint32_t(to_bf16(lo)) | std::uint32_t(to_bf16(hi)) << 16; }
+
+// Tiles: 16 fp32 lanes per vector; an MR × NV·16 block of C in 24 of the 32 registers (sgemm's).
+inline constexpr int L = 16;
+inline constexpr int MR = 6;
+inline constexpr int NV = 4;
+inline constexpr int NR = NV * L;
+inline constexpr int KC = 512;  // depths per block (even): a panel's block is 64 KiB, as sgemm's
+
+inline int depth_pairs(int depth) { return (depth + 1) / 2; }
+inline std::size_t packed_size(int cols, int depth) {
+  return std::size_t((cols + NR - 1) / NR) * std::size_t(depth_pairs(depth)) * NR;
+}
+
+// B(k, n) = b[k·ldb + n] (row-major) or b[n·ldb + k] (column-major: a PyTorch weight [cols,
+// depth] read as its transpose), depth pairs [p0, p1) of panel p → dst [panels][depth/2][NR]
+// (zero beyond cols and beyond an odd depth).
+inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p,
+                       int p0, int p1) {
+  const int n0 = p * NR, nc = std::min(NR, cols - n0);
+  std::uint32_t* d = dst + std::ptrdiff_t(p) * depth_pairs(depth) * NR;
+  auto at = [&](int k, int n) {
+    if (k >= depth) return 0.0f;
+    return order == Order::row_major ? b[std::ptrdiff_t(k) * ldb + n] : b[std::ptrdiff_t(n) * ldb + k];
+  };
+  for (int q = p0; q < p1; ++q) {
+    std::uint32_t* o = d + std::ptrdiff_t(q) * NR;
+    for (int j = 0; j < nc; ++j) o[j] = pair(at(2 * q, n0 + j), at(2 * q + 1, n0 + j));
+    std::fill(o + nc, o + NR, 0u);
+  }
+}
+inline void pack(std::uint32_t* packed, const float* B, std::ptrdiff_t ldb, Order b_order, int depth, int cols) {
+  for (int p = 0; p < (cols + NR - 1) / NR; ++p)
+    pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth_pairs(depth));
+}
+
+#if TJEPA_BF16_NATIVE
+static_assert(sgemm::NR == NR && sgemm::MR == MR, "bgemm shares sgemm's tile epilogue and row split");
+
+// A's rows [0, R) × depths [0, kc) → dst [R][kc/2] pairs (a zero high half after an odd kc);
+// a(i, k) = a[i·ars + k·acs]. Row-major rows convert 32 values per instruction.
+inline void pack_a(std::uint32_t* dst, int R, int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs) {
+  const int kc2 = depth_pairs(kc);
+  for (int i = 0; i < R; ++i) {
+    std::uint32_t* o = dst + i * kc2;
+    const float* row = a + i * ars;
+    if (acs == 1) {
+      for (int k = 0; k < kc; k += 2 * L) {
+        const int n = std::min(2 * L, kc - k);
+        const __mmask16 lo = n >= L ? __mmask16(0xffff) : __mmask16((1u << n) - 1);
+        const __mmask16 hi = n >= 2 * L ? __mmask16(0xffff) : n > L ? __mmask16((1u << (n - L)) - 1) : __mmask16(0);
+        const __m512bh v =
+            _mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(hi, row + k + L), _mm512_maskz_loadu_ps(lo, row + k));
+        const __mmask16 out = (n + 1) / 2 >= L ? __mmask16(0xffff) : __mmask16((1u << ((n + 1) / 2)) - 1);
+        _mm512_mask_storeu_epi32(o + k / 2, out, std::bit_cast<__m512i>(v));
+      }
+    } else {
+      for (int q = 0; q < kc2; ++q)
+        o[q] = pair(row[2 * q * acs], 2 * q + 1 < kc ? row[(2 * q + 1) * acs] : 0.0f);
+    }
+  }
+}
+
+// 32 bf16 as the 16 pairs vdpbf16ps reads (a no-op: the same 512 bits).
+inline __m512bh as_bf16(__m512i v) { return std::bit_cast<__m512bh>(v); }
+
+// acc[R][NV·16] = Σ over kc2 depth pairs of a [R][lda2] pairs against b [kc2][NR].
+template <int R>
+[[gnu::noinline]] void depth_loop(int kc2, const std::uint32_t* a, int lda2, const std::uint32_t* b, float* acc_out) {
+  __m512 acc[R][NV];
+#pragma GCC unroll 8
+  for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
+    for (int j = 0; j < NV; ++j) acc[i][j] = _mm512_setzero_ps();
+  for (int q = 0; q < kc2; ++q) {
+    __m512i bv[NV];
+#pragma GCC unroll 4
+    for (int j = 0; j < NV; ++j) bv[j] = _mm512_load_si512(b + std::ptrdiff_t(q) * NR + j * L);
+#pragma GCC unroll 8
+    for (int i = 0; i < R; ++i) {
+      const __m512i ai = _mm512_set1_epi32(int(a[i * lda2 + q]));
+#pragma GCC unroll 4
+      for (int j = 0; j < NV; ++j) acc[i][j] = _mm512_dpbf16_ps(acc[i][j], as_bf16(ai), as_bf16(bv[j]));
+    }
+  }
+#pragma GCC unroll 8
+  for (int i = 0; i < R; ++i)
+#pragma GCC unroll 4
+    for (int j = 0; j < NV; ++j) _mm512_store_ps(acc_out + i * NR + j * L, acc[i][j]);
+}
+
+template <int R>
+void micro_kernel(int kc2, const std::uint32_t* a, const std::uint32_t* b, float* c, std::ptrdiff_t ldc, int cols,
+                  const float* c_in, const float* bias, float* g, const float* gg) {
+  sgemm::prefetch_tile<R, NV>(c, ldc, c_in, gg);
+  alignas(64) float tile[R * NR];
+  depth_loop<R>(kc2, a, kc2, b, tile);
+  sgemm::finish_tile<R, NV>(tile, c, ldc, cols, c_in, bias, g, gg);
+}
+
+using Kernel = void (*)(int, const std::uint32_t*, const std::uint32_t*, float*, std::ptrdiff_t, int, const float*,
+                        const float*, float*, const float*);
+template <int... R>
+constexpr auto kernel_table(std::integer_sequence<int, R...>) {
+  return std::array<Kernel, sizeof...(R)>{&micro_kernel<R + 1>...};
+}
+inline constexpr std::array<Kernel, MR> kernels = kernel_table(std::make_integer_sequence<int, MR>{});
+
+// Rows [r0, r1) of C from the packed B.
+inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
+                         const std::uint32_t* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
+  const std::ptrdiff_t ars = a_order == Order::row_major ? lda : 1, acs = a_order == Order::row_major ? 1 : lda;
+  const int panels = (cols + NR - 1) / NR, depth2 = depth_pairs(depth);
+  alignas(64) std::uint32_t apack[MR * KC / 2];
+  for (int k0 = 0; k0 < depth; k0 += KC) {
+    const int kc = std::min(KC, depth - k0), kc2 = depth_pairs(kc);
+    const bool first = k0 == 0, last = k0 + kc == depth;
+    const float* c_in = !first || e.accumulate ? C : e.residual;
+    for (int i0 = r0; i0 < r1; i0 += MR) {
+      const int R = std::min(MR, r1 - i0);
+      pack_a(apack, R, kc, A + i0 * ars + k0 * acs, ars, acs);
+      const Kernel kern = kernels[std::size_t(R - 1)];
+      for (int p = 0; p < panels; ++p) {
+        const int n0 = p * NR;
+        const std::uint32_t* b = packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR;
+        kern(kc2, apack, b, C + i0 * ldc + n0, ldc, std::min(NR, cols - n0), c_in ? c_in + i0 * ldc + n0 : nullptr,
+             first && e.bias ? e.bias + n0 : nullptr, last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
+             last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr);
+      }
+    }
+  }
+}
+
+#endif  // TJEPA_BF16_NATIVE
+
+// C (+)= A · B per the epilogue, B packed beforehand (pack(), packed_size()). depth ≥ 1. Only on
+// a native build (the fallback packs float panels instead: see kernels::PackedWeights).
+inline void gemm_packed(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
+                        const std::uint32_t* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e = {}) {
+#if TJEPA_BF16_NATIVE
+  if (rows <= 0 || cols <= 0) return;
+  sgemm::run_product(rows, cols, depth, 0, [](int) {}, [&](int r0, int r1) {
+    compute_rows(r0, r1, cols, depth, A, lda, a_order, packed, C, ldc, e);
+  });
+#else
+  (void)rows, (void)cols, (void)depth, (void)A, (void)lda, (void)a_order, (void)packed, (void)C, (void)ldc, (void)e;
+  fail<std::logic_error>("bgemm::gemm_packed: this build has no AVX512-BF16");
+#endif
+}
+
+// sgemm::gemm's contract in bf16 (Native) or, without the instructions, sgemm::gemm itself.
+template <bool Native = native>
+void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order, const float* B,
+          std::ptrdiff_t ldb, Order b_order, float* C, std::ptrdiff_t ldc, const Epilogue& e = {}) {
+  if constexpr (!Native) {
+    sgemm::gemm(rows, cols, depth, A, lda, a_order, B, ldb, b_order, C, ldc, e);
+  } else {
+    if (rows <= 0 || cols <= 0) return;
+    if (depth <= 0) return sgemm::empty_product(rows, cols, C, ldc, e);
+    thread_local AlignedVector<std::uint32_t> pack_buffer;
+    std::uint32_t* packed = grow(pack_buffer, packed_size(cols, depth));
+    // Packing tasks of one panel × one block of depth pairs.
+    const int pairs = depth_pairs(depth), kblocks = (pairs + KC / 2 - 1) / (KC / 2), panels = (cols + NR - 1) / NR;
+    sgemm::run_product(
+        rows, cols, depth, panels * kblocks,
+        [&](int task) {
+          const int kb = task % kblocks;
+          pack_panel(packed, B, ldb, b_order, depth, cols, task / kblocks, kb * KC / 2,
+                     std::min(pairs, (kb + 1) * KC / 2));
+        },
+        [&](int r0, int r1) { compute_rows(r0, r1, cols, depth, A, lda, a_order, packed, C, ldc, e); });
+  }
+}
+
+}  // namespace tjepa::detail::bgemm
