@@ -31,7 +31,9 @@ double block_flops(double tokens, double L, double d) { return tokens * (24 * d 
 
 // One step of `model` on batch x [B, N, token width] with masks from `graph`'s collator.
 void run_jepa_step(benchmark::State& state, const tjepa::TaxelGraph& graph, const tjepa::JepaConfig& config,
-                   const std::vector<float>& x, int B) {
+                   const std::vector<float>& x, int B, tjepa::Precision precision) {
+  if (precision == tjepa::Precision::bf16 && !tjepa::detail::bgemm::native)
+    return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
 #ifdef _OPENMP
   const int previous = omp_get_max_threads();
   omp_set_num_threads(static_cast<int>(state.range(0)));
@@ -47,7 +49,9 @@ void run_jepa_step(benchmark::State& state, const tjepa::TaxelGraph& graph, cons
   tjepa::AdamW<float> opt(model.trainable());
   const auto schedule = tjepa::TrainingSchedule::reference(500, 100, 30);
   const tjepa::MaskBatch masks = collator.sample(B, 3, 0);
-  tjepa::JepaStep<float> step(model, tjepa::JepaStepConfig{});  // drop-path 0.3, as the reference
+  tjepa::JepaStepConfig step_config;  // drop-path 0.3, as the reference
+  step_config.precision = precision;
+  tjepa::JepaStep<float> step(model, step_config);
   // FLOPs of one step with these masks.
   const double d = config.encoder.dim, K = masks.K;
   double flops = block_flops(double(B) * N, N, d) * config.encoder.depth;  // target encoder, forward only
@@ -83,18 +87,22 @@ void run_jepa_step(benchmark::State& state, const tjepa::TaxelGraph& graph, cons
 #endif
 }
 
-void BM_JepaTrainStep(benchmark::State& state) {
+void allegro_step(benchmark::State& state, tjepa::Precision precision) {
   const int B = 8;
   const auto skin = tjepa::layouts::allegro_xela();
   const int N = skin.graph.num_nodes();
   tjepa::Rng rng(2);
   std::vector<float> x(static_cast<std::size_t>(B) * N * 30);
   for (auto& v : x) v = static_cast<float>(rng.normal());
-  run_jepa_step(state, skin.graph, tjepa::JepaConfig::reference(N, 30, 3), x, B);
+  run_jepa_step(state, skin.graph, tjepa::JepaConfig::reference(N, 30, 3), x, B, precision);
 }
+void BM_JepaTrainStep(benchmark::State& state) { allegro_step(state, tjepa::Precision::fp32); }
 BENCHMARK(BM_JepaTrainStep)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->Iterations(4)->UseRealTime();
+// The same step with bf16 products (JepaStepConfig::precision).
+void BM_JepaTrainStepBf16(benchmark::State& state) { allegro_step(state, tjepa::Precision::bf16); }
+BENCHMARK(BM_JepaTrainStepBf16)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->Iterations(4)->UseRealTime();
 
-void BM_JepaTrainStepDeco(benchmark::State& state) {
+void deco_step(benchmark::State& state, tjepa::Precision precision) {
   const int B = 8, tau = 3, axes = 1;
   const tjepa::Skin hands = tjepa::layouts::inspire_hands();
   const tjepa::Grouping grouping = tjepa::layouts::deco50_grouping(hands);
@@ -107,8 +115,11 @@ void BM_JepaTrainStepDeco(benchmark::State& state) {
   tjepa::gather_groups(windows.data(), B, taxels, tau, axes, grouping.members.data(), G, grouping.max_size, x.data());
   tjepa::JepaConfig config = tjepa::JepaConfig::reference(G, tau * axes, axes);
   config.group_size = grouping.sizes;
-  run_jepa_step(state, grouping.graph, config, x, B);
+  run_jepa_step(state, grouping.graph, config, x, B, precision);
 }
+void BM_JepaTrainStepDeco(benchmark::State& state) { deco_step(state, tjepa::Precision::fp32); }
 BENCHMARK(BM_JepaTrainStepDeco)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->Iterations(4)->UseRealTime();
+void BM_JepaTrainStepDecoBf16(benchmark::State& state) { deco_step(state, tjepa::Precision::bf16); }
+BENCHMARK(BM_JepaTrainStepDecoBf16)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->Iterations(4)->UseRealTime();
 
 }  // namespace

@@ -40,6 +40,7 @@ void add_run_overrides(CLI::App* app, nlohmann::json& j) {
   run_override<int>(app, "--warmup", "warmup_steps", j, "learning-rate warm-up steps");
   run_override<double>(app, "--lr", "lr", j, "peak learning rate");
   run_override<double>(app, "--drop-path", "drop_path", j, "stochastic depth rate");
+  run_override<std::string>(app, "--precision", "precision", j, "arithmetic of the products: fp32 or bf16 (AVX512-BF16)");
   run_override<double>(app, "--ema-start", "ema_start", j, "initial EMA momentum of the target encoder");
   run_override<double>(app, "--tokenizer-bias", "tokenizer_bias_std", j, "std of the tokenizer's initial bias (reference: 0)");
   run_override<std::uint64_t>(app, "--seed", "seed", j, "random seed (init, masks, data order, simulation)");

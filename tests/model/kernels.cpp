@@ -348,6 +348,26 @@ TEST_SUITE("nn") {
     detail::bgemm::pack_a(packed, 1, 77, row.data(), 77, 1);
     for (int q = 0; q < 39; ++q)
       CHECK(packed[q] == detail::bgemm::pair(row[std::size_t(2 * q)], 2 * q + 1 < 77 ? row[std::size_t(2 * q + 1)] : 0.0f));
+    // Column-major A ([kc/2][MR] pairs), and B's panels in both orders, against the scalar packing.
+    using detail::sgemm::Order;
+    namespace bg = detail::bgemm;
+    const int depth = 37, cols = 83;  // odd depth, a partial second panel
+    const std::vector<float> m = random_vector<float>(std::size_t(depth) * cols, rng);
+    alignas(64) std::uint32_t acol[19 * bg::MR] = {};
+    bg::pack_a(acol, 5, depth, m.data(), 1, cols);  // a(i, k) = m[k·cols + i], rows 0..4
+    for (int q = 0; q < 19; ++q)
+      for (int i = 0; i < 5; ++i)
+        CHECK(acol[q * bg::MR + i] == bg::pair(m[std::size_t(2 * q) * cols + i],
+                                               2 * q + 1 < depth ? m[std::size_t(2 * q + 1) * cols + i] : 0.0f));
+    for (const Order order : {Order::row_major, Order::col_major}) {
+      const std::ptrdiff_t ldb = order == Order::row_major ? cols : depth;
+      AlignedVector<std::uint32_t> fast(bg::packed_size(cols, depth), 7u), ref(fast.size(), 9u);
+      for (int p = 0; p < 2; ++p) {
+        bg::pack_panel(fast.data(), m.data(), ldb, order, depth, cols, p, 0, 19);
+        bg::pack_panel_ref(ref.data(), m.data(), ldb, order, depth, cols, p, 0, 19);
+      }
+      CHECK(fast == ref);
+    }
 #endif
   }
 

@@ -120,7 +120,7 @@ struct SelfAttention {
     const std::size_t Mq = std::size_t(B) * r.Lq();
     T* dqkv = scratch.dqkv;
     detail::parallel_fill(scratch.datt, scratch.datt + Mq * d, T(0));
-    proj.backward(ps, dy, saved.att, scratch.datt, int(Mq));  // y = att · Wprojᵀ + b
+    proj.backward(ps, dy, saved.att, scratch.datt, int(Mq), ws.precision);  // y = att · Wprojᵀ + b
     detail::parallel_fill(dqkv, dqkv + std::size_t(B) * L * 3 * d, T(0));
     const kernels::AttentionShape s = head_shape(L, q_from);
     kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(s);
@@ -135,7 +135,7 @@ struct SelfAttention {
                                   saved.lse + std::size_t(bh) * L, scratch.datt + oo, dqkv + qo, dqkv + ko,
                                   dqkv + ko + d, aws[detail::thread_id()]);
     }
-    qkv.backward(ps, dqkv, x, dx, B * L);  // qkv = x · Wqkvᵀ + b
+    qkv.backward(ps, dqkv, x, dx, B * L, ws.precision);  // qkv = x · Wqkvᵀ + b
   }
 };
 

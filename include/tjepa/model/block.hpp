@@ -210,7 +210,7 @@ struct BlockStack {
         }
         detail::parallel_fill(dln + q * d, dln + (q + rows) * d, T(0));
         blk.mlp.backward(ps, g2, c.ln2.data() + o + q * d, c.h_pre.data() + std::size_t(i) * M * hid + q * hid,
-                         h + q * hid, dh + q * hid, dln + q * d, rows);
+                         h + q * hid, dh + q * hid, dln + q * d, rows, ws.precision);
         blk.norm2.backward(ps, dln + q * d, c.x_mid.data() + o + q * d, c.mean2.data() + r + q,
                            c.rstd2.data() + r + q, gq + q * d, rows);
       });

@@ -84,11 +84,11 @@ struct LinearParams {
                         kernels::PackedWeights<T>* cache = nullptr) const {
     kernels::linear_forward_residual(y, r, x, ps.value(weight), b(ps), M, in, out, plan(ps, cache));
   }
-  // dx (may be nullptr) += dy · W; dW += dyᵀ · x; db += Σ dy
+  // dx (may be nullptr) += dy · W; dW += dyᵀ · x; db += Σ dy. precision: of the two products.
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dy, const T* x, T* dx, int M) const {
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, T* dx, int M, Precision precision = Precision::fp32) const {
     kernels::linear_backward(dx, ps.grad(weight), has_bias ? ps.grad(bias) : nullptr, dy, x, ps.value(weight), M, in,
-                             out, true);
+                             out, true, precision);
   }
 };
 

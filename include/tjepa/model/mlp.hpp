@@ -50,14 +50,15 @@ struct Mlp {
 
   // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]; the parameters' gradients +=. h, dh
   // [M, hidden] are scratch (h is recomputed from h_pre rather than kept: the largest activation
-  // of a block).
+  // of a block). precision: of the products.
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M) const {
+  void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M,
+                Precision precision = Precision::fp32) const {
     kernels::gelu_forward(h, h_pre, std::size_t(M) * std::size_t(fc1.out));
-    fc2.backward(ps, dy, h, static_cast<T*>(nullptr), M);  // y = h · W2ᵀ + b2: dW2, db2
+    fc2.backward(ps, dy, h, static_cast<T*>(nullptr), M, precision);  // y = h · W2ᵀ + b2: dW2, db2
     // dh = ∂L/∂h_pre = (dy · W2) ⊙ gelu'(h_pre), one fused product.
-    kernels::linear_backward_input_gelu(dh, dy, ps.value(fc2.weight), h_pre, M, fc2.in, fc2.out);
-    fc1.backward(ps, dh, x, dx, M);  // h_pre = x · W1ᵀ + b1
+    kernels::linear_backward_input_gelu(dh, dy, ps.value(fc2.weight), h_pre, M, fc2.in, fc2.out, precision);
+    fc1.backward(ps, dh, x, dx, M, precision);  // h_pre = x · W1ᵀ + b1
   }
 };
 

@@ -57,6 +57,7 @@ struct TrainConfig {
   double drop_path = 0.0;
   bool target_drop_path = true;
   double clip_grad_norm = 10.0;
+  std::string precision = "fp32";  // of the products: "fp32" or "bf16" (JepaStepConfig::precision)
   // Optimizer and schedules (in optimizer steps).
   std::int64_t steps = 600, warmup_steps = 60;
   int batch = 32;
@@ -80,6 +81,7 @@ struct TrainConfig {
     f("loss", c.loss), f("normalize_targets", c.normalize_targets), f("standardize_targets", c.standardize_targets);
     f("predictor_pos_from_context", c.predictor_pos_from_context);
     f("drop_path", c.drop_path), f("target_drop_path", c.target_drop_path), f("clip_grad_norm", c.clip_grad_norm);
+    f("precision", c.precision);
     f("steps", c.steps), f("warmup_steps", c.warmup_steps), f("batch", c.batch);
     f("lr", c.lr), f("start_lr", c.start_lr), f("final_lr", c.final_lr);
     f("wd_start", c.wd_start), f("wd_end", c.wd_end);
@@ -169,6 +171,7 @@ struct TrainConfig {
     check(min_context_tokens >= 1, "min_context_tokens", min_context_tokens, ">= 1");
     check(loss == "mse" || loss == "smooth_l1", "loss", loss, "'mse' or 'smooth_l1'");
     check(drop_path >= 0 && drop_path < 1, "drop_path", drop_path, "in [0, 1)");
+    check(precision == "fp32" || precision == "bf16", "precision", precision, "'fp32' or 'bf16'");
     check(finite_pos(clip_grad_norm), "clip_grad_norm", clip_grad_norm, "> 0");
     check(steps > 0, "steps", steps, "> 0");
     check(warmup_steps >= 0 && warmup_steps <= steps, "warmup_steps", warmup_steps, "in [0, steps]");
@@ -219,6 +222,7 @@ struct TrainConfig {
     c.drop_path = drop_path;
     c.target_drop_path = target_drop_path;
     c.clip_grad_norm = clip_grad_norm;
+    c.precision = precision == "bf16" ? Precision::bf16 : Precision::fp32;
     return c;
   }
   AdamWConfig adamw() const { return AdamWConfig{beta1, beta2, eps}; }

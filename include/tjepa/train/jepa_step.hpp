@@ -55,9 +55,14 @@ struct JepaStepConfig {
   double drop_path = 0.3;                 // the reference's stochastic depth in every block
   bool target_drop_path = true;           // the reference's target encoder runs in train mode too
   double clip_grad_norm = 10.0;
+  // The products' arithmetic in every forward and backward of the step (Workspace::precision):
+  // bf16 operands with fp32 accumulation, or fp32. Parameters, gradients, optimizer state, EMA,
+  // attention, norms and the loss stay fp32 either way.
+  Precision precision = Precision::fp32;
 
   nlohmann::json to_json() const {
     return {{"loss", to_string(loss)},       {"normalize_targets", normalize_targets},
+            {"precision", precision_name(precision)},
             {"standardize_targets", standardize_targets},
             {"predictor_pos_from_context", predictor_pos_from_context},
             {"drop_path", drop_path},        {"target_drop_path", target_drop_path},
@@ -121,7 +126,9 @@ class JepaStep {
  public:
   // The model must outlive the step. loss: the regression loss of one target (empty: cfg.loss).
   explicit JepaStep(JepaModel<T>& model, JepaStepConfig cfg = {}, JepaLoss<T> loss = {})
-      : model_(model), cfg_(cfg), loss_(loss ? std::move(loss) : jepa_loss_of<T>(cfg.loss)) {}
+      : model_(model), cfg_(cfg), loss_(loss ? std::move(loss) : jepa_loss_of<T>(cfg.loss)) {
+    w_.ws.precision = cfg.precision;
+  }
 
   const JepaStepConfig& config() const { return cfg_; }
   JepaWorkspace<T>& workspace() { return w_; }

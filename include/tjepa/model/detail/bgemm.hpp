@@ -77,9 +77,9 @@ inline std::size_t packed_size(int cols, int depth) {
 
 // B(k, n) = b[k·ldb + n] (row-major) or b[n·ldb + k] (column-major: a PyTorch weight [cols,
 // depth] read as its transpose), depth pairs [p0, p1) of panel p → dst [panels][depth/2][NR]
-// (zero beyond cols and beyond an odd depth).
-inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p,
-                       int p0, int p1) {
+// (zero beyond cols and beyond an odd depth). The scalar specification of pack_panel below.
+inline void pack_panel_ref(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols,
+                           int p, int p0, int p1) {
   const int n0 = p * NR, nc = std::min(NR, cols - n0);
   std::uint32_t* d = dst + std::ptrdiff_t(p) * depth_pairs(depth) * NR;
   auto at = [&](int k, int n) {
@@ -92,44 +92,83 @@ inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, O
     std::fill(o + nc, o + NR, 0u);
   }
 }
-inline void pack(std::uint32_t* packed, const float* B, std::ptrdiff_t ldb, Order b_order, int depth, int cols) {
-  for (int p = 0; p < (cols + NR - 1) / NR; ++p)
-    pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth_pairs(depth));
-}
 
 #if TJEPA_BF16_NATIVE
 static_assert(sgemm::NR == NR && sgemm::MR == MR, "bgemm shares sgemm's tile epilogue and row split");
 
-// A's rows [0, R) × depths [0, kc) → dst [R][kc/2] pairs (a zero high half after an odd kc);
-// a(i, k) = a[i·ars + k·acs]. Row-major rows convert 32 values per instruction.
+inline __mmask16 first_lanes(int n) { return n >= L ? __mmask16(0xffff) : n <= 0 ? __mmask16(0) : __mmask16((1u << n) - 1); }
+
+// The pairs (lo[j], hi[j]) of the first n < 17 lanes as 16 words (zero beyond n; hi = nullptr:
+// zero high halves): both rows converted by one vcvtne2ps2bf16, then interleaved by vpermw.
+inline __m512i pairs16(const float* lo, const float* hi, int n) {
+  alignas(64) static constexpr std::uint16_t interleave[32] = {0, 16, 1, 17, 2,  18, 3,  19, 4,  20, 5,
+                                                                21, 6, 22, 7, 23, 8, 24, 9, 25, 10, 26,
+                                                                11, 27, 12, 28, 13, 29, 14, 30, 15, 31};
+  const __mmask16 m = first_lanes(n);
+  const __m512 l = _mm512_maskz_loadu_ps(m, lo), h = hi ? _mm512_maskz_loadu_ps(m, hi) : _mm512_setzero_ps();
+  return _mm512_permutexvar_epi16(_mm512_load_si512(interleave), std::bit_cast<__m512i>(_mm512_cvtne2ps_pbh(h, l)));
+}
+// The n < 33 consecutive values x[0, n) as ⌈n/2⌉ words, in order (zero beyond n).
+inline __m512i row_pairs(const float* x, int n) {
+  return std::bit_cast<__m512i>(
+      _mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(first_lanes(n - L), x + L), _mm512_maskz_loadu_ps(first_lanes(n), x)));
+}
+
+// pack_panel_ref's result, vectorized: row-major B converts two depths × 16 columns per step;
+// column-major B converts 32 depths of a column per step and stores its words down the panel.
+inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p,
+                       int p0, int p1) {
+  const int n0 = p * NR, nc = std::min(NR, cols - n0);
+  std::uint32_t* d = dst + std::ptrdiff_t(p) * depth_pairs(depth) * NR;
+  if (order == Order::row_major) {
+    for (int q = p0; q < p1; ++q) {
+      const float* lo = b + std::ptrdiff_t(2 * q) * ldb + n0;
+      const float* hi = 2 * q + 1 < depth ? lo + ldb : nullptr;
+#pragma GCC unroll 4
+      for (int j = 0; j < NV; ++j)
+        _mm512_store_si512(d + std::ptrdiff_t(q) * NR + j * L, pairs16(lo + j * L, hi ? hi + j * L : nullptr, nc - j * L));
+    }
+    return;
+  }
+  for (int j = 0; j < NR; ++j) {
+    if (j >= nc) {
+      for (int q = p0; q < p1; ++q) d[std::ptrdiff_t(q) * NR + j] = 0u;
+      continue;
+    }
+    const float* col = b + std::ptrdiff_t(n0 + j) * ldb;
+    for (int q0 = p0; q0 < p1; q0 += L) {
+      alignas(64) std::uint32_t w[L];
+      _mm512_store_si512(w, row_pairs(col + 2 * q0, std::min(2 * L, depth - 2 * q0)));
+      for (int q = q0; q < std::min(p1, q0 + L); ++q) d[std::ptrdiff_t(q) * NR + j] = w[q - q0];
+    }
+  }
+}
+
+// A's rows [0, R) × depths [0, kc) as bf16 pairs for the micro-kernel, a(i, k) = a[i·ars + k·acs]:
+// row-major A (acs = 1) → dst [R][kc/2] (32 depths of a row per conversion); column-major A →
+// dst [kc/2][MR] (two depths × R rows per conversion). Zero high halves after an odd kc.
 inline void pack_a(std::uint32_t* dst, int R, int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs) {
   const int kc2 = depth_pairs(kc);
-  for (int i = 0; i < R; ++i) {
-    std::uint32_t* o = dst + i * kc2;
-    const float* row = a + i * ars;
-    if (acs == 1) {
-      for (int k = 0; k < kc; k += 2 * L) {
-        const int n = std::min(2 * L, kc - k);
-        const __mmask16 lo = n >= L ? __mmask16(0xffff) : __mmask16((1u << n) - 1);
-        const __mmask16 hi = n >= 2 * L ? __mmask16(0xffff) : n > L ? __mmask16((1u << (n - L)) - 1) : __mmask16(0);
-        const __m512bh v =
-            _mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(hi, row + k + L), _mm512_maskz_loadu_ps(lo, row + k));
-        const __mmask16 out = (n + 1) / 2 >= L ? __mmask16(0xffff) : __mmask16((1u << ((n + 1) / 2)) - 1);
-        _mm512_mask_storeu_epi32(o + k / 2, out, std::bit_cast<__m512i>(v));
-      }
-    } else {
-      for (int q = 0; q < kc2; ++q)
-        o[q] = pair(row[2 * q * acs], 2 * q + 1 < kc ? row[(2 * q + 1) * acs] : 0.0f);
-    }
+  if (acs == 1) {
+    for (int i = 0; i < R; ++i)
+      for (int k = 0; k < kc; k += 2 * L)
+        _mm512_mask_storeu_epi32(dst + i * kc2 + k / 2, first_lanes((std::min(2 * L, kc - k) + 1) / 2),
+                                 row_pairs(a + i * ars + k, std::min(2 * L, kc - k)));
+    return;
+  }
+  for (int q = 0; q < kc2; ++q) {
+    const float* lo = a + std::ptrdiff_t(2 * q) * acs;
+    _mm512_mask_storeu_epi32(dst + q * MR, first_lanes(R), pairs16(lo, 2 * q + 1 < kc ? lo + acs : nullptr, R));
   }
 }
 
 // 32 bf16 as the 16 pairs vdpbf16ps reads (a no-op: the same 512 bits).
 inline __m512bh as_bf16(__m512i v) { return std::bit_cast<__m512bh>(v); }
 
-// acc[R][NV·16] = Σ over kc2 depth pairs of a [R][lda2] pairs against b [kc2][NR].
-template <int R>
-[[gnu::noinline]] void depth_loop(int kc2, const std::uint32_t* a, int lda2, const std::uint32_t* b, float* acc_out) {
+// acc[R][NV·16] = Σ over kc2 depth pairs of A's packed pairs (QMajor: [kc2][MR], else [R][kc2])
+// against b [kc2][NR].
+template <int R, bool QMajor>
+[[gnu::noinline]] void depth_loop(int kc2, const std::uint32_t* a, const std::uint32_t* b, float* acc_out) {
   __m512 acc[R][NV];
 #pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
@@ -141,7 +180,7 @@ template <int R>
     for (int j = 0; j < NV; ++j) bv[j] = _mm512_load_si512(b + std::ptrdiff_t(q) * NR + j * L);
 #pragma GCC unroll 8
     for (int i = 0; i < R; ++i) {
-      const __m512i ai = _mm512_set1_epi32(int(a[i * lda2 + q]));
+      const __m512i ai = _mm512_set1_epi32(int(QMajor ? a[q * MR + i] : a[i * kc2 + q]));
 #pragma GCC unroll 4
       for (int j = 0; j < NV; ++j) acc[i][j] = _mm512_dpbf16_ps(acc[i][j], as_bf16(ai), as_bf16(bv[j]));
     }
@@ -152,22 +191,24 @@ template <int R>
     for (int j = 0; j < NV; ++j) _mm512_store_ps(acc_out + i * NR + j * L, acc[i][j]);
 }
 
-template <int R>
+template <int R, bool QMajor>
 void micro_kernel(int kc2, const std::uint32_t* a, const std::uint32_t* b, float* c, std::ptrdiff_t ldc, int cols,
                   const float* c_in, const float* bias, float* g, const float* gg) {
   sgemm::prefetch_tile<R, NV>(c, ldc, c_in, gg);
   alignas(64) float tile[R * NR];
-  depth_loop<R>(kc2, a, kc2, b, tile);
+  depth_loop<R, QMajor>(kc2, a, b, tile);
   sgemm::finish_tile<R, NV>(tile, c, ldc, cols, c_in, bias, g, gg);
 }
 
 using Kernel = void (*)(int, const std::uint32_t*, const std::uint32_t*, float*, std::ptrdiff_t, int, const float*,
                         const float*, float*, const float*);
-template <int... R>
+template <bool QMajor, int... R>
 constexpr auto kernel_table(std::integer_sequence<int, R...>) {
-  return std::array<Kernel, sizeof...(R)>{&micro_kernel<R + 1>...};
+  return std::array<Kernel, sizeof...(R)>{&micro_kernel<R + 1, QMajor>...};
 }
-inline constexpr std::array<Kernel, MR> kernels = kernel_table(std::make_integer_sequence<int, MR>{});
+// kernels[A column-major][R - 1]
+inline constexpr std::array<std::array<Kernel, MR>, 2> kernels = {
+    kernel_table<false>(std::make_integer_sequence<int, MR>{}), kernel_table<true>(std::make_integer_sequence<int, MR>{})};
 
 // Rows [r0, r1) of C from the packed B.
 inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
@@ -182,7 +223,7 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
     for (int i0 = r0; i0 < r1; i0 += MR) {
       const int R = std::min(MR, r1 - i0);
       pack_a(apack, R, kc, A + i0 * ars + k0 * acs, ars, acs);
-      const Kernel kern = kernels[std::size_t(R - 1)];
+      const Kernel kern = kernels[a_order == Order::col_major][std::size_t(R - 1)];
       for (int p = 0; p < panels; ++p) {
         const int n0 = p * NR;
         const std::uint32_t* b = packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR;
@@ -195,6 +236,16 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
 }
 
 #endif  // TJEPA_BF16_NATIVE
+
+// The whole of B packed: [panels][depth/2][NR] (packed_size(cols, depth) words).
+inline void pack(std::uint32_t* packed, const float* B, std::ptrdiff_t ldb, Order b_order, int depth, int cols) {
+  for (int p = 0; p < (cols + NR - 1) / NR; ++p)
+#if TJEPA_BF16_NATIVE
+    pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth_pairs(depth));
+#else
+    pack_panel_ref(packed, B, ldb, b_order, depth, cols, p, 0, depth_pairs(depth));
+#endif
+}
 
 // C (+)= A · B per the epilogue, B packed beforehand (pack(), packed_size()). depth ≥ 1. Only on
 // a native build (the fallback packs float panels instead: see kernels::PackedWeights).

@@ -71,6 +71,16 @@ inline void pack_weight(float* dst, Precision p, const float* w, int out, int in
   else
     sgemm::pack(dst, w, in, sgemm::Order::col_major, in, out);
 }
+// sgemm::gemm's product in precision p: bgemm::gemm for bf16 (the float GEMM without AVX512-BF16).
+inline void gemm(Precision p, int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, sgemm::Order a_order,
+                 const float* B, std::ptrdiff_t ldb, sgemm::Order b_order, float* C, std::ptrdiff_t ldc,
+                 const sgemm::Epilogue& e = {}) {
+  if (bgemm::resolve(p) == Precision::bf16)
+    bgemm::gemm(rows, cols, depth, A, lda, a_order, B, ldb, b_order, C, ldc, e);
+  else
+    sgemm::gemm(rows, cols, depth, A, lda, a_order, B, ldb, b_order, C, ldc, e);
+}
+
 // Rows [0, rows) of C[rows, cols] = A[rows, depth] · B per e, from B packed in precision p.
 inline void compute_rows(Precision p, int rows, int cols, int depth, const float* A, const void* packed, float* C,
                          const sgemm::Epilogue& e) {
@@ -90,16 +100,12 @@ inline void compute_rows(Precision p, int rows, int cols, int depth, const float
 inline void forward_gemm(float* out, const float* in, const float* w, kernels::WeightPlan plan, int M, int K, int N,
                          const sgemm::Epilogue& e) {
   using sgemm::Order;
-  if (bgemm::resolve(plan.precision) == Precision::bf16) {
-    if (plan.packed)
-      bgemm::gemm_packed(M, N, K, in, K, Order::row_major, bf16_panels(plan.packed), out, N, e);
-    else
-      bgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, e);
-  } else if (plan.packed) {
+  if (!plan.packed)
+    gemm(plan.precision, M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, e);
+  else if (bgemm::resolve(plan.precision) == Precision::bf16)
+    bgemm::gemm_packed(M, N, K, in, K, Order::row_major, bf16_panels(plan.packed), out, N, e);
+  else
     sgemm::gemm_packed(M, N, K, in, K, Order::row_major, fp32_panels(plan.packed), out, N, e);
-  } else {
-    sgemm::gemm(M, N, K, in, K, Order::row_major, w, K, Order::col_major, out, N, e);
-  }
 }
 }  // namespace tjepa::detail
 
@@ -186,23 +192,24 @@ void linear_forward_accumulate(T* out, const T* in, const T* w, const T* b, int 
 // Differentiates out = in · wᵀ + b:
 //   din[M, K] += dout · w,   dw[N, K] += doutᵀ · in,   db[N] += Σ_m dout[m, :].
 // Any of din, dw, db may be nullptr (not wanted). add_din = false: din = dout · w (overwritten,
-// so the caller need not zero it first).
+// so the caller need not zero it first). precision: of both products (float; bf16 operands, fp32
+// accumulation into fp32 gradients).
 template <class T>
 void linear_backward(T* din, T* dw, T* db, const T* dout, const T* in, const T* w, int M, int K,
-                     int N, bool add_din = true) {
+                     int N, bool add_din = true, Precision precision = Precision::fp32) {
   if constexpr (std::is_same_v<T, float>) {
     using detail::sgemm::Order;
-    if (din) detail::sgemm::gemm(M, K, N, dout, N, Order::row_major, w, K, Order::row_major, din, K, {add_din});
+    if (din) detail::gemm(precision, M, K, N, dout, N, Order::row_major, w, K, Order::row_major, din, K, {add_din});
     if (dw && N < K) {
       // Few outputs (fc2: 192 × 768): the product is computed as dwᵀ [K, N] = inᵀ · dout, whose
       // packed B (dout) per depth block is N columns instead of K and stays in L2, then added
       // transposed.
       thread_local AlignedVector<float> dwt;
       float* t = detail::grow(dwt, std::size_t(K) * std::size_t(N));
-      detail::sgemm::gemm(K, N, M, in, K, Order::col_major, dout, N, Order::row_major, t, N);
+      detail::gemm(precision, K, N, M, in, K, Order::col_major, dout, N, Order::row_major, t, N);
       detail::add_transposed(dw, t, K, N);
     } else if (dw) {
-      detail::sgemm::gemm(N, K, M, dout, N, Order::col_major, in, K, Order::row_major, dw, K, {true});
+      detail::gemm(precision, N, K, M, dout, N, Order::col_major, in, K, Order::row_major, dw, K, {true});
     }
   } else {
     if (din && !add_din) std::fill(din, din + std::size_t(M) * std::size_t(K), T(0));
@@ -288,11 +295,12 @@ void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, cons
 // The MLP's backward through fc2 and its GELU in one product: dpre[M, K] = (dout · w) ⊙ gelu'(pre)
 // for out = gelu(pre) · wᵀ + b (dout [M, N], w [N, K]). dpre is overwritten, not added to.
 template <class T>
-void linear_backward_input_gelu(T* dpre, const T* dout, const T* w, const T* pre, int M, int K, int N) {
+void linear_backward_input_gelu(T* dpre, const T* dout, const T* w, const T* pre, int M, int K, int N,
+                                Precision precision = Precision::fp32) {
   if constexpr (std::is_same_v<T, float>) {
     using detail::sgemm::Order;
-    detail::sgemm::gemm(M, K, N, dout, N, Order::row_major, w, K, Order::row_major, dpre, K,
-                        {false, nullptr, nullptr, pre});
+    detail::gemm(precision, M, K, N, dout, N, Order::row_major, w, K, Order::row_major, dpre, K,
+                 {false, nullptr, nullptr, pre});
   } else {
     const std::size_t n = std::size_t(M) * std::size_t(K);
     std::fill(dpre, dpre + n, T(0));
