@@ -46,6 +46,7 @@ for r in 1 2 3; do
   stream --rate 100 "${rt[@]}" --spin --controls > "$out/stream_spin_$r.txt" || true
   stream --rate 100 "${rt[@]}" > "$out/stream_sleep_$r.txt" || true
   stream --rate 0 > "$out/stream_rate0_$r.txt" || true
+  stream --rate 100 "${rt[@]}" --spin --precision bf16 > "$out/stream_bf16-spin_$r.txt" || true
 done
 /usr/bin/python3 bench/make_results.py "$out" > "$out/RESULTS.md"
 mv "$out/RESULTS.md" bench/RESULTS.md

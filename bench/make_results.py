@@ -223,7 +223,7 @@ def parse_stream(path):
 
 
 MODES = (("spin", "--rate 100 {rt}--spin --controls"), ("sleep", "--rate 100 {rt}(sleeping)"),
-         ("rate0", "--rate 0 (back to back)"))
+         ("rate0", "--rate 0 (back to back)"), ("bf16-spin", "--precision bf16 --rate 100 {rt}--spin"))
 streams = {mode: [s for s in (parse_stream(p) for p in sorted(d.glob(f"stream_{mode}_*.txt"))) if s]
            for mode, _ in MODES}
 sizes = sorted({k for runs in streams.values() for s in runs for k in s["memory"]})
@@ -309,7 +309,7 @@ if all_runs:
     mem = {k: median([s["memory"][k] for s in loop if k in s["memory"]]) for k in sizes}
     controls = "".join([f"; FMA control {fma:.3f}" if fma else ""] + [f", {k} KiB sweep {v:.3f}" for k, v in mem.items()])
     others = "".join(f"; {mode}: {median([s['ratio'] for s in streams[mode]]):.3f}"
-                     for mode, _ in MODES if streams[mode] and streams[mode] is not loop)
+                     for mode, _ in MODES if streams[mode] and streams[mode] is not loop and mode != "bf16-spin")
     goal("inference at 100 Hz: p99 within 10% of p50 (median of the runs)",
          f"{med:.3f} (runs: {', '.join(f'{r:.3f}' for r in ratios)}{controls}, medians{others})", med <= 1.10)
     if med > 1.10 and mem:
@@ -367,6 +367,16 @@ for N in (368, 528):
         goal22(f"bf16 JEPA step N {N}, {t} thread(s): ≥ 1.5× tjepa fp32", f"{fmt(x, '.2f')}×", x is not None and x >= 1.5)
         x = ratio(f"jepa_step/{N}", t, "torch_ms", "tjepa_bf16_ms")
         goal22(f"bf16 JEPA step N {N}, {t} thread(s): ≥ 2.5× PyTorch", f"{fmt(x, '.2f')}×", x is not None and x >= 2.5)
+b16 = streams.get("bf16-spin", [])
+if b16:
+    r16 = sorted(s["ratio"] for s in b16)
+    m16 = r16[len(r16) // 2]
+    a16 = max(s["allocations"] if s["allocations"] is not None else 1 for s in b16)
+    goal22("bf16 inference at 100 Hz: p99/p50 ≤ 1.10 (median of the runs) and zero allocations",
+           f"{m16:.3f} (runs: {', '.join(f'{r:.3f}' for r in r16)}; p50 {b16[0]['p50']} µs), allocations {a16}",
+           m16 <= 1.10 and a16 == 0)
+else:
+    goal22("bf16 inference at 100 Hz: p99/p50 ≤ 1.10 and zero allocations", "?", False)
 print("\n## Goals (issue 22)\n")
 print("Computed from the tables above by bench/make_results.py ('?': not measured in this run). "
       "PyTorch is the timm-style drop-path column of the JEPA step table.\n")

@@ -15,7 +15,7 @@
 // allocates nothing: every malloc of the process is counted and the example checks it.
 //
 //   streaming [--checkpoint runs/demo/checkpoint.safetensors] [--ticks 2000] [--rate 100] [--spin]
-//             [--realtime] [--stages] [--controls] [--memory-kib 1024 4096] [--repack]
+//             [--realtime] [--stages] [--controls] [--memory-kib 1024 4096] [--repack] [--precision bf16]
 // Prints latency p50 / p99 / max per tick and the allocations after warm-up. --stages times each
 // stage of every tick (StageClock) and says where the slowest ticks lose their time. --controls
 // then times fixed loops of the median tick's length the same way: FMAs in registers (what
@@ -255,6 +255,10 @@ int main(int argc, char** argv) {
   app.add_flag("--spin", spin, "busy-wait between ticks instead of sleeping (with --rate)");
   app.add_flag("--realtime", realtime,
                "run under SCHED_FIFO (priority 10), as a control loop would: other threads no longer preempt it");
+  std::string precision = "fp32";
+  app.add_option("--precision", precision, "arithmetic of the encoder's and probe's products")
+      ->check(CLI::IsMember({"fp32", "bf16"}))
+      ->capture_default_str();
   app.add_flag("--repack", repack, "pack the weights for the GEMM on every call, as training does (A/B of frozen weights)");
   app.add_flag("--stages", stages, "time each stage of every tick and show where the slowest ticks lose time");
   app.add_flag("--controls", controls, "then time an FMA loop and a memory sweep of the median tick's length the same way");
@@ -314,6 +318,7 @@ int main(int argc, char** argv) {
     std::vector<float> y(static_cast<std::size_t>(probe.outputs()));
     Workspace<float> ws;
     ws.frozen_weights = !repack;  // the encoder's weights are packed for the GEMM once, on the first tick
+    ws.precision = precision == "bf16" ? Precision::bf16 : Precision::fp32;
     StageClock clock;
     std::vector<std::vector<std::pair<const char*, double>>> stage_us;  // [tick] (stage, µs), made before the loop
     if (stages) {
@@ -365,9 +370,10 @@ int main(int argc, char** argv) {
     std::vector<double> sorted = timings.us;
     std::sort(sorted.begin(), sorted.end());
     auto pct = [&](double p) { return quantile(sorted, p); };
-    std::printf("streaming: %d taxels x %d axes, window of %d frames, encoder d=%d, %d blocks, %d heads%s\n", N, m, tau,
-                d, model->config.encoder.depth, model->config.encoder.heads,
-                checkpoint.empty() ? " (random weights)" : "");
+    std::printf("streaming: %d taxels x %d axes, window of %d frames, encoder d=%d, %d blocks, %d heads%s, %s products%s\n",
+                N, m, tau, d, model->config.encoder.depth, model->config.encoder.heads,
+                checkpoint.empty() ? " (random weights)" : "", precision_name(ws.precision),
+                ws.precision == Precision::bf16 && !detail::bgemm::native ? " (no AVX512-BF16: computed in fp32)" : "");
     std::printf("%d ticks after %d warm-up ticks, 1 thread%s%s\n", ticks, warmup,
                 rate > 0 ? (spin ? ", busy-waiting between ticks" : ", sleeping between ticks") : ", back to back",
                 realtime ? ", SCHED_FIFO" : "");
