@@ -68,7 +68,7 @@ inline constexpr int L = 16;
 inline constexpr int MR = 6;
 inline constexpr int NV = 4;
 inline constexpr int NR = NV * L;
-inline constexpr int KC = 512;  // depths per block (even): a panel's block is 64 KiB, as sgemm's
+inline constexpr int KC = 1024;  // depths per block (even): 128 KiB of a panel, A's 6 rows 12 KiB
 
 inline int depth_pairs(int depth) { return (depth + 1) / 2; }
 inline std::size_t packed_size(int cols, int depth) {
