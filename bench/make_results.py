@@ -165,7 +165,7 @@ if jepa:
           "batch 0; PyTorch gets fixed masks of the same sizes). N 368: the Allegro/Xela skin, m·τ = 30 "
           "per token (`BM_JepaTrainStep/<threads>`); N 528: DECO-50, 2124 taxels in groups of 4 and 5, "
           "τ = 3 (`BM_JepaTrainStepDeco/<threads>`). PyTorch (`jepa_step/<N>` in bench/compare_torch.py) "
-          "is written the way the reference's XelaJEPAModule runs the step, with timm-style drop-path "
+          "is written the way I-JEPA-style reference code runs the step, with timm-style drop-path "
           "(every sample's branch computed, then masked); tjepa skips a dropped sample's branch. "
           "The last columns time the reference's own DINOv2 NestedTensorBlock drop-path (at rates > 0.1 "
           "each branch runs on int(0.7·B) = 5 of the 8 samples), when measured. GFLOP: bench/train.cpp's "
