@@ -40,6 +40,14 @@ struct AttentionSaved {
   T* lse = nullptr;
 };
 
+// The precision of the attention products (QKᵀ, PV) of a forward: the workspace's, unless the
+// forward keeps its statistics for a backward, whose products are fp32 (they recompute P from
+// the saved log-sum-exp, which must come from the same arithmetic).
+template <class T>
+Precision attention_precision(const AttentionSaved<T>& saved, const Workspace<T>& ws) {
+  return saved.lse ? Precision::fp32 : ws.precision;
+}
+
 // A backward pass's scratch, shaped like the saved buffers of the same names.
 template <class T>
 struct AttentionScratch {
@@ -102,7 +110,8 @@ struct SelfAttention {
       kernels::attention_forward(s, k - d + std::size_t(q_from + r0) * 3 * d, k, k + d,
                                  r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr,
                                  saved.att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
-                                 saved.lse ? saved.lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()]);
+                                 saved.lse ? saved.lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()],
+                                 attention_precision(saved, ws));
     }
     ws.mark("attention");
     if (residual)
@@ -177,7 +186,7 @@ struct CrossAttention {
       kernels::attention_forward(s, saved.q + std::size_t(b) * d, k, k + d,
                                  r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr,
                                  saved.att + std::size_t(b) * d, saved.lse ? saved.lse + std::size_t(b) * heads : nullptr,
-                                 aws[detail::thread_id()]);
+                                 aws[detail::thread_id()], attention_precision(saved, ws));
     }
     if (residual)
       proj.forward_residual(ps, saved.att, residual, y, B);

@@ -272,9 +272,12 @@ void AttentionWorkspace<T>::reserve(const AttentionShape& shape) {
 // statistics (running max m and sum l, in base 2: scores scaled by c = scale * log2 e) are vectors
 // across queries and need no horizontal reductions; the output block is rescaled by
 // alpha = 2^(m_old - m_new) in the P V product. Only a [BK, BQ] tile of scores ever exists.
+// precision = bf16 (float, on AVX512-BF16): both products take bf16 operands (Q, K, V and the
+// tile's P rounded to bf16) and accumulate in fp32; the softmax stays fp32.
 template <class T>
 void attention_forward(const AttentionShape& s, const T* q, const T* k, const T* v,
-                       const std::uint8_t* key_valid, T* out, T* lse, AttentionWorkspace<T>& ws) {
+                       const std::uint8_t* key_valid, T* out, T* lse, AttentionWorkspace<T>& ws,
+                       Precision precision = Precision::fp32) {
   detail::check_forward_args("attention_forward", s, q, k, v, out);
   namespace A = detail::attn;
   using V = A::Vec<T>;
@@ -297,12 +300,32 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
   T *const l = base + lay.l, *const alpha = base + lay.alpha;
   const T c = static_cast<T>(A::log2e / std::sqrt(static_cast<double>(Dh)));
   const std::ptrdiff_t DhP = lay.DhP;
+#if TJEPA_BF16_NATIVE
+  constexpr bool can_bf16 = std::is_same_v<T, float>;
+  const bool bf16 = can_bf16 && detail::bgemm::resolve(precision) == Precision::bf16;
+  auto words = [base](std::ptrdiff_t off) { return reinterpret_cast<std::uint32_t*>(base + off); };
+  const std::ptrdiff_t Dh2 = lay.Dh2;
+#else
+  (void)precision;
+#endif
 
   for (int h = 0; h < s.H; ++h) {
     const int c0 = h * Dh;
-    A::pack_transposed(q + c0, s.ldq, nullptr, Lq, Dh, qt, lay.NqP, BQ);
-    A::pack_rows(k + c0, s.ldk, ws.keys.data(), nk, Dh, kp, DhP, nk);
-    A::pack_rows(v + c0, s.ldv, ws.keys.data(), nk, Dh, vp, DhP, nk);
+#if TJEPA_BF16_NATIVE
+    if constexpr (can_bf16) {
+      if (bf16) {
+        A::pack_row_pairs(q + c0, s.ldq, nullptr, Lq, Dh, words(lay.qt16), lay.NqP, BQ, true);
+        A::pack_row_pairs(k + c0, s.ldk, ws.keys.data(), nk, Dh, words(lay.kp16), nk, 0, false);
+        A::pack_pairs_across_rows(v + c0, s.ldv, ws.keys.data(), nk, Dh, words(lay.vp16), DhP);
+      }
+    }
+    if (!bf16)
+#endif
+    {
+      A::pack_transposed(q + c0, s.ldq, nullptr, Lq, Dh, qt, lay.NqP, BQ);
+      A::pack_rows(k + c0, s.ldk, ws.keys.data(), nk, Dh, kp, DhP, nk);
+      A::pack_rows(v + c0, s.ldv, ws.keys.data(), nk, Dh, vp, DhP, nk);
+    }
 
     for (int q0 = 0; q0 < Lq; q0 += BQ) {
       const int mq = std::min(BQ, Lq - q0);
@@ -315,12 +338,37 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
       for (int kb = 0; kb < nk; kb += BK) {
         const int kv = std::min(BK, nk - kb);
         // S^T [kv, nb*w] = K_tile Q_blk^T (unscaled); query columns past mq are 0 (zero padding).
-        A::gemm<T, A::Store::overwrite, A::MR_st<T>, A::NV_st<T>>(kv, nb * w, Dh, kp + kb * DhP, DhP, 1, qtb, BQ, st, BQ);
+#if TJEPA_BF16_NATIVE
+        if constexpr (can_bf16) {
+          if (bf16)
+            A::gemm<T, A::Store::overwrite, A::MR_st<T>, A::NV_st<T>, A::Bf16Dot>(
+                kv, nb * w, int(Dh2), words(lay.kp16) + kb * Dh2, Dh2, 1, words(lay.qt16) + q0 * Dh2, BQ, st, BQ);
+        }
+        if (!bf16)
+#endif
+          A::gemm<T, A::Store::overwrite, A::MR_st<T>, A::NV_st<T>>(kv, nb * w, Dh, kp + kb * DhP, DhP, 1, qtb, BQ, st,
+                                                                    BQ);
         if (nb == NB)  // a full query block: the statistics stay in registers
           A::online_softmax_tile<T, NB, true>(st, BQ, kv, nb, c, m, l, alpha);
         else
           A::online_softmax_tile<T, NB, false>(st, BQ, kv, nb, c, m, l, alpha);
         // O [mq, DhP] = alpha O + P V_tile, P read transposed out of the P^T tile.
+#if TJEPA_BF16_NATIVE
+        if constexpr (can_bf16) {
+          if (bf16) {
+            std::uint32_t* pt = words(lay.pt16);
+            A::pack_pairs_across_rows(st, BQ, nullptr, kv, nb * w, pt, BQ);
+            const std::uint32_t* vt = words(lay.vp16) + kb / 2 * DhP;
+            const int kv2 = (kv + 1) / 2;
+            if (kb == 0)
+              A::gemm<T, A::Store::overwrite, A::MR<T>, A::NV, A::Bf16Dot>(mq, int(DhP), kv2, pt, 1, BQ, vt, DhP, O, DhP);
+            else
+              A::gemm<T, A::Store::rescale_add, A::MR<T>, A::NV, A::Bf16Dot>(mq, int(DhP), kv2, pt, 1, BQ, vt, DhP, O,
+                                                                           DhP, alpha);
+            continue;
+          }
+        }
+#endif
         if (kb == 0)
           A::gemm<T, A::Store::overwrite>(mq, static_cast<int>(DhP), kv, st, 1, BQ, vp, DhP, O, DhP);
         else

@@ -4,6 +4,7 @@
 // micro-kernels on tiles, and the tile sizes. Everything uses xsimd's default architecture (the best
 // one the translation unit is compiled for: AVX-512, AVX2 or plain SSE2).
 #include <algorithm>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -12,6 +13,7 @@
 #include "tjepa/core/detail/vendor.hpp"
 
 #include "tjepa/core/detail/simd.hpp"
+#include "tjepa/model/detail/bgemm.hpp"
 
 namespace tjepa::detail::attn {
 
@@ -162,15 +164,37 @@ inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* 
 }
 
 // ---------------------------------------------------------------------------------------------
-// Micro-kernel: C[MR_, NV_*W] (op)= A[MR_, K] B[K, NV_*W].
+// Micro-kernel: C[MR_, NV_*W] (op)= A[MR_, K] B[K, NV_*W], over K steps of the dot product D:
+// FloatDot (one FMA per step and element), or Bf16Dot (operands bf16 pairs in 32-bit words, one
+// vdpbf16ps per step: two depths, fp32 accumulation; K counts pairs).
 // A has arbitrary strides (element (i, p) at A[i*a_rs + p*a_cs]); its entries are broadcast, so a
 // transposed A costs nothing. B rows are W-aligned with stride ldb; C is W-aligned with stride ldc.
 enum class Store { overwrite, add, rescale_add };  // C = AB, C += AB, C = alpha_i C + AB
 
-template <class T, int MR_, int NV_, Store S>
-inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
-                         const T* __restrict B, std::ptrdiff_t ldb, T* __restrict C, std::ptrdiff_t ldc,
-                         const T* __restrict alpha) {
+template <class T>
+struct FloatDot {
+  using Elem = T;
+  using B = Vec<T>;
+  static B load(const T* b) { return B::load_aligned(b); }
+  static B broadcast(T a) { return B(a); }
+  static Vec<T> madd(B a, B b, Vec<T> acc) { return xsimd::fma(a, b, acc); }
+};
+#if TJEPA_BF16_NATIVE
+struct Bf16Dot {
+  using Elem = std::uint32_t;
+  using B = __m512i;
+  static B load(const std::uint32_t* b) { return _mm512_load_si512(b); }
+  static B broadcast(std::uint32_t a) { return _mm512_set1_epi32(static_cast<int>(a)); }
+  static Vec<float> madd(B a, B b, Vec<float> acc) {
+    return _mm512_dpbf16_ps(acc, std::bit_cast<__m512bh>(a), std::bit_cast<__m512bh>(b));
+  }
+};
+#endif
+
+template <class T, int MR_, int NV_, Store S, class D = FloatDot<T>>
+inline void micro_kernel(int K, const typename D::Elem* __restrict A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+                         const typename D::Elem* __restrict B, std::ptrdiff_t ldb, T* __restrict C,
+                         std::ptrdiff_t ldc, const T* __restrict alpha) {
   constexpr int w = W<T>;
   Vec<T> acc[MR_][NV_];
 #pragma GCC unroll 8
@@ -178,16 +202,16 @@ inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std:
 #pragma GCC unroll 8
     for (int j = 0; j < NV_; ++j) acc[i][j] = Vec<T>(T(0));
   for (int p = 0; p < K; ++p) {
-    const T* b = B + p * ldb;
-    Vec<T> bv[NV_];
+    const typename D::Elem* b = B + p * ldb;
+    typename D::B bv[NV_];
 #pragma GCC unroll 8
-    for (int j = 0; j < NV_; ++j) bv[j] = Vec<T>::load_aligned(b + j * w);
-    const T* a = A + p * a_cs;
+    for (int j = 0; j < NV_; ++j) bv[j] = D::load(b + j * w);
+    const typename D::Elem* a = A + p * a_cs;
 #pragma GCC unroll 8
     for (int i = 0; i < MR_; ++i) {
-      const Vec<T> ai(a[i * a_rs]);
+      const typename D::B ai = D::broadcast(a[i * a_rs]);
 #pragma GCC unroll 8
-      for (int j = 0; j < NV_; ++j) acc[i][j] = xsimd::fma(ai, bv[j], acc[i][j]);
+      for (int j = 0; j < NV_; ++j) acc[i][j] = D::madd(ai, bv[j], acc[i][j]);
     }
   }
 #pragma GCC unroll 8
@@ -207,34 +231,35 @@ inline void micro_kernel(int K, const T* __restrict A, std::ptrdiff_t a_rs, std:
 }
 
 // Runs the micro-kernel of mr rows (1 <= mr <= MRm) and nv vectors (1 <= nv <= NVm).
-template <class T, Store S, int MRm, int NVm>
-inline void micro_dispatch(int mr, int nv, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
-                           std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
+template <class T, Store S, int MRm, int NVm, class D = FloatDot<T>>
+inline void micro_dispatch(int mr, int nv, int K, const typename D::Elem* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+                           const typename D::Elem* B, std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
   if constexpr (MRm > 1) {
-    if (mr < MRm) return micro_dispatch<T, S, MRm - 1, NVm>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+    if (mr < MRm) return micro_dispatch<T, S, MRm - 1, NVm, D>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
   }
   if constexpr (NVm > 1) {
-    if (nv < NVm) return micro_dispatch<T, S, MRm, NVm - 1>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+    if (nv < NVm) return micro_dispatch<T, S, MRm, NVm - 1, D>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
   }
-  micro_kernel<T, MRm, NVm, S>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+  micro_kernel<T, MRm, NVm, S, D>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
 }
 
 // C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NVm vectors outside (the B
 // panel stays in L1), strips of MRm rows inside. alpha [M] is read only by Store::rescale_add.
-// MRm * NVm accumulators must fit the register file.
-template <class T, Store S, int MRm = MR<T>, int NVm = NV>
-inline void gemm(int M, int N, int K, const T* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs, const T* B,
-                 std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha = nullptr) {
+// MRm * NVm accumulators must fit the register file. With Bf16Dot, A and B hold bf16 pairs (K
+// counts pairs; B's row stride ldb is in words, one word per output column).
+template <class T, Store S, int MRm = MR<T>, int NVm = NV, class D = FloatDot<T>>
+inline void gemm(int M, int N, int K, const typename D::Elem* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+                 const typename D::Elem* B, std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha = nullptr) {
   constexpr int w = W<T>;
   for (int n0 = 0; n0 < N; n0 += NVm * w) {
     const int nv = std::min(NVm, (N - n0) / w);
     for (int m0 = 0; m0 < M; m0 += MRm) {
       const int mr = std::min(MRm, M - m0);
-      const T* a = A + m0 * a_rs;
-      const T* b = B + n0;
+      const typename D::Elem* a = A + m0 * a_rs;
+      const typename D::Elem* b = B + n0;
       T* c = C + m0 * ldc + n0;
       const T* al = alpha == nullptr ? nullptr : alpha + m0;
-      micro_dispatch<T, S, MRm, NVm>(mr, nv, K, a, a_rs, a_cs, b, ldb, c, ldc, al);
+      micro_dispatch<T, S, MRm, NVm, D>(mr, nv, K, a, a_rs, a_cs, b, ldb, c, ldc, al);
     }
   }
 }
@@ -287,6 +312,46 @@ inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, 
   }
 }
 
+#if TJEPA_BF16_NATIVE
+// The bf16 operands of the attention products (32-bit words of two bf16, bgemm's conversion):
+// n rows (row r at src + rows[r]*lds, or r*lds) paired along their Dh columns, as the rows of
+// dst [n, Dh2] (A operands), or transposed into panels dst [n_pad / panel][Dh2][panel] (B operands;
+// columns [n, n_pad) zero).
+inline void pack_row_pairs(const float* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, std::uint32_t* dst,
+                           std::ptrdiff_t n_pad, int panel, bool transposed) {
+  namespace bg = bgemm;
+  const int Dh2 = (Dh + 1) / 2;
+  alignas(64) std::uint32_t words[bg::L];
+  for (std::ptrdiff_t r = 0; r < n_pad; ++r) {
+    std::uint32_t* d = transposed ? dst + (r / panel) * Dh2 * panel + r % panel : dst + r * Dh2;
+    const std::ptrdiff_t step = transposed ? panel : 1;
+    if (r >= n) {
+      for (int p = 0; p < Dh2; ++p) d[p * step] = 0u;
+      continue;
+    }
+    prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
+    const float* sr = src + (rows == nullptr ? r : rows[r]) * lds;
+    for (int k = 0; k < Dh; k += 2 * bg::L) {
+      _mm512_store_si512(words, bg::row_pairs(sr + k, std::min(2 * bg::L, Dh - k)));
+      for (int p = k / 2; p < std::min(Dh2, k / 2 + bg::L); ++p) d[p * step] = words[p - k / 2];
+    }
+  }
+}
+// n rows of width `cols` (row r at src + rows[r]*lds, or r*lds) paired across consecutive rows:
+// dst [⌈n/2⌉][ldd] words (pair p = rows 2p and 2p+1; the high half 0 past n; columns [cols, ldd)
+// zero, ldd a multiple of 16): V as the B operand of P·V, P^T as the A operand.
+inline void pack_pairs_across_rows(const float* src, std::ptrdiff_t lds, const int* rows, int n, int cols,
+                                   std::uint32_t* dst, std::ptrdiff_t ldd) {
+  namespace bg = bgemm;
+  for (int p = 0; 2 * p < n; ++p) {
+    const float* lo = src + (rows == nullptr ? 2 * p : rows[2 * p]) * lds;
+    const float* hi = 2 * p + 1 < n ? src + (rows == nullptr ? 2 * p + 1 : rows[2 * p + 1]) * lds : nullptr;
+    for (int c = 0; c < ldd; c += bg::L)
+      _mm512_store_si512(dst + p * ldd + c, bg::pairs16(lo + c, hi ? hi + c : nullptr, cols - c));
+  }
+}
+#endif
+
 // ---------------------------------------------------------------------------------------------
 // Tile sizes. Forward: BK keys x BQ queries of transposed scores per tile (both multiples of MR,
 // BQ of W).
@@ -314,7 +379,7 @@ struct Carver {
 template <class T>
 struct ForwardLayout {
   std::ptrdiff_t NqP, DhP;  // padded query count, padded head width
-  std::ptrdiff_t qt, kp, vp, st, o, m, l, alpha, total;
+  std::ptrdiff_t qt, kp, vp, st, o, m, l, alpha, Dh2, qt16, kp16, vp16, pt16, total;
   ForwardLayout(int Lq, int Lk, int Dh) {
     using Tl = Tiles<T>;
     NqP = round_up(Lq, Tl::BQ);
@@ -329,6 +394,12 @@ struct ForwardLayout {
     m = take(Tl::BQ);                               // running max (base 2) [BQ]
     l = take(Tl::BQ);                               // running sum [BQ]
     alpha = take(Tl::BQ);                           // rescale factor of the current tile [BQ]
+    // bf16 operands (Precision::bf16; 32-bit words of two bf16, carved from the same buffer):
+    Dh2 = (Dh + 1) / 2;
+    qt16 = take(Dh2 * NqP);                            // Q_h^T pairs along Dh [NqP / BQ][Dh2][BQ]
+    kp16 = take(std::ptrdiff_t{Lk} * Dh2);             // K_h pairs along Dh [Lk, Dh2]
+    vp16 = take((std::ptrdiff_t{Lk} + 1) / 2 * DhP);   // V_h pairs along keys [Lk / 2][DhP]
+    pt16 = take(std::ptrdiff_t{Tl::BK} / 2 * Tl::BQ);  // P^T pairs along keys [BK / 2][BQ]
     total = c.at;
   }
 };
