@@ -40,9 +40,10 @@ struct AttentionSaved {
   T* lse = nullptr;
 };
 
-// The precision of the attention products (QKᵀ, PV) of a forward: the workspace's, unless the
-// forward keeps its statistics for a backward, whose products are fp32 (they recompute P from
-// the saved log-sum-exp, which must come from the same arithmetic).
+// The precision of the attention products (QKᵀ, PV) of a forward whose backward is fp32 (cross-
+// and causal attention): the workspace's, unless the forward keeps its statistics for that
+// backward (it recomputes P from the saved log-sum-exp, which must come from the same
+// arithmetic). SelfAttention runs forward and backward in the workspace's precision.
 template <class T>
 Precision attention_precision(const AttentionSaved<T>& saved, const Workspace<T>& ws) {
   return saved.lse ? Precision::fp32 : ws.precision;
@@ -111,7 +112,7 @@ struct SelfAttention {
                                  r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr,
                                  saved.att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
                                  saved.lse ? saved.lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()],
-                                 attention_precision(saved, ws));
+                                 ws.precision);  // its backward runs in the same precision
     }
     ws.mark("attention");
     if (residual)
@@ -142,7 +143,7 @@ struct SelfAttention {
       kernels::attention_backward(s, saved.qkv + qo, saved.qkv + ko, saved.qkv + ko + d,
                                   r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr, saved.att + oo,
                                   saved.lse + std::size_t(bh) * L, scratch.datt + oo, dqkv + qo, dqkv + ko,
-                                  dqkv + ko + d, aws[detail::thread_id()]);
+                                  dqkv + ko + d, aws[detail::thread_id()], ws.precision);
     }
     qkv.backward(ps, dqkv, x, dx, B * L, ws.precision);  // qkv = x · Wqkvᵀ + b
   }

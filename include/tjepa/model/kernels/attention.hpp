@@ -391,10 +391,13 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
 // and D index columns (vector loads, no horizontal work). P^T = 2^(S^T c - lse2),
 // dS^T = P^T * (dO V^T - D)^T; dV += P^T dO, dK += scale dS^T Q, dQ += scale dS K.
 // Every gradient entry is complete before it is added to dq, dk or dv, once.
+// precision = bf16 (float, on AVX512-BF16): the five products take bf16 operands (Q, K, V, dO and
+// each tile's P and dS rounded to bf16) with fp32 accumulation; pair it with a bf16 forward, whose
+// lse it reproduces.
 template <class T>
 void attention_backward(const AttentionShape& s, const T* q, const T* k, const T* v,
                         const std::uint8_t* key_valid, const T* out, const T* lse, const T* dout,
-                        T* dq, T* dk, T* dv, AttentionWorkspace<T>& ws) {
+                        T* dq, T* dk, T* dv, AttentionWorkspace<T>& ws, Precision precision = Precision::fp32) {
   detail::check_backward_args("attention_backward", s, q, k, v, out, lse, dout, dq, dk, dv);
   namespace A = detail::attn;
   using V = A::Vec<T>;
@@ -414,15 +417,40 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
   const T scale = static_cast<T>(1.0 / std::sqrt(static_cast<double>(Dh)));
   const T c = static_cast<T>(A::log2e / std::sqrt(static_cast<double>(Dh)));
   const std::ptrdiff_t NqP = lay.NqP, DhP = lay.DhP;
+#if TJEPA_BF16_NATIVE
+  constexpr bool can_bf16 = std::is_same_v<T, float>;
+  const bool bf16 = can_bf16 && detail::bgemm::resolve(precision) == Precision::bf16;
+  auto words = [base](std::ptrdiff_t off) { return reinterpret_cast<std::uint32_t*>(base + off); };
+  const std::ptrdiff_t Dh2 = lay.Dh2;
+  constexpr int BQB = Tl::BQB;
+#else
+  (void)precision;
+#endif
 
   for (int h = 0; h < s.H; ++h) {
     const int c0 = h * Dh;
-    A::pack_rows(q + c0, s.ldq, nullptr, Lq, Dh, qp, DhP, NqP);
-    A::pack_rows(dout + c0, s.ldo, nullptr, Lq, Dh, dop, DhP, NqP);
-    A::pack_transposed(qp, DhP, nullptr, Lq, Dh, qt, NqP, Tl::BQB);
-    A::pack_transposed(dop, DhP, nullptr, Lq, Dh, dot, NqP, Tl::BQB);
-    A::pack_rows(k + c0, s.ldk, keys, nk, Dh, kp, DhP, nk);
-    A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
+#if TJEPA_BF16_NATIVE
+    if constexpr (can_bf16) {
+      if (bf16) {
+        A::pack_row_pairs(q + c0, s.ldq, nullptr, Lq, Dh, words(lay.qt16), NqP, BQB, true);
+        A::pack_row_pairs(dout + c0, s.ldo, nullptr, Lq, Dh, words(lay.dot16), NqP, BQB, true);
+        A::pack_row_pairs(k + c0, s.ldk, keys, nk, Dh, words(lay.kr16), nk, 0, false);
+        A::pack_row_pairs(v + c0, s.ldv, keys, nk, Dh, words(lay.vr16), nk, 0, false);
+        A::pack_pairs_across_rows(dout + c0, s.ldo, nullptr, Lq, Dh, words(lay.do16), DhP);
+        A::pack_pairs_across_rows(q + c0, s.ldq, nullptr, Lq, Dh, words(lay.q16), DhP);
+        A::pack_pairs_across_rows(k + c0, s.ldk, keys, nk, Dh, words(lay.kx16), DhP);
+      }
+    }
+    if (!bf16)
+#endif
+    {
+      A::pack_rows(q + c0, s.ldq, nullptr, Lq, Dh, qp, DhP, NqP);
+      A::pack_rows(dout + c0, s.ldo, nullptr, Lq, Dh, dop, DhP, NqP);
+      A::pack_transposed(qp, DhP, nullptr, Lq, Dh, qt, NqP, Tl::BQB);
+      A::pack_transposed(dop, DhP, nullptr, Lq, Dh, dot, NqP, Tl::BQB);
+      A::pack_rows(k + c0, s.ldk, keys, nk, Dh, kp, DhP, nk);
+      A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
+    }
     std::fill(dqa, dqa + NqP * DhP, T(0));
     for (std::ptrdiff_t i = 0; i < NqP; ++i) {
       if (i >= Lq) {
@@ -430,7 +458,7 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
         dd[i] = T(0);
         continue;
       }
-      const T* doi = dop + i * DhP;
+      const T* doi = dout + i * s.ldo + c0;
       const T* oi = out + i * s.ldo + c0;
       T D = T(0);
       for (int p = 0; p < Dh; ++p) D += doi[p] * oi[p];
@@ -445,8 +473,21 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
       for (int qb = 0; qb < Lq; qb += Tl::BQB) {
         const int nq = std::min(Tl::BQB, Lq - qb);
         const int nv = static_cast<int>(A::round_up(nq, w));
-        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, kblk, DhP, 1, qt + qb * Dh, Tl::BQB, st, Tl::BQB);   // S^T
-        A::gemm<T, A::Store::overwrite>(mk, nv, Dh, vblk, DhP, 1, dot + qb * Dh, Tl::BQB, dpt, Tl::BQB);  // dP^T
+#if TJEPA_BF16_NATIVE
+        if constexpr (can_bf16) {
+          if (bf16) {
+            A::gemm<T, A::Store::overwrite, A::MR<T>, A::NV, A::Bf16Dot>(
+                mk, nv, int(Dh2), words(lay.kr16) + kb * Dh2, Dh2, 1, words(lay.qt16) + qb * Dh2, BQB, st, BQB);
+            A::gemm<T, A::Store::overwrite, A::MR<T>, A::NV, A::Bf16Dot>(
+                mk, nv, int(Dh2), words(lay.vr16) + kb * Dh2, Dh2, 1, words(lay.dot16) + qb * Dh2, BQB, dpt, BQB);
+          }
+        }
+        if (!bf16)
+#endif
+        {
+          A::gemm<T, A::Store::overwrite>(mk, nv, Dh, kblk, DhP, 1, qt + qb * Dh, Tl::BQB, st, Tl::BQB);   // S^T
+          A::gemm<T, A::Store::overwrite>(mk, nv, Dh, vblk, DhP, 1, dot + qb * Dh, Tl::BQB, dpt, Tl::BQB);  // dP^T
+        }
         const V cv(c);
         for (int r = 0; r < mk; ++r) {
           T* srow = st + r * Tl::BQB;
@@ -457,6 +498,34 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
             (p * (V::load_aligned(dprow + j) - V::load_aligned(dd + qb + j))).store_aligned(dprow + j);
           }
         }
+#if TJEPA_BF16_NATIVE
+        if constexpr (can_bf16) {
+          if (bf16) {
+            // dV += P^T dO, dK += dS^T Q (A paired along queries), dQ += dS K (A paired across keys).
+            const int nq2 = (nq + 1) / 2, mk2 = (mk + 1) / 2;
+            A::pack_row_pairs(st, BQB, nullptr, mk, nq, words(lay.pt16), mk, 0, false);
+            A::pack_row_pairs(dpt, BQB, nullptr, mk, nq, words(lay.dst16), mk, 0, false);
+            A::pack_pairs_across_rows(dpt, BQB, nullptr, mk, nv, words(lay.ds16), BQB);
+            const std::uint32_t* dob = words(lay.do16) + qb / 2 * DhP;
+            const std::uint32_t* qpb = words(lay.q16) + qb / 2 * DhP;
+            using Bd = A::Bf16Dot;
+            if (qb == 0) {
+              A::gemm<T, A::Store::overwrite, A::MR<T>, A::NV, Bd>(mk, int(DhP), nq2, words(lay.pt16), nq2, 1, dob, DhP,
+                                                                   dva, DhP);
+              A::gemm<T, A::Store::overwrite, A::MR<T>, A::NV, Bd>(mk, int(DhP), nq2, words(lay.dst16), nq2, 1, qpb, DhP,
+                                                                   dka, DhP);
+            } else {
+              A::gemm<T, A::Store::add, A::MR<T>, A::NV, Bd>(mk, int(DhP), nq2, words(lay.pt16), nq2, 1, dob, DhP, dva,
+                                                             DhP);
+              A::gemm<T, A::Store::add, A::MR<T>, A::NV, Bd>(mk, int(DhP), nq2, words(lay.dst16), nq2, 1, qpb, DhP, dka,
+                                                             DhP);
+            }
+            A::gemm<T, A::Store::add, A::MR<T>, A::NV, Bd>(nq, int(DhP), mk2, words(lay.ds16), 1, BQB,
+                                                           words(lay.kx16) + kb / 2 * DhP, DhP, dqa + qb * DhP, DhP);
+            continue;
+          }
+        }
+#endif
         if (qb == 0) {
           A::gemm<T, A::Store::overwrite>(mk, static_cast<int>(DhP), nq, st, Tl::BQB, 1, dop, DhP, dva, DhP);
           A::gemm<T, A::Store::overwrite>(mk, static_cast<int>(DhP), nq, dpt, Tl::BQB, 1, qp, DhP, dka, DhP);

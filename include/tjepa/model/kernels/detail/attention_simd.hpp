@@ -407,7 +407,8 @@ struct ForwardLayout {
 template <class T>
 struct BackwardLayout {
   std::ptrdiff_t Nk, NqP, DhP;
-  std::ptrdiff_t qt, dot, qp, dop, dq, kp, vp, lse2, dd, st, dpt, dk, dv, total;
+  std::ptrdiff_t qt, dot, qp, dop, dq, kp, vp, lse2, dd, st, dpt, dk, dv;
+  std::ptrdiff_t Dh2, qt16, dot16, kr16, vr16, do16, q16, kx16, pt16, dst16, ds16, total;
   BackwardLayout(int Lq, int Lk, int Dh) {
     using Tl = Tiles<T>;
     Nk = round_up(Lk, Tl::BKB);
@@ -428,6 +429,20 @@ struct BackwardLayout {
     dpt = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB);  // dP^T, then dS^T [BKB, BQB]
     dk = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dK accumulator of one key block
     dv = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dV accumulator of one key block
+    // bf16 operands (Precision::bf16; words of two bf16): pairs along Dh of Q^T, dO^T (panels of
+    // BQB queries) and of K, V rows; pairs across rows of dO, Q [NqP / 2][DhP] and K [Nk / 2][DhP];
+    // per tile P^T and dS^T paired along queries [BKB][BQB / 2], dS paired across keys [BKB / 2][BQB].
+    Dh2 = (Dh + 1) / 2;
+    qt16 = take(Dh2 * NqP);
+    dot16 = take(Dh2 * NqP);
+    kr16 = take(Nk * Dh2);
+    vr16 = take(Nk * Dh2);
+    do16 = take(NqP / 2 * DhP);
+    q16 = take(NqP / 2 * DhP);
+    kx16 = take(Nk / 2 * DhP);
+    pt16 = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB / 2);
+    dst16 = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB / 2);
+    ds16 = take(std::ptrdiff_t{Tl::BKB} / 2 * Tl::BQB);
     total = c.at;
   }
 };
