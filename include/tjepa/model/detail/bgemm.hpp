@@ -266,9 +266,8 @@ inline void gemm_packed(int rows, int cols, int depth, const float* A, std::ptrd
 template <bool Native = native>
 void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order, const float* B,
           std::ptrdiff_t ldb, Order b_order, float* C, std::ptrdiff_t ldc, const Epilogue& e = {}) {
-  if constexpr (!Native) {
-    sgemm::gemm(rows, cols, depth, A, lda, a_order, B, ldb, b_order, C, ldc, e);
-  } else {
+#if TJEPA_BF16_NATIVE
+  if constexpr (Native) {
     if (rows <= 0 || cols <= 0) return;
     if (depth <= 0) return sgemm::empty_product(rows, cols, C, ldc, e);
     thread_local AlignedVector<std::uint32_t> pack_buffer;
@@ -283,7 +282,10 @@ void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Ord
                      std::min(pairs, (kb + 1) * KC / 2));
         },
         [&](int r0, int r1) { compute_rows(r0, r1, cols, depth, A, lda, a_order, packed, C, ldc, e); });
+    return;
   }
+#endif
+  sgemm::gemm(rows, cols, depth, A, lda, a_order, B, ldb, b_order, C, ldc, e);
 }
 
 }  // namespace tjepa::detail::bgemm
