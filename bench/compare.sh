@@ -17,7 +17,7 @@ cmake --build --preset release --target tjepa_bench tjepa_streaming -j "$(nproc)
 
 out=build/compare
 mkdir -p "$out"
-kernels='BM_FmaPeak|BM_EncoderForward/|BM_EncoderForwardBf16/|BM_EncoderForwardBackward/.*/0/|BM_AttentionForward/|BM_AttentionForwardBackward/'
+kernels='BM_FmaPeak|BM_EncoderForward/|BM_EncoderForwardFrozen/|BM_EncoderForwardBf16/|BM_EncoderForwardBackward/.*/0/|BM_AttentionForward/|BM_AttentionForwardBackward/'
 for t in 1 2; do
   # The whole JEPA step (bench/train.cpp: BM_JepaTrainStep, BM_JepaTrainStepDeco and their Bf16
   # variants) takes its thread count as the first argument: run the one of this pass (a variant

@@ -56,6 +56,8 @@ def tjepa_key(run_name):
         return f"train_step/B{nums[1]}/L{nums[0]}"
     if run_name.startswith("BM_EncoderForward/"):
         return f"encoder_forward/B{nums[1]}/L{nums[0]}"
+    if run_name.startswith("BM_EncoderForwardFrozen/"):  # PyTorch's row: encoder_forward (frozen_rows)
+        return f"encoder_forward_frozen/B{nums[1]}/L{nums[0]}"
     if run_name.startswith("BM_AttentionForwardBackward/"):
         return f"attention_forward_backward/B{nums[1]}/L{nums[0]}"
     if run_name.startswith("BM_AttentionForward/"):
@@ -116,6 +118,12 @@ for t in (1, 2):
         for k in ("B", "K", "targets"):
             if k in r:
                 e[k] = r[k]
+# The frozen-weight encoder (weights packed once) does the work of PyTorch's encoder_forward.
+for (key, t), e in list(rows.items()):
+    if key.startswith("encoder_forward_frozen/"):
+        for k in ("torch_ms", "gflop"):
+            if k in rows.get((key.replace("_frozen", ""), t), {}):
+                e[k] = rows[(key.replace("_frozen", ""), t)][k]
 blas = sorted({b for i in torch_info.values() for b in i.get("blas", [])})
 blas_name = ", ".join(blas) if blas else "not recorded"
 
@@ -350,10 +358,12 @@ def ratio(key, t, num, den):
     return e[num] / e[den] if e.get(num) and e.get(den) else None
 
 
-enc = [peak_fraction(f"encoder_forward/B1/L{L}", 1) for L in (368, 528, 2124)]
-enc = [v for v in enc if v is not None]
-goal22("fp32 encoder forward B1, 1 thread: ≥ 85% of the FMA peak (L 368, 528, 2124; lowest)",
-       f"{100 * min(enc):.0f}%" if enc else "?", bool(enc) and min(enc) >= 0.85)
+for key, what in (("encoder_forward_frozen", "frozen weights (inference)"),
+                  ("encoder_forward", "weights packed per call (training's target encoder)")):
+    enc = [peak_fraction(f"{key}/B1/L{L}", 1) for L in (368, 528, 2124)]
+    enc = [v for v in enc if v is not None]
+    goal22(f"fp32 encoder forward B1, 1 thread, {what}: ≥ 85% of the FMA peak (L 368, 528, 2124; lowest)",
+           f"{100 * min(enc):.0f}%" if enc else "?", bool(enc) and min(enc) >= 0.85)
 for N in (368, 528):
     for t in (1, 2):
         x = ratio(f"jepa_step/{N}", t, "torch_ms", "tjepa_ms")

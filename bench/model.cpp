@@ -53,11 +53,16 @@ struct EncoderSetup {
 };
 
 // Encoder inference (target-encoder path: all tokens, no cache), batch B, products in the given
-// precision (Workspace::precision). The FLOP count is the same for both.
-void encoder_forward(benchmark::State& state, Precision precision) {
+// precision (Workspace::precision). The FLOP count is the same for both. frozen: the weights are
+// packed for the GEMM once, on the first call, and reused (Workspace::frozen_weights, the
+// inference path of a deployed encoder); else every product packs its weight per call, as
+// training's target encoder must (its weights change every step).
+void encoder_forward(benchmark::State& state, Precision precision, bool frozen = false) {
   const int L = int(state.range(0)), B = int(state.range(1));
   EncoderSetup e(B, L);
   e.ws.precision = precision;
+  e.ws.frozen_weights = frozen;
+  if (frozen) e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), nullptr, e.ws);  // packs
   for (auto _ : state) {
     e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), nullptr, e.ws);
     benchmark::DoNotOptimize(e.out.data());
@@ -67,6 +72,10 @@ void encoder_forward(benchmark::State& state, Precision precision) {
 }
 void BM_EncoderForward(benchmark::State& state) { encoder_forward(state, Precision::fp32); }
 BENCHMARK(BM_EncoderForward)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The same on frozen weights (packed once): what inference at control-loop rate runs.
+void BM_EncoderForwardFrozen(benchmark::State& state) { encoder_forward(state, Precision::fp32, true); }
+BENCHMARK(BM_EncoderForwardFrozen)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The same with bf16 products (AVX512-BF16, fp32 accumulation): qkv, proj and the MLP in bf16,
 // attention and norms fp32.

@@ -161,6 +161,8 @@ int main(int argc, char** argv) {
   run_override<int>(eval, "--batch", "batch", eval_overrides, "pre-training batch");
   run_override<int>(eval, "--dim", "dim", eval_overrides, "encoder width d");
   run_override<int>(eval, "--depth", "depth", eval_overrides, "encoder blocks");
+  run_override<std::string>(eval, "--precision", "precision", eval_overrides,
+                            "arithmetic of the pre-training products: fp32 or bf16 (AVX512-BF16)");
   eval->add_flag("--no-mae", [&ev](std::int64_t) { ev.eval.mae = false; }, "skip the MAE row");
   eval->add_flag("--no-ablation", [&ev](std::int64_t) { ev.eval.ablation = false; }, "skip the mask ablation");
   eval->add_flag("--no-end-to-end", [&ev](std::int64_t) { ev.eval.end_to_end = false; }, "skip the end-to-end row");

@@ -237,14 +237,20 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
 
 #endif  // TJEPA_BF16_NATIVE
 
+// Panel p of B, all of its depth, into its place in packed (the vector packing where the build
+// has it).
+inline void pack_whole_panel(std::uint32_t* packed, const float* B, std::ptrdiff_t ldb, Order b_order, int depth,
+                             int cols, int p) {
+#if TJEPA_BF16_NATIVE
+  pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth_pairs(depth));
+#else
+  pack_panel_ref(packed, B, ldb, b_order, depth, cols, p, 0, depth_pairs(depth));
+#endif
+}
+
 // The whole of B packed: [panels][depth/2][NR] (packed_size(cols, depth) words).
 inline void pack(std::uint32_t* packed, const float* B, std::ptrdiff_t ldb, Order b_order, int depth, int cols) {
-  for (int p = 0; p < (cols + NR - 1) / NR; ++p)
-#if TJEPA_BF16_NATIVE
-    pack_panel(packed, B, ldb, b_order, depth, cols, p, 0, depth_pairs(depth));
-#else
-    pack_panel_ref(packed, B, ldb, b_order, depth, cols, p, 0, depth_pairs(depth));
-#endif
+  for (int p = 0; p < (cols + NR - 1) / NR; ++p) pack_whole_panel(packed, B, ldb, b_order, depth, cols, p);
 }
 
 // C (+)= A · B per the epilogue, B packed beforehand (pack(), packed_size()). depth ≥ 1. Only on

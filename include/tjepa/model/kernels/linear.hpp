@@ -65,11 +65,17 @@ inline const float* fp32_panels(const void* p) { return static_cast<const float*
 inline std::size_t packed_weight_size(Precision p, int out, int in) {
   return p == Precision::bf16 ? bgemm::packed_size(out, in) : sgemm::packed_size(out, in);
 }
-inline void pack_weight(float* dst, Precision p, const float* w, int out, int in) {
+// The packing's unit of work is a panel of NR outputs (the same NR in both precisions), so that
+// threads can share it.
+inline int weight_panels(int out) { return (out + sgemm::NR - 1) / sgemm::NR; }
+inline void pack_weight_panel(float* dst, Precision p, const float* w, int out, int in, int panel) {
   if (p == Precision::bf16)
-    bgemm::pack(reinterpret_cast<std::uint32_t*>(dst), w, in, sgemm::Order::col_major, in, out);
+    bgemm::pack_whole_panel(reinterpret_cast<std::uint32_t*>(dst), w, in, sgemm::Order::col_major, in, out, panel);
   else
-    sgemm::pack(dst, w, in, sgemm::Order::col_major, in, out);
+    sgemm::pack_panel(dst, w, in, sgemm::Order::col_major, in, out, panel, 0, in);
+}
+inline void pack_weight(float* dst, Precision p, const float* w, int out, int in) {
+  for (int q = 0; q < weight_panels(out); ++q) pack_weight_panel(dst, p, w, out, in, q);
 }
 // sgemm::gemm's product in precision p: bgemm::gemm for bf16 (the float GEMM without AVX512-BF16).
 inline void gemm(Precision p, int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, sgemm::Order a_order,
@@ -239,11 +245,11 @@ inline constexpr int mlp_tile_rows = 48;
 // The MLP's inference forward, row-tiled: out[M, N] = (residual +) gelu(in · w1ᵀ + b1) · w2ᵀ + b2
 // with in [M, K], w1 [H, K], w2 [N, H]. Per tile of rows the activation h [tile, H] is computed and
 // consumed at once, so the [M, H] activation (the largest of a block) never goes to memory, and
-// both weights are packed once per call (float). Same values as linear_bias_gelu_forward then
-// linear_forward(_residual) on whole matrices. residual may equal out, or be nullptr. scratch
-// grows to the packed weights plus one [tile, H] activation per thread and is reused. plan1,
-// plan2: the precision (plan1's serves both) and w1, w2 packed beforehand (PackedWeights; then
-// not packed here), or {}.
+// both weights are packed once per call (float; the threads share the packing, panel by panel).
+// Same values as linear_bias_gelu_forward then linear_forward(_residual) on whole matrices.
+// residual may equal out, or be nullptr. scratch grows to the packed weights plus one [tile, H]
+// activation per thread and is reused. plan1, plan2: the precision (plan1's serves both) and w1,
+// w2 packed beforehand (PackedWeights; then not packed here), or {}.
 template <class T>
 void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, const T* b1, const T* w2, const T* b2,
                        int M, int K, int H, int N, AlignedVector<T>& scratch, WeightPlan plan1 = {},
@@ -264,10 +270,16 @@ void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, cons
   T* const tile_base = base + size1 + size2;
   const void* p1 = size1 ? base : plan1.packed;
   const void* p2 = size2 ? base + size1 : plan2.packed;
-  if constexpr (std::is_same_v<T, float>) {
-    if (size1) detail::pack_weight(base, p, w1, H, K);
-    if (size2) detail::pack_weight(base + size1, p, w2, N, H);
-  }
+  // Packing tasks: w1's panels, then w2's (those not packed beforehand), shared by the threads.
+  const int panels1 = size1 ? detail::weight_panels(H) : 0, panels2 = size2 ? detail::weight_panels(N) : 0;
+  auto pack_task = [&](int task) {
+    if constexpr (std::is_same_v<T, float>) {
+      if (task < panels1)
+        detail::pack_weight_panel(base, p, w1, H, K, task);
+      else
+        detail::pack_weight_panel(base + size1, p, w2, N, H, task - panels1);
+    }
+  };
   auto run_tile = [&](int t, T* h) {
     const int i0 = t * mlp_tile_rows, r = std::min(mlp_tile_rows, M - i0);
     const T* x = in + std::size_t(i0) * K;
@@ -285,11 +297,16 @@ void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, cons
     }
   };
   if (threads <= 1) {
+    for (int task = 0; task < panels1 + panels2; ++task) pack_task(task);
     for (int t = 0; t < tiles; ++t) run_tile(t, tile_base);
     return;
   }
-  TJEPA_OMP(omp parallel for schedule(static) num_threads(threads))
-  for (int t = 0; t < tiles; ++t) run_tile(t, tile_base + std::size_t(detail::thread_id()) * tile_size);
+  TJEPA_OMP(omp parallel num_threads(threads)) {
+    TJEPA_OMP(omp for schedule(static))
+    for (int task = 0; task < panels1 + panels2; ++task) pack_task(task);
+    TJEPA_OMP(omp for schedule(static))
+    for (int t = 0; t < tiles; ++t) run_tile(t, tile_base + std::size_t(detail::thread_id()) * tile_size);
+  }
 }
 
 // The MLP's backward through fc2 and its GELU in one product: dpre[M, K] = (dout · w) ⊙ gelu'(pre)
