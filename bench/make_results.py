@@ -56,7 +56,7 @@ def tjepa_key(run_name):
         return f"train_step/B{nums[1]}/L{nums[0]}"
     if run_name.startswith("BM_EncoderForward/"):
         return f"encoder_forward/B{nums[1]}/L{nums[0]}"
-    if run_name.startswith("BM_EncoderForwardFrozen/"):  # PyTorch's row: encoder_forward (frozen_rows)
+    if run_name.startswith("BM_EncoderForwardFrozen/"):  # compared with PyTorch's encoder_forward (below)
         return f"encoder_forward_frozen/B{nums[1]}/L{nums[0]}"
     if run_name.startswith("BM_AttentionForwardBackward/"):
         return f"attention_forward_backward/B{nums[1]}/L{nums[0]}"
@@ -121,9 +121,8 @@ for t in (1, 2):
 # The frozen-weight encoder (weights packed once) does the work of PyTorch's encoder_forward.
 for (key, t), e in list(rows.items()):
     if key.startswith("encoder_forward_frozen/"):
-        for k in ("torch_ms", "gflop"):
-            if k in rows.get((key.replace("_frozen", ""), t), {}):
-                e[k] = rows[(key.replace("_frozen", ""), t)][k]
+        torch_row = rows.get((key.replace("_frozen", ""), t), {})
+        e.update({k: torch_row[k] for k in ("torch_ms", "gflop") if k in torch_row})
 blas = sorted({b for i in torch_info.values() for b in i.get("blas", [])})
 blas_name = ", ".join(blas) if blas else "not recorded"
 
