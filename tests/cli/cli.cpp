@@ -571,7 +571,6 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   o.eval.tasks.sequence_length = 3;
   o.eval.tasks.max_object_windows = o.eval.tasks.max_force_windows = 30;
   o.eval.tasks.max_pose_sequences = 8;
-  o.eval.heads.sequence.validation_blocks = o.eval.heads.sequence.validation_gap = 1;  // 8 sequences: one block
   o.eval.heads.probe.max_epochs = o.eval.heads.sequence.max_epochs = o.eval.heads.end_to_end_max_epochs = 1;
   o.eval.heads.probe_heads = 1;
   o.quiet = true;

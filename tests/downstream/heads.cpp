@@ -15,6 +15,7 @@
 #include <numbers>
 #include <tuple>
 #include <type_traits>
+#include <map>
 #include <set>
 #include <vector>
 
@@ -229,7 +230,7 @@ struct EncodedSamples {
 };
 EncodedSamples encoded_samples(int S, int L, int d, std::uint64_t seed, bool random_targets = false) {
   Rng rng(seed);
-  EncodedSamples e{AlignedVector<float>(static_cast<std::size_t>(S) * L * d, 0.0f), {2, 4, {}, {}}};
+  EncodedSamples e{AlignedVector<float>(static_cast<std::size_t>(S) * L * d, 0.0f), {2, 4, {}, {}, {}}};
   for (int i = 0; i < S; ++i) {
     const float F = static_cast<float>(rng.uniform(0, 10));
     const int cls = static_cast<int>(rng.below(4));
@@ -288,7 +289,7 @@ TEST_CASE("train_head: learns regression and classes with early stopping and res
   CHECK(r2.validation_loss == r.validation_loss);
   CHECK(std::equal(head.params.values().begin(), head.params.values().end(), again.params.values().begin()));
   // Regression only and classification only.
-  HeadTargets reg{2, 0, targets.value, {}}, cls{0, 4, {}, targets.label};
+  HeadTargets reg{2, 0, targets.value, {}, {}}, cls{0, 4, {}, targets.label, {}};
   ProbeHead<float> hr(d, 3, 2, 0, 1), hc(d, 3, 0, 4, 1);
   cfg.max_epochs = 3;
   CHECK(train_head(hr, f, reg, cfg).epochs() == 3);
@@ -340,6 +341,61 @@ TEST_CASE("split_for_validation: random samples or contiguous blocks with gaps -
                        DataError);
 }
 
+TEST_CASE("split_by_groups: whole groups, stratified, seeded; validation_split picks groups over blocks") {
+  // 6 strata (objects) with 1, 2, 5, 10, 10, 10 groups (episodes) of 3-7 samples, interleaved.
+  SampleGroups g;
+  const int groups_of[6] = {1, 2, 5, 10, 10, 10};
+  std::int64_t id = 100;
+  std::map<std::int64_t, int> stratum_of;
+  for (int round = 0; round < 10; ++round)
+    for (int st = 0; st < 6; ++st)
+      if (round < groups_of[st]) {
+        stratum_of[id] = st;
+        for (int k = 0; k < 3 + (round + st) % 5; ++k) {
+          g.group.push_back(id);
+          g.stratum.push_back(st);
+        }
+        ++id;
+      }
+  const int S = static_cast<int>(g.group.size());
+  const ValidationSplit s = split_by_groups(g, 0.2, 7);
+  REQUIRE(s.fit.size() + s.validation.size() == static_cast<std::size_t>(S));
+  CHECK(std::is_sorted(s.fit.begin(), s.fit.end()));
+  CHECK(std::is_sorted(s.validation.begin(), s.validation.end()));
+  std::set<std::int64_t> fit_groups, val_groups;
+  for (auto i : s.fit) fit_groups.insert(g.group[static_cast<std::size_t>(i)]);
+  for (auto i : s.validation) val_groups.insert(g.group[static_cast<std::size_t>(i)]);
+  for (auto v : val_groups) CHECK(fit_groups.count(v) == 0);  // no group on both sides
+  // Held-out groups per stratum: round(0.2 n), at least 1 where n >= 2, never all.
+  const int expected[6] = {0, 1, 1, 2, 2, 2};
+  int held[6] = {};
+  for (auto v : val_groups) ++held[stratum_of[v]];
+  for (int st = 0; st < 6; ++st) CHECK(held[st] == expected[st]);
+  CHECK(split_by_groups(g, 0.2, 7).validation == s.validation);
+  CHECK(split_by_groups(g, 0.2, 8).validation != s.validation);
+  // One group per stratum: one seeded group is held out.
+  const SampleGroups lone{{5, 5, 6, 6, 7}, {0, 0, 1, 1, 2}};
+  const ValidationSplit l = split_by_groups(lone, 0.2, 1);
+  REQUIRE(!l.validation.empty());
+  std::set<std::int64_t> lv;
+  for (auto i : l.validation) lv.insert(lone.group[static_cast<std::size_t>(i)]);
+  CHECK(lv.size() == 1u);
+  CHECK_THROWS_WITH_AS(split_by_groups(SampleGroups{{1, 1, 1}, {}}, 0.2, 1), doctest::Contains("1 group(s)"), DataError);
+  CHECK_THROWS_WITH_AS(split_by_groups(SampleGroups{{1, 1, 2}, {0, 1, 1}}, 0.2, 1),
+                       doctest::Contains("one stratum per group"), DataError);
+  // validation_split: groups win when present, blocks with groups are an error, no groups: the old split.
+  HeadTrainConfig cfg;
+  cfg.seed = 7;
+  CHECK(validation_split(S, cfg, g).validation == s.validation);
+  CHECK(validation_split(100, cfg, SampleGroups{}).validation == split_for_validation(100, 0.2, 7).validation);
+  cfg.validation_groups = false;
+  CHECK(validation_split(S, cfg, g).validation == split_for_validation(S, 0.2, 7).validation);
+  cfg.validation_groups = true;
+  cfg.validation_blocks = 2;
+  CHECK_THROWS_WITH_AS(validation_split(S, cfg, g), doctest::Contains("validation_blocks"), ConfigError);
+  CHECK_THROWS_AS(validation_split(S + 1, HeadTrainConfig{}, g), ShapeError);
+}
+
 TEST_CASE("train_head: stops after patience epochs without improvement on unlearnable targets") {
   const int S = 60, L = 1, d = 12;
   const auto [x, targets] = encoded_samples(S, L, d, 8, true);
@@ -364,7 +420,7 @@ TEST_CASE("train_head end to end: the encoder trains and is restored to its best
   pre.fit(rec.recording);
   const WindowSource src(rec.recording, WindowSpec{5}, rec.labels, pre);
   const std::vector<std::int64_t> contact = src.windows_with_contact(2);
-  HeadTargets targets{3, 0, {}, {}};
+  HeadTargets targets{3, 0, {}, {}, {}};
   for (std::int64_t w : contact) {
     const auto force = src.label(w).force;
     targets.value.insert(targets.value.end(), force.begin(), force.end());
@@ -493,7 +549,7 @@ TEST_CASE("train_sequence_head: learns a running sum of the windows with early s
       t[2 + n] = 3;
     }
   }
-  SequenceTargets targets{L, 3, {}, {}};
+  SequenceTargets targets{L, 3, {}, {}, {}};
   for (int q = 0; q < Q; ++q) {
     double run = 0;
     for (int l = 0; l < L; ++l) {
@@ -554,12 +610,15 @@ TEST_CASE("grasp_tasks: every sample carries the label of its window's last fram
     const GraspLabel l = last(t.object_rows[i]);
     CHECK(l.object == t.object.label[i]);
     CHECK(l.contact_mask != 0u);
+    CHECK(t.object.groups.group[i] == l.episode);  // validation groups: the episode, by object
+    CHECK(t.object.groups.stratum[i] == l.episode_object);
   }
   REQUIRE(t.force.size() > 0);
   for (std::size_t i = 0; i < t.force_rows.size(); ++i) {
     const GraspLabel l = last(t.force_rows[i]);
     CHECK(((l.contact_mask >> c.label_pad) & 1u) == 1u);
     for (int a = 0; a < 3; ++a) CHECK(t.force.value[i * 3 + a] == l.force[a]);
+    CHECK(t.force.groups.group[i] == l.episode);
   }
   REQUIRE(t.pose.size() > 0);
   std::vector<bool> used(t.windows.size(), false);
@@ -573,6 +632,7 @@ TEST_CASE("grasp_tasks: every sample carries the label of its window's last fram
       if (l > 0) CHECK(start == d.src.start_of(t.windows[t.pose.window[q * 4 + l - 1]]) + 10);
       for (int f = 0; f < 10; ++f) CHECK(d.labels[start + f].held);
       const GraspLabel g = last(row);
+      CHECK(t.pose.groups.group[static_cast<std::size_t>(q)] == g.episode);  // a sequence stays in its episode
       CHECK(t.pose.value[(q * 4 + l) * 3 + 0] == g.x_cm);
       CHECK(t.pose.value[(q * 4 + l) * 3 + 2] == g.theta_deg);
     }
@@ -678,7 +738,6 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   c.tasks.max_object_windows = 40;
   c.tasks.max_force_windows = 40;
   c.tasks.max_pose_sequences = 10;
-  c.heads.sequence.validation_blocks = c.heads.sequence.validation_gap = 1;  // 10 sequences: one block
   c.heads.probe_heads = 2;
   c.heads.probe.max_epochs = 2;
   c.heads.sequence.max_epochs = 2;

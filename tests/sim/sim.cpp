@@ -14,6 +14,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <map>
 #include <set>
 #include <vector>
 
@@ -51,7 +52,7 @@ std::vector<Frame> record_frames(tjepa::SimulatedHand& sim, int frames) {
 }
 
 bool same_label(const tjepa::GraspLabel& a, const tjepa::GraspLabel& b) {
-  return a.object == b.object && a.grasp == b.grasp && a.phase == b.phase && a.held == b.held && a.x_cm == b.x_cm &&
+  return a.episode == b.episode && a.episode_object == b.episode_object && a.object == b.object && a.grasp == b.grasp && a.phase == b.phase && a.held == b.held && a.x_cm == b.x_cm &&
          a.y_cm == b.y_cm && a.theta_deg == b.theta_deg && a.force == b.force && a.contact_mask == b.contact_mask;
 }
 
@@ -270,6 +271,28 @@ TEST_SUITE("sim") {
     }
     for (const tjepa::GraspLabel& l : r.labels)
       if (l.object >= 0) CHECK(tjepa::grasp_objects()[static_cast<std::size_t>(l.object)].allows(static_cast<tjepa::GraspType>(l.grasp)));
+  }
+
+  TEST_CASE("grasping hand: episodes count up, hold one object each, and stay unique across reseed") {
+    tjepa::SimulatedHand sim(hand_layout(), {}, 4);
+    const tjepa::GraspRecording a = sim.record(6000);
+    sim.reseed(5);
+    const tjepa::GraspRecording b = sim.record(3000);
+    std::map<int, int> object_of;
+    int last = -1;
+    for (const tjepa::GraspRecording* r : {&a, &b})
+      for (const tjepa::GraspLabel& l : r->labels) {
+        REQUIRE(l.episode >= 0);
+        CHECK((l.episode == last || l.episode == last + 1));  // counts up by one, never back
+        last = l.episode;
+        CHECK(l.episode_object >= 0);
+        if (l.object >= 0) CHECK(l.object == l.episode_object);
+        const auto [at, fresh] = object_of.emplace(l.episode, l.episode_object);
+        CHECK(at->second == l.episode_object);  // one object per episode
+      }
+    CHECK(object_of.size() > 12u);  // about 5 s per episode
+    CHECK(a.labels.back().episode < b.labels.front().episode);  // reseed starts a new episode, new id
+    CHECK(a.labels.front().episode == 0);
   }
 
   TEST_CASE("grasping hand: bad config and layout errors name the field") {

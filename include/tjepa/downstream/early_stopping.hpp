@@ -2,7 +2,9 @@
 // Early stopping, the training loop every downstream head of the evaluation protocol shares
 // (attentive probe heads, the sequence head, the end-to-end baseline):
 //   - a seeded split holds out validation_fraction of the training samples (split_for_validation):
-//     random samples, or (validation_blocks > 0) contiguous blocks of samples in their order, with
+//     whole groups of samples, stratified (when the targets carry SampleGroups: the grasp episodes,
+//     stratified by object, so that no episode has samples on both sides); else random samples,
+//     or (validation_blocks > 0) contiguous blocks of samples in their order, with
 //     validation_gap samples on each side of a block left out of both sets, for samples in
 //     recording order whose neighbours are alike or overlap (windows of one grasp, sequences of
 //     windows that start a few windows apart)
@@ -34,6 +36,7 @@ struct HeadTrainConfig {
   double validation_fraction = 0.2;  // of the training samples, held out for early stopping
   int validation_blocks = 0;         // 0: random samples; k > 0: k contiguous blocks (samples in order)
   int validation_gap = 0;            // samples left out on each side of a validation block
+  bool validation_groups = true;     // split by the targets' SampleGroups when they have them
   int batch = 32;
   double lr = 1e-3;
   int warmup_epochs = 1;
@@ -121,6 +124,85 @@ inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_
   s.fit.assign(order.begin(), order.end() - n_val);
   s.validation.assign(order.end() - n_val, order.end());
   return s;
+}
+
+// Groups of alike samples (the windows of one grasp episode) and their strata (the episode's
+// object): a grouped split puts every group whole on one side.
+struct SampleGroups {
+  std::vector<std::int64_t> group;  // [S] group id per sample; empty: no groups
+  std::vector<int> stratum;         // [S] stratum per sample, the same within a group; empty: one stratum
+
+  bool empty() const { return group.empty(); }
+  void validate(const char* who, int S) const {
+    if (empty()) {
+      require<ShapeError>(stratum.empty(), who, ": ", stratum.size(), " strata without groups");
+      return;
+    }
+    require<ShapeError>(group.size() == static_cast<std::size_t>(S) && (stratum.empty() || stratum.size() == group.size()),
+                        who, ": ", group.size(), " group ids and ", stratum.size(), " strata for ", S,
+                        " samples, expected ", S, " group ids and 0 or ", S, " strata");
+  }
+};
+
+// Validation by groups: each stratum's groups (in order of first appearance) are shuffled with the
+// seed and round(fraction·n) of its n groups are held out, at least one where n >= 2 and never
+// all; if that holds out nothing (every stratum has one group), one seeded group of all. Every
+// sample of a held-out group is a validation sample, the rest fit (both in sample order).
+inline ValidationSplit split_by_groups(const SampleGroups& g, double fraction, std::uint64_t seed) {
+  require<ConfigError>(fraction > 0 && fraction < 1, "split_by_groups: fraction = ", fraction, ", expected in (0, 1)");
+  require<DataError>(!g.empty(), "split_by_groups: no groups");
+  g.validate("split_by_groups", static_cast<int>(g.group.size()));
+  std::vector<std::int64_t> ids;  // distinct groups, in order of first appearance
+  std::vector<int> strata;        // their strata
+  for (std::size_t i = 0; i < g.group.size(); ++i) {
+    const int st = g.stratum.empty() ? 0 : g.stratum[i];
+    const auto at = std::find(ids.begin(), ids.end(), g.group[i]);
+    if (at == ids.end()) {
+      ids.push_back(g.group[i]);
+      strata.push_back(st);
+    } else {
+      require<DataError>(strata[static_cast<std::size_t>(at - ids.begin())] == st, "split_by_groups: group ",
+                         g.group[i], " has samples of strata ", strata[static_cast<std::size_t>(at - ids.begin())],
+                         " and ", st, ", expected one stratum per group");
+    }
+  }
+  require<DataError>(ids.size() >= 2, "split_by_groups: ", ids.size(),
+                     " group(s), expected at least 2 (one to fit on, one to validate on)");
+  std::vector<int> sorted = strata;
+  std::sort(sorted.begin(), sorted.end());
+  sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
+  Rng rng(seed, detail::validation_salt);
+  std::vector<std::int64_t> held;
+  for (const int st : sorted) {
+    std::vector<std::int64_t> mine;
+    for (std::size_t j = 0; j < ids.size(); ++j)
+      if (strata[j] == st) mine.push_back(ids[j]);
+    rng.shuffle(std::span<std::int64_t>(mine));
+    const auto n = static_cast<long>(mine.size());
+    const long k = n < 2 ? 0 : std::clamp(std::lround(fraction * static_cast<double>(n)), 1L, n - 1);
+    held.insert(held.end(), mine.begin(), mine.begin() + k);
+  }
+  if (held.empty()) held.push_back(ids[static_cast<std::size_t>(rng.below(ids.size()))]);
+  std::sort(held.begin(), held.end());
+  ValidationSplit s;
+  for (std::size_t i = 0; i < g.group.size(); ++i)
+    (std::binary_search(held.begin(), held.end(), g.group[i]) ? s.validation : s.fit).push_back(static_cast<std::int64_t>(i));
+  require<DataError>(s.fit.size() >= 2 && !s.validation.empty(), "split_by_groups: ", s.fit.size(),
+                     " fitting and ", s.validation.size(), " validation samples, expected at least 2 and 1");
+  return s;
+}
+
+// The split a head trains with: by the targets' groups when there are some and
+// cfg.validation_groups, else split_for_validation with cfg's fraction, blocks and gap.
+inline ValidationSplit validation_split(int S, const HeadTrainConfig& cfg, const SampleGroups& groups) {
+  if (cfg.validation_groups && !groups.empty()) {
+    require<ConfigError>(cfg.validation_blocks == 0, "validation_split: the targets have groups and validation_blocks = ",
+                         cfg.validation_blocks, "; validate by groups (validation_blocks = 0) or by blocks "
+                         "(validation_groups = false)");
+    groups.validate("validation_split", S);
+    return split_by_groups(groups, cfg.validation_fraction, cfg.seed);
+  }
+  return split_for_validation(S, cfg.validation_fraction, cfg.seed, cfg.validation_blocks, cfg.validation_gap);
 }
 
 // The loop at the top of this file. step(ids) runs forward and backward on a batch of fitting

@@ -59,7 +59,9 @@ struct GraspEvalConfig {
   std::uint64_t data_seed = 0;
   std::vector<std::uint64_t> seeds{0, 1, 2};  // pre-training seeds
   int head_seeds = 3;                         // heads per task and pre-training seed
-  int baseline_frames = 300, pretrain_frames = 40000, train_frames = 30000, test_frames = 15000;
+  // Frames of each recording (100 Hz; an episode is about 5 s): the unlabelled one is twice as long
+  // as the labelled training one, which holds about 12 episodes per object; the test one as many.
+  int baseline_frames = 300, pretrain_frames = 200000, train_frames = 100000, test_frames = 100000;
   GraspSimConfig sim;
   TrainConfig train = grasp_pretrain_config();  // Tactile-JEPA (and MAE's budget: steps, batch, schedule)
   double mae_mask_ratio = 0.75;
@@ -101,6 +103,7 @@ struct GraspEvalConfig {
                        {"sequence_patience", heads.sequence.patience},
                        {"sequence_validation_blocks", heads.sequence.validation_blocks},
                        {"sequence_validation_gap", heads.sequence.validation_gap},
+                       {"validation_by_episode", heads.probe.validation_groups && heads.sequence.validation_groups},
                        {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
                        {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
                        {"end_to_end_patience", heads.end_to_end_patience}}},

@@ -129,18 +129,27 @@ inline GraspTasks grasp_tasks(const WindowSource& src, std::span<const GraspLabe
     return static_cast<std::int64_t>(std::lower_bound(used.begin(), used.end(), w) - used.begin());
   };
 
+  // Every sample's group is the episode of its window (a sequence's: of its first window), its
+  // stratum the episode's object: the heads validate on whole episodes, stratified by object.
+  auto group = [&](SampleGroups& g, std::int64_t w) {
+    g.group.push_back(last(w).episode);
+    g.stratum.push_back(last(w).episode_object);
+  };
   t.object.classes = num_grasp_objects();
   for (std::int64_t w : obj) {
     t.object_rows.push_back(row(w));
     t.object.label.push_back(last(w).object);
+    group(t.object.groups, w);
   }
   t.force.regression = 3;
   for (std::int64_t w : frc) {
     t.force_rows.push_back(row(w));
     for (float f : last(w).force) t.force.value.push_back(f);
+    group(t.force.groups, w);
   }
   t.pose.length = L;
   t.pose.outputs = 3;
+  for (std::int64_t s : seq) group(t.pose.groups, s);
   for (std::int64_t s : seq)
     for (int l = 0; l < L; ++l) {
       const GraspLabel& g = last(s + l);
@@ -223,14 +232,12 @@ void score_pose(GraspScores& s, const T* pred, std::size_t ld, const GraspTasks&
 // trained with early stopping on a validation split of the training samples.
 struct GraspHeadConfig {
   int probe_heads = 3;  // attention heads of the probe's pooling (REFERENCE §6: 3)
-  // The probes validate on random windows. The sequence head validates on 5 contiguous blocks of
-  // the training sequences (in recording order) with gaps of 5 sequences: a random split puts
-  // sequences that share windows (10 windows starting 2 apart overlap up to 4 starts away) on both
-  // sides, and early stopping then follows the fit. (Blocks for the probes were tried: 5 blocks
-  // hold a few of the 16 objects, and the object probe stopped at the constant's accuracy.)
+  // Every head validates on whole episodes, stratified by object (the tasks' SampleGroups): 20 % of
+  // each object's training episodes. Windows of one grasp are alike and pose sequences of one
+  // episode overlap, so a split of windows or sequences puts near-copies on both sides and early
+  // stopping follows the fit; contiguous blocks hold a few of the 16 objects only.
   HeadTrainConfig probe{.max_epochs = 40, .patience = 5, .batch = 64, .lr = 1e-3};
-  HeadTrainConfig sequence{.max_epochs = 40, .patience = 5, .validation_blocks = 5, .validation_gap = 5,
-                           .batch = 16, .lr = 1e-3};
+  HeadTrainConfig sequence{.max_epochs = 40, .patience = 5, .batch = 16, .lr = 1e-3};
   // End to end (the encoder trains with the head): the same, with these epoch limits (every step
   // runs the encoder forward and backward).
   int end_to_end_max_epochs = 3, end_to_end_patience = 2;

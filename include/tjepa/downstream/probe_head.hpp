@@ -34,6 +34,7 @@ struct HeadTargets {
   int classes = 0;            // C classes (0: no classification; else >= 2)
   std::vector<float> value;   // [S, R]
   std::vector<int> label;     // [S] in [0, C) (empty when C = 0)
+  SampleGroups groups;        // optional: the samples' groups, for validation by groups
 
   int size() const {
     return regression > 0 ? static_cast<int>(value.size() / static_cast<std::size_t>(regression))
@@ -50,6 +51,7 @@ struct HeadTargets {
                         label.size(), " labels for ", S, " samples, expected ", classes == 0 ? 0 : S);
     for (int c : label) require<DataError>(c >= 0 && c < classes, who, ": label ", c, ", expected in [0, ", classes, ")");
     for (float v : value) require<DataError>(std::isfinite(v), who, ": regression value ", v, ", expected finite");
+    groups.validate(who, S);
   }
 };
 
@@ -183,7 +185,7 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
   require<ShapeError>(features.size() == S, "train_head: ", features.size(), " feature rows for ", S, " targets");
   require<ShapeError>(features.dim() == head.probe.config.dim, "train_head: features of width ", features.dim(),
                       ", the head expects ", head.probe.config.dim);
-  const ValidationSplit split = split_for_validation(S, cfg.validation_fraction, cfg.seed, cfg.validation_blocks, cfg.validation_gap);
+  const ValidationSplit split = validation_split(S, cfg, targets.groups);
   if (R > 0) head.scaler = ColumnScaler::fit(targets.value, R, split.fit);
 
   std::vector<PrefixedParams<T>> parts{{"probe.", &head.params}};

@@ -71,7 +71,7 @@ struct ProbeLabels {
 // The same labels as targets of a general ProbeHead (downstream/probe_head.hpp), trained with
 // early stopping by train_head: R = 3 force axes, C = num_classes indenter classes.
 inline HeadTargets head_targets(const ProbeLabels& l, int num_classes) {
-  HeadTargets t{force_axes, num_classes, l.force, l.indenter};
+  HeadTargets t{force_axes, num_classes, l.force, l.indenter, {}};
   t.validate("head_targets");
   return t;
 }

@@ -153,6 +153,7 @@ struct SequenceTargets {
   int outputs = 3;                  // P
   std::vector<std::int64_t> window; // [Q, L] sample ids in the Features the head reads
   std::vector<float> value;         // [Q, L, P] e.g. pose (x, y, θ) after each window
+  SampleGroups groups;              // optional: [Q] the sequences' groups, for validation by groups
 
   int size() const { return length > 0 ? static_cast<int>(window.size() / static_cast<std::size_t>(length)) : 0; }
   void validate(const char* who, int samples) const {
@@ -164,6 +165,7 @@ struct SequenceTargets {
     for (std::int64_t w : window)
       require<DataError>(w >= 0 && w < samples, who, ": window id ", w, ", expected in [0, ", samples, ")");
     for (float v : value) require<DataError>(std::isfinite(v), who, ": target ", v, ", expected finite");
+    groups.validate(who, static_cast<int>(Q));
   }
 };
 
@@ -242,7 +244,7 @@ HeadTrainResult train_sequence_head(SequenceModel<T>& model, Features& features,
                       " outputs on features of width ", features.dim(), ", the head takes ", hc.length, " x ",
                       hc.outputs, " and width ", hc.dim);
   const int Q = targets.size(), L = targets.length, P = targets.outputs, N = features.tokens(), d = hc.dim;
-  const ValidationSplit split = split_for_validation(Q, cfg.validation_fraction, cfg.seed, cfg.validation_blocks, cfg.validation_gap);
+  const ValidationSplit split = validation_split(Q, cfg, targets.groups);
   std::vector<std::int64_t> fit_rows;  // (sequence, position) rows of the fitting sequences
   for (std::int64_t q : split.fit)
     for (int l = 0; l < L; ++l) fit_rows.push_back(q * L + l);

@@ -15,8 +15,8 @@
 //     motion; the shear lags its target and never exceeds μ·F_k.
 //   * Each contact renders through the contact model shared with SimulatedSkin (contact_model.hpp)
 //     into raw Xela-like counts, so PreprocessConfig::magnetic() with a baseline applies.
-// Labels per frame (GraspLabel): object, grasp, phase, held, pose, the 3-axis force on one pad
-// (GraspSimConfig::label_pad, the FrameLabel convention) and the 18-bit contact mask.
+// Labels per frame (GraspLabel): episode, object, grasp, phase, held, pose, the 3-axis force on
+// one pad (GraspSimConfig::label_pad, the FrameLabel convention) and the 18-bit contact mask.
 //
 // Everything is drawn from one tjepa::Rng seeded at construction: the same config, seed and
 // sequence of calls give the same data bit for bit.
@@ -49,6 +49,8 @@ inline const char* grasp_phase_name(int phase) {
 
 // One frame's ground truth.
 struct GraspLabel {
+  int episode = -1;     // the frame's episode: counts the episodes the SimulatedHand started, from 0
+  int episode_object = -1;  // the object of the frame's episode (also in its idle, touch and reach)
   int object = -1;      // object id (grasp_objects()), -1: nothing in the hand
   int grasp = -1;       // GraspType, -1: none
   int phase = 0;        // GraspPhase
@@ -259,6 +261,7 @@ class SimulatedHand {
     std::size_t seg = 0;
     int k = 0;        // frame within the segment
     int frame = 0;    // frame within the episode
+    int id = -1;      // GraspLabel::episode
     int object = -1;
     GraspType grasp = GraspType::pinch;
     std::vector<Grip> grips;
@@ -345,6 +348,7 @@ class SimulatedHand {
   void start_episode() {
     Episode& e = ep_;
     e = Episode{};
+    e.id = episodes_++;
     auto seg = [&](GraspPhase p, int frames) {
       Segment s;
       s.phase = p;
@@ -524,6 +528,8 @@ class SimulatedHand {
     const int k = e.k++;
     ++e.frame;
     contacts_.clear();
+    l.episode = e.id;
+    l.episode_object = e.object;
     l.phase = static_cast<int>(s.phase);
     if (s.phase == GraspPhase::idle || s.phase == GraspPhase::reach) return;
     if (s.phase == GraspPhase::touch) {
@@ -660,6 +666,7 @@ class SimulatedHand {
   SkinSensor sensor_;
   std::array<std::array<double, 2>, layouts::allegro::kPads> finger_dir_{};  // [pad] layout unit vector
   Episode ep_;
+  int episodes_ = 0;       // episodes started (reseed does not reset it: ids stay unique in a session)
   std::vector<int> deck_;  // objects left in this round, drawn from the back
   std::vector<Contact> contacts_;
 };
