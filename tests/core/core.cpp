@@ -206,6 +206,10 @@ TEST_SUITE("core") {
     REQUIRE(::read(pipefd[0], &c, 1) == 1);
     ::close(pipefd[0]);
     REQUIRE(::kill(child, SIGKILL) == 0);
+    // Dead but not reaped (a zombie, as a killed MPI rank can be for a while): already stale.
+    siginfo_t info{};
+    REQUIRE(::waitid(P_PID, static_cast<id_t>(child), &info, WEXITED | WNOWAIT) == 0);
+    CHECK(tjepa::stale_temporaries(p).size() == 1u);
     int status = 0;
     REQUIRE(::waitpid(child, &status, 0) == child);
     CHECK(WIFSIGNALED(status));

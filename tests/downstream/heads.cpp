@@ -341,7 +341,7 @@ TEST_CASE("split_for_validation: random samples or contiguous blocks with gaps -
                        DataError);
 }
 
-TEST_CASE("split_by_groups: whole groups, stratified, seeded; validation_split picks groups over blocks") {
+TEST_CASE("split_by_groups: whole groups - stratified - seeded / validation_split picks groups over blocks") {
   // 6 strata (objects) with 1, 2, 5, 10, 10, 10 groups (episodes) of 3-7 samples, interleaved.
   SampleGroups g;
   const int groups_of[6] = {1, 2, 5, 10, 10, 10};
@@ -760,6 +760,11 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK(again.ablation.to_json() == r.ablation.to_json());
   c.tasks.label_pad = 5;
   CHECK_THROWS_AS(run_grasp_eval(c), ConfigError);
+  c.tasks.label_pad = c.sim.label_pad;
+  c.heads.sequence.validation_blocks = c.heads.sequence.validation_gap = 1;  // and by episodes: which?
+  CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("at once"), ConfigError);
+  c.heads.sequence.validation_groups = false;
+  CHECK_NOTHROW(c.validate());
 }
 
 }  // TEST_SUITE

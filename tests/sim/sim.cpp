@@ -273,7 +273,7 @@ TEST_SUITE("sim") {
       if (l.object >= 0) CHECK(tjepa::grasp_objects()[static_cast<std::size_t>(l.object)].allows(static_cast<tjepa::GraspType>(l.grasp)));
   }
 
-  TEST_CASE("grasping hand: episodes count up, hold one object each, and stay unique across reseed") {
+  TEST_CASE("grasping hand: episodes count up - hold one object each - and stay unique across reseed") {
     tjepa::SimulatedHand sim(hand_layout(), {}, 4);
     const tjepa::GraspRecording a = sim.record(6000);
     sim.reseed(5);

@@ -7,15 +7,16 @@
 //
 // Temporary names: `.<name>.tjepa-tmp.<host hash>.<pid>.<random>` beside `<name>`. A process
 // killed mid-write leaves one behind; the next write of the same target on the same host removes
-// those whose process no longer runs (stale_temporaries lists them). Hosts are told apart by name:
-// containers that share a host name and a volume but not a PID namespace must not write the same
-// file. Each write lists the target's directory once.
+// those whose process no longer runs or is a zombie (stale_temporaries lists them). Hosts are
+// told apart by name: containers that share a host name and a volume but not a PID namespace must
+// not write the same file. Each write lists the target's directory once.
 #include <array>
 #include <cerrno>
 #include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <ostream>
 #include <random>
 #include <streambuf>
@@ -127,6 +128,20 @@ inline void sync_directory(const std::filesystem::path& dir) noexcept {
   ::close(fd);
 }
 
+// Whether process pid may still write: it exists (kill(pid, 0); EPERM: not ours, but it exists)
+// and, where /proc tells, is not a zombie, a process that has ended and waits to be reaped (as
+// a killed MPI rank can for a while after mpirun returns).
+inline bool process_runs(long long pid) {
+  if (::kill(static_cast<::pid_t>(pid), 0) != 0 && errno == ESRCH) return false;
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return true;  // no /proc: trust kill
+  const std::size_t close = line.rfind(')');     // "pid (comm) state ...", comm may hold spaces
+  if (close == std::string::npos || close + 2 >= line.size()) return true;
+  const char state = line[close + 2];
+  return state != 'Z' && state != 'X';
+}
+
 }  // namespace detail
 
 // The temporary files of earlier writes of `path` on this host whose process no longer runs
@@ -150,7 +165,7 @@ inline std::vector<std::filesystem::path> stale_temporaries(const std::filesyste
       else pid = pid * 10 + (rest[i] - '0');
     }
     if (!digits || pid <= 0 || pid == static_cast<long long>(::getpid())) continue;
-    if (::kill(static_cast<::pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive (or not ours to judge)
+    if (detail::process_runs(pid)) continue;
     std::error_code lec;
     if (std::filesystem::is_symlink(it->symlink_status(lec)) || !std::filesystem::is_regular_file(it->symlink_status(lec)))
       continue;

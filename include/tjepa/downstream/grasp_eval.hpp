@@ -78,6 +78,11 @@ struct GraspEvalConfig {
     sim.validate();
     train.validate();
     tasks.validate();
+    // The tasks carry episodes: validation by episodes excludes blocks (validation_split).
+    for (const HeadTrainConfig* h : {&heads.probe, &heads.sequence})
+      require<ConfigError>(!h->validation_groups || h->validation_blocks == 0, "GraspEvalConfig: heads validate by ",
+                           "episodes (validation_groups) and by ", h->validation_blocks,
+                           " blocks at once; set validation_blocks = 0 or validation_groups = false");
     const int overlap = (tasks.sequence_length + tasks.sequence_stride - 1) / tasks.sequence_stride - 1;
     require<ConfigError>(heads.sequence.validation_blocks == 0 || heads.sequence.validation_gap >= overlap,
                          "GraspEvalConfig: heads.sequence.validation_gap = ", heads.sequence.validation_gap,
