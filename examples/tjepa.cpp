@@ -166,6 +166,9 @@ int main(int argc, char** argv) {
   eval->add_flag("--no-mae", [&ev](std::int64_t) { ev.eval.mae = false; }, "skip the MAE row");
   eval->add_flag("--no-ablation", [&ev](std::int64_t) { ev.eval.ablation = false; }, "skip the mask ablation");
   eval->add_flag("--no-end-to-end", [&ev](std::int64_t) { ev.eval.end_to_end = false; }, "skip the end-to-end row");
+  eval->add_flag("--no-random", [&ev](std::int64_t) { ev.eval.random = false; }, "skip the random-init row");
+  eval->add_flag("--no-jepa", [&ev](std::int64_t) { ev.eval.jepa = false; },
+                 "skip the Tactile-JEPA row (with --no-ablation)");
   eval->add_option("--out", ev.out, "output directory")->capture_default_str();
   eval->add_flag("--force", ev.force, "overwrite --out");
   eval->add_flag("--quiet", ev.quiet, "no progress lines");

@@ -198,6 +198,27 @@ TEST_CASE("fit_ridge: recovers a known linear map and picks the small lambda wit
   CHECK_THROWS_AS(fit_ridge(X, Y, lambdas, 1.0, 1), ConfigError);
   CHECK_THROWS_AS(fit_ridge(X, Y, std::vector<double>{0.0}, 0.25, 1), ConfigError);
   CHECK_THROWS_AS(fit_ridge(X, Y.topRows(10), lambdas, 0.25, 1), ShapeError);
+  // With groups, λ is scored on held-out whole groups (split_by_groups), by hand here.
+  SampleGroups g;
+  for (int i = 0; i < n; ++i) {
+    g.group.push_back(i / 8);        // 10 groups of 8 rows
+    g.stratum.push_back(i / 8 % 2);  // 2 strata
+  }
+  const Eigen::MatrixXd Yn = Y + 0.5 * random_features(n, k, rng);
+  const RidgeModel grouped = fit_ridge(X, Yn, lambdas, 0.25, 1, g);
+  const ValidationSplit split = split_by_groups(g, 0.25, 1);
+  auto rows = [](const Eigen::MatrixXd& M, const std::vector<std::int64_t>& ids) {
+    Eigen::MatrixXd out(static_cast<Eigen::Index>(ids.size()), M.cols());
+    for (std::size_t i = 0; i < ids.size(); ++i) out.row(static_cast<Eigen::Index>(i)) = M.row(ids[i]);
+    return out;
+  };
+  REQUIRE(grouped.validation.size() == lambdas.size());
+  for (std::size_t j = 0; j < lambdas.size(); ++j) {
+    const RidgeModel f = fit_ridge_at(rows(X, split.fit), rows(Yn, split.fit), lambdas[j]);
+    const Eigen::MatrixXd e = predict(f, rows(X, split.validation)) - rows(Yn, split.validation);
+    CHECK(grouped.validation[j] == doctest::Approx(e.squaredNorm() / static_cast<double>(e.size())).epsilon(1e-12));
+  }
+  CHECK_THROWS_AS(fit_ridge(X, Y, lambdas, 0.25, 1, SampleGroups{{1, 2}, {}}), ShapeError);
 }
 
 TEST_CASE("fit_ridge_classifier: separable classes by argmax of one-hot ridge") {
@@ -764,6 +785,10 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   c.heads.sequence.validation_blocks = c.heads.sequence.validation_gap = 1;  // and by episodes: which?
   CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("at once"), ConfigError);
   c.heads.sequence.validation_groups = false;
+  CHECK_NOTHROW(c.validate());
+  c.jepa = false;  // the ablation's 2L+2G row is the Tactile-JEPA row
+  CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("needs the Tactile-JEPA row"), ConfigError);
+  c.ablation = false;
   CHECK_NOTHROW(c.validate());
 }
 

@@ -68,13 +68,15 @@ struct GraspEvalConfig {
   GraspTaskConfig tasks{.max_object_windows = 1500, .max_force_windows = 1500, .max_pose_sequences = 300};
   GraspHeadConfig heads;
   // Rows to run.
-  bool ridge = true, random = true, end_to_end = true, mae = true, ablation = true;
+  bool ridge = true, random = true, end_to_end = true, mae = true, jepa = true, ablation = true;
 
   void validate() const {
     require<ConfigError>(!seeds.empty() && head_seeds > 0, "GraspEvalConfig: ", seeds.size(), " seeds, ", head_seeds,
                          " head seeds, expected at least one of each");
     require<ConfigError>(baseline_frames > 0 && pretrain_frames > 0 && train_frames > 0 && test_frames > 0,
                          "GraspEvalConfig: frame counts must be > 0");
+    require<ConfigError>(jepa || !ablation, "GraspEvalConfig: the mask ablation needs the Tactile-JEPA row (its 2L+2G "
+                         "row); run with jepa or without the ablation");
     sim.validate();
     train.validate();
     tasks.validate();
@@ -112,7 +114,7 @@ struct GraspEvalConfig {
                        {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
                        {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
                        {"end_to_end_patience", heads.end_to_end_patience}}},
-            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"ablation", ablation}}}};
+            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"jepa", jepa}, {"ablation", ablation}}}};
   }
 };
 
@@ -321,7 +323,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
           .runs.push_back(score_frozen_encoder(mae.context, mae.tokenizer, mae.encoder, *d.train, tr, *d.test, te, hc,
                                                seeds_of(s), stage("MAE")));
     }
-    {
+    if (c.jepa) {
       auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);
       auto scores = score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test, te, hc,
                                          seeds_of(s), stage("Tactile-JEPA"));

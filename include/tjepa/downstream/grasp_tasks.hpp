@@ -365,8 +365,9 @@ inline GraspScores score_constant(const GraspTasks& tr, const GraspTasks& te) {
 }
 
 // The ridge baseline on hand-crafted window features (pad sums and per-taxel window means,
-// downstream/ridge.hpp), λ by validation: a classifier for objects, a regression for force, and a
-// per-window regression for the pose (no sequence model).
+// downstream/ridge.hpp), λ by validation on whole episodes like the heads (the tasks' groups): a
+// classifier for objects, a regression for force, and a per-window regression for the pose (no
+// sequence model).
 inline GraspScores score_ridge(const WindowSource& train_src, const GraspTasks& tr, const WindowSource& test_src,
                                const GraspTasks& te, std::span<const int> group, int num_groups, std::uint64_t seed,
                                double validation_fraction = 0.2) {
@@ -387,19 +388,25 @@ inline GraspScores score_ridge(const WindowSource& train_src, const GraspTasks& 
   GraspScores s{};
   {
     const RidgeModel m = fit_ridge_classifier(features(train_src, tr, tr.object_rows), tr.object.label, tr.object.classes,
-                                              lambdas, validation_fraction, seed);
+                                              lambdas, validation_fraction, seed, tr.object.groups);
     score_object(s, predict_class(m, features(test_src, te, te.object_rows)), te);
   }
   {
     const RidgeModel m = fit_ridge(features(train_src, tr, tr.force_rows), targets(tr.force.value), lambdas,
-                                   validation_fraction, seed);
+                                   validation_fraction, seed, tr.force.groups);
     const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y =
         predict(m, features(test_src, te, te.force_rows));
     score_force(s, y.data(), 3, te);
   }
   {
+    SampleGroups per_window;  // each window of a sequence in the sequence's group
+    for (std::size_t q = 0; q < tr.pose.groups.group.size(); ++q)
+      for (int l = 0; l < tr.pose.length; ++l) {
+        per_window.group.push_back(tr.pose.groups.group[q]);
+        if (!tr.pose.groups.stratum.empty()) per_window.stratum.push_back(tr.pose.groups.stratum[q]);
+      }
     const RidgeModel m = fit_ridge(features(train_src, tr, tr.pose.window), targets(tr.pose.value), lambdas,
-                                   validation_fraction, seed);
+                                   validation_fraction, seed, per_window);
     const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y =
         predict(m, features(test_src, te, te.pose.window));
     score_pose(s, y.data(), 3, te);

@@ -11,7 +11,8 @@
 //   ŷ = z·W + b                   b = mean of the fitted targets (the intercept is not penalized)
 //   W = argmin ‖Z W − (Y − b)‖² + λ‖W‖²  = (ZᵀZ + λI)⁻¹ Zᵀ(Y − b)        (primal, p ≤ n)
 //                                       = Zᵀ (ZZᵀ + λI)⁻¹ (Y − b)       (dual, p > n)
-// λ is chosen from a grid: a seeded split holds out validation_fraction of the rows; for each λ
+// λ is chosen from a grid: a seeded split holds out validation_fraction of the rows (or, given
+// SampleGroups, of each stratum's groups: split_by_groups, downstream/early_stopping.hpp); for each λ
 // the model is fitted on the rest and scored on the held-out rows (mean squared error over rows
 // and outputs; for the classifier: the error rate, ties broken by the squared error); the best λ
 // (the smallest on ties) is then refitted on all rows. Classification is ridge on one-hot targets,
@@ -28,6 +29,7 @@
 
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
+#include "tjepa/downstream/early_stopping.hpp"
 #include "tjepa/data/window_source.hpp"
 
 namespace tjepa {
@@ -133,29 +135,42 @@ inline RidgeModel fit_ridge_at(const Eigen::MatrixXd& X, const Eigen::MatrixXd& 
 }
 
 namespace detail {
-// The λ of the grid with the lowest score(model fitted on the fit rows, validation rows), refitted
-// on all rows; model.validation holds the scores.
-template <class Score>
-RidgeModel select_ridge(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, std::span<const double> lambdas,
-                        double validation_fraction, std::uint64_t seed, const Score& score) {
-  require<ConfigError>(!lambdas.empty(), "fit_ridge: no lambdas to choose from");
+// The rows λ is chosen on: with groups, split_by_groups; else a seeded shuffle of the rows, the
+// last round(fraction·n) held out.
+inline ValidationSplit ridge_split(int n, double validation_fraction, std::uint64_t seed, const SampleGroups& groups) {
   require<ConfigError>(validation_fraction > 0 && validation_fraction < 1, "fit_ridge: validation_fraction = ",
                        validation_fraction, ", expected in (0, 1)");
-  require<ShapeError>(X.rows() == Y.rows(), "fit_ridge: X has ", X.rows(), " rows, Y ", Y.rows());
-  const auto n = static_cast<int>(X.rows());
+  if (!groups.empty()) {
+    groups.validate("fit_ridge", n);
+    return split_by_groups(groups, validation_fraction, seed);
+  }
   const int n_val = static_cast<int>(std::lround(validation_fraction * n));
   require<DataError>(n_val >= 1 && n - n_val >= 2, "fit_ridge: ", n, " rows cannot be split ", 1 - validation_fraction,
                      " / ", validation_fraction, " into fitting and validation rows");
   std::vector<std::int64_t> order(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) order[static_cast<std::size_t>(i)] = i;
   Rng(seed, 0x7269646765ull /* "ridge" */).shuffle(std::span<std::int64_t>(order));
-  auto rows = [&](const Eigen::MatrixXd& M, int from, int count) {
-    Eigen::MatrixXd out(count, M.cols());
-    for (int i = 0; i < count; ++i) out.row(i) = M.row(static_cast<Eigen::Index>(order[static_cast<std::size_t>(from + i)]));
+  ValidationSplit split;
+  split.fit.assign(order.begin(), order.end() - n_val);
+  split.validation.assign(order.end() - n_val, order.end());
+  return split;
+}
+
+// The λ of the grid with the lowest score(model fitted on the fit rows, validation rows), refitted
+// on all rows; model.validation holds the scores.
+template <class Score>
+RidgeModel select_ridge(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, std::span<const double> lambdas,
+                        double validation_fraction, std::uint64_t seed, const SampleGroups& groups, const Score& score) {
+  require<ConfigError>(!lambdas.empty(), "fit_ridge: no lambdas to choose from");
+  require<ShapeError>(X.rows() == Y.rows(), "fit_ridge: X has ", X.rows(), " rows, Y ", Y.rows());
+  const ValidationSplit split = ridge_split(static_cast<int>(X.rows()), validation_fraction, seed, groups);
+  auto rows = [](const Eigen::MatrixXd& M, const std::vector<std::int64_t>& ids) {
+    Eigen::MatrixXd out(static_cast<Eigen::Index>(ids.size()), M.cols());
+    for (std::size_t i = 0; i < ids.size(); ++i) out.row(static_cast<Eigen::Index>(i)) = M.row(static_cast<Eigen::Index>(ids[i]));
     return out;
   };
-  const Eigen::MatrixXd Xf = rows(X, 0, n - n_val), Yf = rows(Y, 0, n - n_val);
-  const Eigen::MatrixXd Xv = rows(X, n - n_val, n_val), Yv = rows(Y, n - n_val, n_val);
+  const Eigen::MatrixXd Xf = rows(X, split.fit), Yf = rows(Y, split.fit);
+  const Eigen::MatrixXd Xv = rows(X, split.validation), Yv = rows(Y, split.validation);
   std::vector<double> scores;
   double best = std::numeric_limits<double>::infinity(), best_lambda = lambdas[0];
   for (double lambda : lambdas) {
@@ -175,8 +190,8 @@ RidgeModel select_ridge(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, std:
 // Multi-output ridge regression, X [n, p], Y [n, k], λ from the grid by validation mean squared
 // error (see the top). Returns the model refitted on all rows at the chosen λ.
 inline RidgeModel fit_ridge(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, std::span<const double> lambdas,
-                            double validation_fraction, std::uint64_t seed) {
-  return detail::select_ridge(X, Y, lambdas, validation_fraction, seed,
+                            double validation_fraction, std::uint64_t seed, const SampleGroups& groups = {}) {
+  return detail::select_ridge(X, Y, lambdas, validation_fraction, seed, groups,
                               [](const RidgeModel& m, const Eigen::MatrixXd& Xv, const Eigen::MatrixXd& Yv) {
                                 return (predict(m, Xv) - Yv).squaredNorm() / static_cast<double>(Yv.size());
                               });
@@ -186,11 +201,11 @@ inline RidgeModel fit_ridge(const Eigen::MatrixXd& X, const Eigen::MatrixXd& Y, 
 // rate, ties broken by the squared error. predict_class gives the classes.
 inline RidgeModel fit_ridge_classifier(const Eigen::MatrixXd& X, std::span<const int> labels, int num_classes,
                                        std::span<const double> lambdas, double validation_fraction,
-                                       std::uint64_t seed) {
+                                       std::uint64_t seed, const SampleGroups& groups = {}) {
   require<ShapeError>(labels.size() == static_cast<std::size_t>(X.rows()), "fit_ridge_classifier: ", labels.size(),
                       " labels for ", X.rows(), " rows");
   return detail::select_ridge(
-      X, one_hot(labels, num_classes), lambdas, validation_fraction, seed,
+      X, one_hot(labels, num_classes), lambdas, validation_fraction, seed, groups,
       [](const RidgeModel& m, const Eigen::MatrixXd& Xv, const Eigen::MatrixXd& Yv) {
         const Eigen::MatrixXd s = predict(m, Xv);
         int wrong = 0;
