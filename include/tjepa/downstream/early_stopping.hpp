@@ -1,7 +1,7 @@
 #pragma once
 // Early stopping, the training loop every downstream head of the evaluation protocol shares
 // (attentive probe heads, the sequence head, the end-to-end baseline):
-//   - a seeded split holds out validation_fraction of the training samples (split_for_validation):
+//   - a seeded split holds out validation_fraction of the training samples (validation_split):
 //     whole groups of samples, stratified (when the targets carry SampleGroups: the grasp episodes,
 //     stratified by object, so that no episode has samples on both sides); else random samples,
 //     or (validation_blocks > 0) contiguous blocks of samples in their order, with
