@@ -28,7 +28,6 @@
 #include <vector>
 
 #include "tjepa/core/error.hpp"
-#include "tjepa/core/random.hpp"
 #include "tjepa/downstream/early_stopping.hpp"
 #include "tjepa/data/window_source.hpp"
 
@@ -135,25 +134,13 @@ inline RidgeModel fit_ridge_at(const Eigen::MatrixXd& X, const Eigen::MatrixXd& 
 }
 
 namespace detail {
-// The rows λ is chosen on: with groups, split_by_groups; else a seeded shuffle of the rows, the
-// last round(fraction·n) held out.
+// The rows λ is chosen on: with groups, split_by_groups; else split_for_validation's random rows.
 inline ValidationSplit ridge_split(int n, double validation_fraction, std::uint64_t seed, const SampleGroups& groups) {
   require<ConfigError>(validation_fraction > 0 && validation_fraction < 1, "fit_ridge: validation_fraction = ",
                        validation_fraction, ", expected in (0, 1)");
-  if (!groups.empty()) {
-    groups.validate("fit_ridge", n);
-    return split_by_groups(groups, validation_fraction, seed);
-  }
-  const int n_val = static_cast<int>(std::lround(validation_fraction * n));
-  require<DataError>(n_val >= 1 && n - n_val >= 2, "fit_ridge: ", n, " rows cannot be split ", 1 - validation_fraction,
-                     " / ", validation_fraction, " into fitting and validation rows");
-  std::vector<std::int64_t> order(static_cast<std::size_t>(n));
-  for (int i = 0; i < n; ++i) order[static_cast<std::size_t>(i)] = i;
-  Rng(seed, 0x7269646765ull /* "ridge" */).shuffle(std::span<std::int64_t>(order));
-  ValidationSplit split;
-  split.fit.assign(order.begin(), order.end() - n_val);
-  split.validation.assign(order.end() - n_val, order.end());
-  return split;
+  if (groups.empty()) return split_for_validation(n, validation_fraction, seed);
+  groups.validate("fit_ridge", n);
+  return split_by_groups(groups, validation_fraction, seed);
 }
 
 // The λ of the grid with the lowest score(model fitted on the fit rows, validation rows), refitted
