@@ -149,13 +149,14 @@ inline GraspTasks grasp_tasks(const WindowSource& src, std::span<const GraspLabe
   }
   t.pose.length = L;
   t.pose.outputs = 3;
-  for (std::int64_t s : seq) group(t.pose.groups, s);
-  for (std::int64_t s : seq)
+  for (std::int64_t s : seq) {
+    group(t.pose.groups, s);
     for (int l = 0; l < L; ++l) {
       const GraspLabel& g = last(s + l);
       t.pose.window.push_back(row(s + l));
       t.pose.value.insert(t.pose.value.end(), {g.x_cm, g.y_cm, g.theta_deg});
     }
+  }
   require<DataError>(!obj.empty() && !frc.empty() && !seq.empty(), "grasp_tasks: ", obj.size(), " object windows, ",
                      frc.size(), " force windows, ", seq.size(),
                      " pose sequences; every task needs samples (record more frames)");
