@@ -50,11 +50,13 @@ inline int run_eval(const EvalOptions& o, std::ostream& out) {
   auto write = [&](const GraspEvalResult& r) {
     std::string md = "# " + o.command + "\n\n" + r.main.markdown();
     if (!r.ablation.rows.empty()) md += "\n" + r.ablation.markdown();
+    if (!r.linear.rows.empty()) md += "\n" + r.linear.markdown();
     write_file_atomic(dir / "results.md", md);
     nlohmann::json j = r.info;
     j["command"] = o.command;
     j["main"] = r.main.to_json();
     if (!r.ablation.rows.empty()) j["ablation"] = r.ablation.to_json();
+    if (!r.linear.rows.empty()) j["linear"] = r.linear.to_json();
     write_file_atomic(dir / "results.json", j.dump(2));
     write_file_atomic(dir / "results.svg", r.main.svg());
     if (!r.ablation.rows.empty()) write_file_atomic(dir / "ablation.svg", r.ablation.svg());

@@ -583,6 +583,8 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK(s.find("MAE") == std::string::npos);
   const auto j = nlohmann::json::parse(read_text(t.path / "demo" / "results.json"));
   CHECK(j["main"]["rows"].size() == 5);
+  CHECK(s.find("Linear read-out") != std::string::npos);
+  CHECK(j["linear"]["rows"].size() == 3);  // ridge, random init, Tactile-JEPA
   CHECK(j["config"]["seeds"] == nlohmann::json::array({3}));
   CHECK(j["command"] == "tjepa demo");
   for (const char* f : {"results.md", "results.json", "results.svg"}) CHECK(fs::exists(t.path / "demo" / f));

@@ -147,6 +147,32 @@ TEST_CASE("window_features: pad sums and taxel means per axis") {
   CHECK_THROWS_AS(window_features(wb, std::vector<int>{0, 2, 0}, 2), DataError);
 }
 
+TEST_CASE("group_mean_embeddings: each group's mean token embedding for the rows asked for") {
+  // 3 samples, 4 tokens in groups {1, 0, 1, 1}, d = 2; x[s, n, i] = 100s + 10n + i.
+  const int S = 3, N = 4, d = 2;
+  std::vector<float> x(static_cast<std::size_t>(S) * N * d);
+  for (int s = 0; s < S; ++s)
+    for (int n = 0; n < N; ++n)
+      for (int i = 0; i < d; ++i) x[static_cast<std::size_t>((s * N + n) * d + i)] = float(100 * s + 10 * n + i);
+  const std::vector<int> group{1, 0, 1, 1};
+  const std::vector<std::int64_t> rows{2, 0};
+  const Eigen::MatrixXd f = group_mean_embeddings(x, N, d, rows, group, 2);
+  REQUIRE(f.rows() == 2);
+  REQUIRE(f.cols() == 2 * d);
+  for (int r = 0; r < 2; ++r)
+    for (int i = 0; i < d; ++i) {
+      const double base = 100.0 * rows[static_cast<std::size_t>(r)] + i;
+      CHECK(f(r, i) == doctest::Approx(base + 10));                      // group 0: token 1
+      CHECK(f(r, d + i) == doctest::Approx(base + 10.0 * (0 + 2 + 3) / 3));  // group 1: tokens 0, 2, 3
+    }
+  CHECK_THROWS_WITH_AS(group_mean_embeddings(x, N, d, rows, group, 3), doctest::Contains("group 2 has no token"), DataError);
+  CHECK_THROWS_WITH_AS(group_mean_embeddings(x, N, d, std::vector<std::int64_t>{3}, group, 2), doctest::Contains("row 3"),
+                       DataError);
+  CHECK_THROWS_AS(group_mean_embeddings(x, N, d, rows, std::vector<int>{1, 0, 1}, 2), ShapeError);
+  CHECK_THROWS_AS(group_mean_embeddings(x, N, 5, rows, group, 2), ShapeError);  // 24 values, not [S, 4, 5]
+  CHECK_THROWS_AS(group_mean_embeddings(x, N, d, rows, std::vector<int>{1, 0, 2, 1}, 2), DataError);
+}
+
 namespace {
 // n rows of p features ~ N(mean_j, scale_j²) (scales and offsets differ, to exercise the
 // standardization).
@@ -768,7 +794,13 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK(lines > 10);
   REQUIRE(r.main.rows.size() == 6);
   REQUIRE(r.ablation.rows.size() == 5);
-  for (const EvalTable* t : {&r.main, &r.ablation})
+  // The linear read-out: the ridge row (the same runs as the main table's) and one row per frozen
+  // encoder of the main table, one read-out per pre-training seed.
+  REQUIRE(r.linear.rows.size() == 4);
+  CHECK(r.linear.rows[0].name == r.main.rows[1].name);
+  CHECK(r.linear.rows[0].runs == r.main.rows[1].runs);
+  for (std::size_t i = 1; i < 4; ++i) CHECK(r.linear.rows[i].runs.front().size() == 1);
+  for (const EvalTable* t : {&r.main, &r.ablation, &r.linear})
     for (const EvalRow& row : t->rows) {
       REQUIRE(row.runs.size() == 2);
       for (const auto& heads : row.runs)
@@ -779,6 +811,7 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   const GraspEvalResult again = run_grasp_eval(c);
   CHECK(again.main.to_json() == r.main.to_json());
   CHECK(again.ablation.to_json() == r.ablation.to_json());
+  CHECK(again.linear.to_json() == r.linear.to_json());
   c.tasks.label_pad = 5;
   CHECK_THROWS_AS(run_grasp_eval(c), ConfigError);
   c.tasks.label_pad = c.sim.label_pad;

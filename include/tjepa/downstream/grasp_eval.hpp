@@ -10,6 +10,9 @@
 //   rows     constant; ridge on hand-crafted features; the random initial encoder, frozen; the same
 //            encoder trained end to end with each head; MAE pre-trained on the same windows with the
 //            same budget, frozen; Tactile-JEPA, frozen (the target encoder)
+//   linear   the linear read-out of each frozen encoder of the main rows (ridge on its pad-mean
+//            embeddings, score_linear_readout; one per pre-training seed), beside the ridge row:
+//            what the embeddings hold linearly, apart from what the heads learn to find
 //   ablation Tactile-JEPA with the masks of the paper's Table 4: 2L+2G (the default), 4L, 4G,
 //            4 I-JEPA blocks, and 2L+2G with a local (connected) context
 //   protocol for each pre-training seed s in `seeds`: pre-train, then `head_seeds` heads per task
@@ -69,6 +72,7 @@ struct GraspEvalConfig {
   GraspHeadConfig heads;
   // Rows to run.
   bool ridge = true, random = true, end_to_end = true, mae = true, jepa = true, ablation = true;
+  bool linear_readout = true;  // the linear read-out table of the frozen main rows
 
   void validate() const {
     require<ConfigError>(!seeds.empty() && head_seeds > 0, "GraspEvalConfig: ", seeds.size(), " seeds, ", head_seeds,
@@ -114,7 +118,7 @@ struct GraspEvalConfig {
                        {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
                        {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
                        {"end_to_end_patience", heads.end_to_end_patience}}},
-            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"jepa", jepa}, {"ablation", ablation}}}};
+            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}}}};
   }
 };
 
@@ -201,7 +205,7 @@ inline std::vector<MaskVariant> grasp_mask_ablation(const TrainConfig& c) {
 }
 
 struct GraspEvalResult {
-  EvalTable main, ablation;
+  EvalTable main, ablation, linear;
   nlohmann::json info;  // config, data sizes, timings, pre-training losses
 };
 
@@ -234,6 +238,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
               {"pretraining", nlohmann::json::array()}};
   res.main.title = "Simulated grasping hand: frozen encoders, baselines, end to end";
   res.ablation.title = "Mask ablation (Tactile-JEPA, frozen)";
+  res.linear.title = "Linear read-out of the frozen encoders (ridge on pad-mean embeddings)";
   const int axes = d.pretrain->axes();
   const TaxelGraph& graph = d.skin.graph;
   const GraspHeadConfig& hc = c.heads;
@@ -290,16 +295,25 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       say("ridge: done (" + std::to_string(seconds(t)) + " s)");
     }
   }
+  // A frozen main row: its heads in the main table, its linear read-out in the linear table.
+  auto frozen_row = [&](const std::string& name, const std::string& linear_name, std::uint64_t s,
+                        const ParamSet<float>& params, const Tokenizer& tokenizer, const Encoder& encoder) {
+    std::optional<LinearReadoutConfig> readout;
+    if (c.linear_readout) readout = LinearReadoutConfig{d.skin.layout.group, d.skin.layout.num_groups(), s};
+    FrozenEncoderScores f = score_frozen_encoder(params, tokenizer, encoder, *d.train, tr, *d.test, te, hc,
+                                                 seeds_of(s), stage(name), readout);
+    row(res.main, name).runs.push_back(f.heads);
+    if (f.linear) row(res.linear, linear_name).runs.push_back({*f.linear});
+    return f.heads;
+  };
+  if (c.linear_readout && c.ridge) row(res.linear, "ridge (pad sums + taxel means)") = row(res.main, "ridge (pad sums + taxel means)");
   for (std::uint64_t s : c.seeds) {
     say("pre-training seed " + std::to_string(s));
     if (c.random || c.end_to_end) {
       TrainConfig cfg = c.train;
       cfg.seed = s;
       auto model = make_jepa_model<float>(cfg, graph, axes, s);
-      if (c.random)
-        row(res.main, "random init, frozen")
-            .runs.push_back(score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test,
-                                                 te, hc, seeds_of(s), stage("random init")));
+      if (c.random) frozen_row("random init, frozen", "random init", s, model->target, model->tokenizer, model->encoder);
       if (c.end_to_end)
         row(res.main, "end to end")
             .runs.push_back(score_end_to_end(model->context, model->tokenizer, model->encoder, *d.train, tr, *d.test, te,
@@ -319,15 +333,11 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       });
       res.info["pretraining"].push_back({{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss},
                                          {"last_loss", log.back().loss}, {"seconds", seconds(t)}});
-      row(res.main, "MAE, frozen")
-          .runs.push_back(score_frozen_encoder(mae.context, mae.tokenizer, mae.encoder, *d.train, tr, *d.test, te, hc,
-                                               seeds_of(s), stage("MAE")));
+      frozen_row("MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
     }
     if (c.jepa) {
       auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);
-      auto scores = score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test, te, hc,
-                                         seeds_of(s), stage("Tactile-JEPA"));
-      row(res.main, "Tactile-JEPA, frozen").runs.push_back(scores);
+      auto scores = frozen_row("Tactile-JEPA, frozen", "Tactile-JEPA", s, model->target, model->tokenizer, model->encoder);
       if (c.ablation) row(res.ablation, "2L+2G (default)").runs.push_back(scores);
     }
     res.info["total_seconds"] = seconds(t0);
@@ -341,7 +351,8 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
         auto model = pretrain_jepa(v.name, s, &v);
         row(res.ablation, v.name)
             .runs.push_back(score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test,
-                                                 te, hc, seeds_of(s), stage(v.name)));
+                                                 te, hc, seeds_of(s), stage(v.name))
+                                .heads);
       }
       res.info["total_seconds"] = seconds(t0);
       if (after_seed) after_seed(res);

@@ -23,6 +23,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -300,21 +301,114 @@ GraspScores score_heads(MakeFeatures&& features_for, const GraspTasks& tr, const
   return s;
 }
 
-// A frozen encoder: embeds every window of each split once, then trains the heads of `seeds`
-// (one GraspScores per head seed).
-inline std::vector<GraspScores> score_frozen_encoder(const ParamSet<float>& params, const Tokenizer& tokenizer,
-                                                     const Encoder& encoder, const WindowSource& train_src,
-                                                     const GraspTasks& tr, const WindowSource& test_src,
-                                                     const GraspTasks& te, const GraspHeadConfig& c,
-                                                     std::span<const std::uint64_t> head_seeds,
-                                                     const GraspProgress& progress = {}) {
+// Ridge on the features of each task's samples, λ by validation on whole episodes like the heads
+// (the tasks' groups): a classifier for objects, a regression for force, and a per-window
+// regression for the pose (no sequence model). features(test, rows) gives the rows [n, p] of the
+// feature table of the training (test = false) or test split.
+template <class Features>
+GraspScores score_ridge_on(Features&& features, const GraspTasks& tr, const GraspTasks& te, std::uint64_t seed,
+                           double validation_fraction = 0.2) {
+  static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
+  auto targets = [](const std::vector<float>& v) {
+    Eigen::MatrixXd y(static_cast<Eigen::Index>(v.size() / 3), 3);
+    for (Eigen::Index i = 0; i < y.rows(); ++i)
+      for (int a = 0; a < 3; ++a) y(i, a) = v[static_cast<std::size_t>(i) * 3 + a];
+    return y;
+  };
+  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  GraspScores s{};
+  {
+    const RidgeModel m = fit_ridge_classifier(features(false, std::span<const std::int64_t>(tr.object_rows)),
+                                              tr.object.label, tr.object.classes, lambdas, validation_fraction, seed,
+                                              tr.object.groups);
+    score_object(s, predict_class(m, features(true, std::span<const std::int64_t>(te.object_rows))), te);
+  }
+  {
+    const RidgeModel m = fit_ridge(features(false, std::span<const std::int64_t>(tr.force_rows)),
+                                   targets(tr.force.value), lambdas, validation_fraction, seed, tr.force.groups);
+    const RowMajor y = predict(m, features(true, std::span<const std::int64_t>(te.force_rows)));
+    score_force(s, y.data(), 3, te);
+  }
+  {
+    SampleGroups per_window;  // each window of a sequence in the sequence's group
+    for (std::size_t q = 0; q < tr.pose.groups.group.size(); ++q)
+      for (int l = 0; l < tr.pose.length; ++l) {
+        per_window.group.push_back(tr.pose.groups.group[q]);
+        if (!tr.pose.groups.stratum.empty()) per_window.stratum.push_back(tr.pose.groups.stratum[q]);
+      }
+    const RidgeModel m = fit_ridge(features(false, std::span<const std::int64_t>(tr.pose.window)),
+                                   targets(tr.pose.value), lambdas, validation_fraction, seed, per_window);
+    const RowMajor y = predict(m, features(true, std::span<const std::int64_t>(te.pose.window)));
+    score_pose(s, y.data(), 3, te);
+  }
+  return s;
+}
+
+// The ridge baseline on hand-crafted window features (pad sums and per-taxel window means,
+// downstream/ridge.hpp), score_ridge_on.
+inline GraspScores score_ridge(const WindowSource& train_src, const GraspTasks& tr, const WindowSource& test_src,
+                               const GraspTasks& te, std::span<const int> group, int num_groups, std::uint64_t seed,
+                               double validation_fraction = 0.2) {
+  auto features = [&](bool test, std::span<const std::int64_t> rows) {
+    const GraspTasks& t = test ? te : tr;
+    std::vector<std::int64_t> ids;
+    for (std::int64_t r : rows) ids.push_back(t.windows[static_cast<std::size_t>(r)]);
+    WindowBatch wb;
+    (test ? test_src : train_src).gather(ids, wb);
+    return window_features(wb, group, num_groups);
+  };
+  return score_ridge_on(features, tr, te, seed, validation_fraction);
+}
+
+// The linear read-out of a frozen encoder: score_ridge_on the mean embedding of each pad's tokens
+// (group_mean_embeddings, [G·d] per sample). It tells what a linear map finds in the embeddings,
+// apart from what a head learns to find.
+inline GraspScores score_linear_readout(std::span<const float> train_embeddings, const GraspTasks& tr,
+                                        std::span<const float> test_embeddings, const GraspTasks& te, int N, int d,
+                                        std::span<const int> group, int num_groups, std::uint64_t seed) {
+  auto features = [&](bool test, std::span<const std::int64_t> rows) {
+    return group_mean_embeddings(test ? test_embeddings : train_embeddings, N, d, rows, group, num_groups);
+  };
+  return score_ridge_on(features, tr, te, seed);
+}
+
+// The scores of a frozen encoder: its heads (one GraspScores per head seed) and, when asked for,
+// its linear read-out (score_linear_readout).
+struct FrozenEncoderScores {
+  std::vector<GraspScores> heads;
+  std::optional<GraspScores> linear;
+};
+
+// The token groups of a linear read-out (TaxelLayout::group, num_groups) and the seed of its λ split.
+struct LinearReadoutConfig {
+  std::span<const int> group;
+  int num_groups = 0;
+  std::uint64_t seed = 0;
+};
+
+// A frozen encoder: embeds every window of each split once, then trains the heads of `head_seeds`
+// and (readout given) fits its linear read-out on the same embeddings.
+inline FrozenEncoderScores score_frozen_encoder(const ParamSet<float>& params, const Tokenizer& tokenizer,
+                                                const Encoder& encoder, const WindowSource& train_src,
+                                                const GraspTasks& tr, const WindowSource& test_src,
+                                                const GraspTasks& te, const GraspHeadConfig& c,
+                                                std::span<const std::uint64_t> head_seeds,
+                                                const GraspProgress& progress = {},
+                                                const std::optional<LinearReadoutConfig>& readout = std::nullopt) {
   const int N = encoder.num_tokens(), d = encoder.dim();
   FrozenFeatures<float> ftr(embed_windows(params, tokenizer, encoder, train_src, tr.windows), N, d);
   FrozenFeatures<float> fte(embed_windows(params, tokenizer, encoder, test_src, te.windows), N, d);
   if (progress) progress("embedded " + std::to_string(tr.windows.size()) + " + " + std::to_string(te.windows.size()) + " windows");
-  std::vector<GraspScores> out;
+  FrozenEncoderScores out;
   for (std::uint64_t h : head_seeds)
-    out.push_back(score_heads<float>([&](int) { return std::pair{&ftr, &fte}; }, tr, te, c, false, h, progress));
+    out.heads.push_back(score_heads<float>([&](int) { return std::pair{&ftr, &fte}; }, tr, te, c, false, h, progress));
+  if (readout) {
+    out.linear = score_linear_readout(ftr.embeddings(), tr, fte.embeddings(), te, N, d, readout->group,
+                                      readout->num_groups, readout->seed);
+    if (progress)
+      progress("linear read-out: object " + std::to_string((*out.linear)[kObjectAccuracy]) + " %, force " +
+               std::to_string((*out.linear)[kForceRmse]) + " N, θ " + std::to_string((*out.linear)[kPoseTheta]) + " deg");
+  }
   return out;
 }
 
@@ -362,56 +456,6 @@ inline GraspScores score_constant(const GraspTasks& tr, const GraspTasks& te) {
   };
   score_force(s, repeat(means(tr.force.value), te.force.value.size() / 3).data(), 3, te);
   score_pose(s, repeat(means(tr.pose.value), te.pose.value.size() / 3).data(), 3, te);
-  return s;
-}
-
-// The ridge baseline on hand-crafted window features (pad sums and per-taxel window means,
-// downstream/ridge.hpp), λ by validation on whole episodes like the heads (the tasks' groups): a
-// classifier for objects, a regression for force, and a per-window regression for the pose (no
-// sequence model).
-inline GraspScores score_ridge(const WindowSource& train_src, const GraspTasks& tr, const WindowSource& test_src,
-                               const GraspTasks& te, std::span<const int> group, int num_groups, std::uint64_t seed,
-                               double validation_fraction = 0.2) {
-  static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
-  auto features = [&](const WindowSource& src, const GraspTasks& t, std::span<const std::int64_t> rows) {
-    std::vector<std::int64_t> ids;
-    for (std::int64_t r : rows) ids.push_back(t.windows[static_cast<std::size_t>(r)]);
-    WindowBatch wb;
-    src.gather(ids, wb);
-    return window_features(wb, group, num_groups);
-  };
-  auto targets = [](const std::vector<float>& v) {
-    Eigen::MatrixXd y(static_cast<Eigen::Index>(v.size() / 3), 3);
-    for (Eigen::Index i = 0; i < y.rows(); ++i)
-      for (int a = 0; a < 3; ++a) y(i, a) = v[static_cast<std::size_t>(i) * 3 + a];
-    return y;
-  };
-  GraspScores s{};
-  {
-    const RidgeModel m = fit_ridge_classifier(features(train_src, tr, tr.object_rows), tr.object.label, tr.object.classes,
-                                              lambdas, validation_fraction, seed, tr.object.groups);
-    score_object(s, predict_class(m, features(test_src, te, te.object_rows)), te);
-  }
-  {
-    const RidgeModel m = fit_ridge(features(train_src, tr, tr.force_rows), targets(tr.force.value), lambdas,
-                                   validation_fraction, seed, tr.force.groups);
-    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y =
-        predict(m, features(test_src, te, te.force_rows));
-    score_force(s, y.data(), 3, te);
-  }
-  {
-    SampleGroups per_window;  // each window of a sequence in the sequence's group
-    for (std::size_t q = 0; q < tr.pose.groups.group.size(); ++q)
-      for (int l = 0; l < tr.pose.length; ++l) {
-        per_window.group.push_back(tr.pose.groups.group[q]);
-        if (!tr.pose.groups.stratum.empty()) per_window.stratum.push_back(tr.pose.groups.stratum[q]);
-      }
-    const RidgeModel m = fit_ridge(features(train_src, tr, tr.pose.window), targets(tr.pose.value), lambdas,
-                                   validation_fraction, seed, per_window);
-    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y =
-        predict(m, features(test_src, te, te.pose.window));
-    score_pose(s, y.data(), 3, te);
-  }
   return s;
 }
 

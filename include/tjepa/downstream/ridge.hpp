@@ -33,6 +33,39 @@
 
 namespace tjepa {
 
+// The linear read-out of a frozen encoder: rows [n, G·d] of the mean embedding of each group's
+// tokens, for samples `rows` of embeddings [S, N, d] (embed_windows). group [N]: each token's
+// pad / group in [0, num_groups); every group must hold a token.
+inline Eigen::MatrixXd group_mean_embeddings(std::span<const float> embeddings, int N, int d,
+                                             std::span<const std::int64_t> rows, std::span<const int> group,
+                                             int num_groups) {
+  require<ShapeError>(N > 0 && d > 0 && embeddings.size() % (static_cast<std::size_t>(N) * d) == 0,
+                      "group_mean_embeddings: ", embeddings.size(), " values, expected a multiple of N*d = ", N, "*", d);
+  require<ShapeError>(group.size() == static_cast<std::size_t>(N), "group_mean_embeddings: group has ", group.size(),
+                      " entries, expected one per token (", N, ")");
+  require<ConfigError>(num_groups > 0, "group_mean_embeddings: num_groups = ", num_groups, ", expected > 0");
+  std::vector<int> count(static_cast<std::size_t>(num_groups), 0);
+  for (int n = 0; n < N; ++n) {
+    require<DataError>(group[n] >= 0 && group[n] < num_groups, "group_mean_embeddings: group[", n, "] = ", group[n],
+                       ", expected in [0, ", num_groups, ")");
+    ++count[static_cast<std::size_t>(group[n])];
+  }
+  for (int g = 0; g < num_groups; ++g)
+    require<DataError>(count[static_cast<std::size_t>(g)] > 0, "group_mean_embeddings: group ", g, " has no token");
+  const auto S = static_cast<std::int64_t>(embeddings.size() / (static_cast<std::size_t>(N) * d));
+  Eigen::MatrixXd f = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(rows.size()), static_cast<Eigen::Index>(num_groups) * d);
+  for (std::size_t r = 0; r < rows.size(); ++r) {
+    require<DataError>(rows[r] >= 0 && rows[r] < S, "group_mean_embeddings: row ", rows[r], ", expected in [0, ", S, ")");
+    for (int n = 0; n < N; ++n) {
+      const float* x = embeddings.data() + (static_cast<std::size_t>(rows[r]) * N + n) * d;
+      const double w = 1.0 / count[static_cast<std::size_t>(group[n])];
+      const Eigen::Index c0 = static_cast<Eigen::Index>(group[n]) * d;
+      for (int i = 0; i < d; ++i) f(static_cast<Eigen::Index>(r), c0 + i) += w * x[i];
+    }
+  }
+  return f;
+}
+
 // Features [B, G·m + N·m] of a batch of windows (see the top). group [N]: each taxel's pad /
 // group in [0, num_groups) (TaxelLayout::group).
 inline Eigen::MatrixXd window_features(const WindowBatch& wb, std::span<const int> group, int num_groups) {
