@@ -584,7 +584,7 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   const auto j = nlohmann::json::parse(read_text(t.path / "demo" / "results.json"));
   CHECK(j["main"]["rows"].size() == 5);
   CHECK(s.find("Linear read-out") != std::string::npos);
-  CHECK(j["linear"]["rows"].size() == 3);  // ridge, random init, Tactile-JEPA
+  CHECK(j["linear"]["rows"].size() == 5);  // ridge; random init and Tactile-JEPA, each on pad means and token components
   CHECK(j["config"]["seeds"] == nlohmann::json::array({3}));
   CHECK(j["command"] == "tjepa demo");
   for (const char* f : {"results.md", "results.json", "results.svg"}) CHECK(fs::exists(t.path / "demo" / f));

@@ -173,6 +173,50 @@ TEST_CASE("group_mean_embeddings: each group's mean token embedding for the rows
   CHECK_THROWS_AS(group_mean_embeddings(x, N, d, rows, std::vector<int>{1, 0, 2, 1}, 2), DataError);
 }
 
+TEST_CASE("TokenComponents: per-token residuals on the leading principal directions") {
+  // Embeddings x[s, n] = μ_n + a_s,n u + b_s,n v with orthonormal u, v in R^4, var(a) > var(b):
+  // the two directions span {u, v}, the first holds the larger variance, the shares sum to 1, and
+  // each token's residual from its mean is rebuilt exactly from its two features.
+  const int S = 40, N = 3, d = 4;
+  Rng rng(11);
+  const Eigen::Vector4d u = Eigen::Vector4d(1, 1, 0, 0) / std::sqrt(2.0), v = Eigen::Vector4d(0, 0, 1, -1) / std::sqrt(2.0);
+  std::vector<float> x(static_cast<std::size_t>(S) * N * d);
+  for (int s = 0; s < S; ++s)
+    for (int n = 0; n < N; ++n) {
+      const double a = 3.0 * rng.normal(0.0, 1.0), b = 0.5 * rng.normal(0.0, 1.0);
+      for (int i = 0; i < d; ++i)
+        x[static_cast<std::size_t>((s * N + n) * d + i)] = float(10.0 * n - i + a * u(i) + b * v(i));
+    }
+  std::vector<std::int64_t> rows(S);
+  for (int s = 0; s < S; ++s) rows[static_cast<std::size_t>(s)] = s;
+  const TokenComponents t = TokenComponents::fit(x, N, d, rows, 2);
+  REQUIRE(t.components() == 2);
+  for (int j = 0; j < 2; ++j) {
+    const Eigen::Vector4d e = t.directions.col(j);
+    CHECK(std::hypot(e.dot(u), e.dot(v)) == doctest::Approx(1).epsilon(1e-5));  // in span {u, v}
+  }
+  CHECK(std::abs(t.directions.col(0).dot(u)) > 0.99);  // mostly u: var(a) = 36 var(b)
+  CHECK(t.variance_share.sum() == doctest::Approx(1).epsilon(1e-5));
+  CHECK(t.variance_share(0) > t.variance_share(1));
+  const std::vector<std::int64_t> pick{5, 17};
+  const Eigen::MatrixXd f = t.features(x, pick);
+  REQUIRE(f.rows() == 2);
+  REQUIRE(f.cols() == N * 2);
+  for (int r = 0; r < 2; ++r)
+    for (int n = 0; n < N; ++n) {
+      const Eigen::Vector4d rebuilt = t.directions * f.row(r).segment(n * 2, 2).transpose();
+      for (int i = 0; i < d; ++i) {
+        const double xi = x[static_cast<std::size_t>((pick[static_cast<std::size_t>(r)] * N + n) * d + i)];
+        CHECK(rebuilt(i) == doctest::Approx(xi - t.mean(n, i)).epsilon(1e-4));
+      }
+    }
+  CHECK_THROWS_WITH_AS(TokenComponents::fit(x, N, d, rows, 5), doctest::Contains("k = 5"), ConfigError);
+  CHECK_THROWS_AS(TokenComponents::fit(x, N, d, std::vector<std::int64_t>{1}, 2), DataError);
+  CHECK_THROWS_WITH_AS(t.features(x, std::vector<std::int64_t>{S}), doctest::Contains("row 40"), DataError);
+  const std::vector<float> flat(x.size(), 1.0f);
+  CHECK_THROWS_WITH_AS(TokenComponents::fit(flat, N, d, rows, 2), doctest::Contains("do not vary"), DataError);
+}
+
 namespace {
 // n rows of p features ~ N(mean_j, scale_j²) (scales and offsets differ, to exercise the
 // standardization).
@@ -794,12 +838,14 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK(lines > 10);
   REQUIRE(r.main.rows.size() == 6);
   REQUIRE(r.ablation.rows.size() == 5);
-  // The linear read-out: the ridge row (the same runs as the main table's) and one row per frozen
-  // encoder of the main table, one read-out per pre-training seed.
-  REQUIRE(r.linear.rows.size() == 4);
+  // The linear read-outs: the ridge row (the same runs as the main table's) and two rows per frozen
+  // encoder of the main table (pad means, token components), one read-out per pre-training seed.
+  REQUIRE(r.linear.rows.size() == 7);
   CHECK(r.linear.rows[0].name == r.main.rows[1].name);
   CHECK(r.linear.rows[0].runs == r.main.rows[1].runs);
-  for (std::size_t i = 1; i < 4; ++i) CHECK(r.linear.rows[i].runs.front().size() == 1);
+  CHECK(r.linear.rows[1].name == "random init: pad means");
+  CHECK(r.linear.rows[6].name == "Tactile-JEPA: token components");
+  for (std::size_t i = 1; i < 7; ++i) CHECK(r.linear.rows[i].runs.front().size() == 1);
   for (const EvalTable* t : {&r.main, &r.ablation, &r.linear})
     for (const EvalRow& row : t->rows) {
       REQUIRE(row.runs.size() == 2);
@@ -823,6 +869,8 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("needs the Tactile-JEPA row"), ConfigError);
   c.ablation = false;
   CHECK_NOTHROW(c.validate());
+  c.readout_components = c.train.dim + 1;
+  CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("readout_components"), ConfigError);
 }
 
 }  // TEST_SUITE

@@ -10,9 +10,10 @@
 //   rows     constant; ridge on hand-crafted features; the random initial encoder, frozen; the same
 //            encoder trained end to end with each head; MAE pre-trained on the same windows with the
 //            same budget, frozen; Tactile-JEPA, frozen (the target encoder)
-//   linear   the linear read-out of each frozen encoder of the main rows (ridge on its pad-mean
-//            embeddings, score_linear_readout; one per pre-training seed), beside the ridge row:
-//            what the embeddings hold linearly, apart from what the heads learn to find
+//   linear   the linear read-outs of each frozen encoder of the main rows (ridge on its pad-mean
+//            embeddings and on its token components, score_linear_readouts; one per pre-training
+//            seed), beside the ridge row: what the embeddings hold linearly, apart from what the
+//            heads learn to find
 //   ablation Tactile-JEPA with the masks of the paper's Table 4: 2L+2G (the default), 4L, 4G,
 //            4 I-JEPA blocks, and 2L+2G with a local (connected) context
 //   protocol for each pre-training seed s in `seeds`: pre-train, then `head_seeds` heads per task
@@ -73,6 +74,7 @@ struct GraspEvalConfig {
   // Rows to run.
   bool ridge = true, random = true, end_to_end = true, mae = true, jepa = true, ablation = true;
   bool linear_readout = true;  // the linear read-out table of the frozen main rows
+  int readout_components = 3;  // k of its token components (as many numbers per taxel as its 3 axes)
 
   void validate() const {
     require<ConfigError>(!seeds.empty() && head_seeds > 0, "GraspEvalConfig: ", seeds.size(), " seeds, ", head_seeds,
@@ -84,6 +86,8 @@ struct GraspEvalConfig {
     sim.validate();
     train.validate();
     tasks.validate();
+    require<ConfigError>(readout_components > 0 && readout_components <= train.dim, "GraspEvalConfig: readout_components = ",
+                         readout_components, ", expected in [1, dim = ", train.dim, "]");
     // The tasks carry episodes: validation by episodes excludes blocks (validation_split).
     for (const HeadTrainConfig* h : {&heads.probe, &heads.sequence})
       require<ConfigError>(!h->validation_groups || h->validation_blocks == 0, "GraspEvalConfig: heads validate by ",
@@ -118,7 +122,7 @@ struct GraspEvalConfig {
                        {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
                        {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
                        {"end_to_end_patience", heads.end_to_end_patience}}},
-            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}}}};
+            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}, {"readout_components", readout_components}}}};
   }
 };
 
@@ -238,7 +242,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
               {"pretraining", nlohmann::json::array()}};
   res.main.title = "Simulated grasping hand: frozen encoders, baselines, end to end";
   res.ablation.title = "Mask ablation (Tactile-JEPA, frozen)";
-  res.linear.title = "Linear read-out of the frozen encoders (ridge on pad-mean embeddings)";
+  res.linear.title = "Linear read-outs of the frozen encoders (ridge on pad-mean embeddings, on token components)";
   const int axes = d.pretrain->axes();
   const TaxelGraph& graph = d.skin.graph;
   const GraspHeadConfig& hc = c.heads;
@@ -299,11 +303,15 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
   auto frozen_row = [&](const std::string& name, const std::string& linear_name, std::uint64_t s,
                         const ParamSet<float>& params, const Tokenizer& tokenizer, const Encoder& encoder) {
     std::optional<LinearReadoutConfig> readout;
-    if (c.linear_readout) readout = LinearReadoutConfig{d.skin.layout.group, d.skin.layout.num_groups(), s};
+    if (c.linear_readout)
+      readout = LinearReadoutConfig{d.skin.layout.group, d.skin.layout.num_groups(), c.readout_components, s};
     FrozenEncoderScores f = score_frozen_encoder(params, tokenizer, encoder, *d.train, tr, *d.test, te, hc,
                                                  seeds_of(s), stage(name), readout);
     row(res.main, name).runs.push_back(f.heads);
-    if (f.linear) row(res.linear, linear_name).runs.push_back({*f.linear});
+    if (f.linear) {
+      row(res.linear, linear_name + ": pad means").runs.push_back({f.linear->group_means});
+      row(res.linear, linear_name + ": token components").runs.push_back({f.linear->token_components});
+    }
     return f.heads;
   };
   if (c.linear_readout && c.ridge) row(res.linear, "ridge (pad sums + taxel means)") = row(res.main, "ridge (pad sums + taxel means)");

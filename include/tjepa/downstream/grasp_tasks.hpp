@@ -360,34 +360,47 @@ inline GraspScores score_ridge(const WindowSource& train_src, const GraspTasks& 
   return score_ridge_on(features, tr, te, seed, validation_fraction);
 }
 
-// The linear read-out of a frozen encoder: score_ridge_on the mean embedding of each pad's tokens
-// (group_mean_embeddings, [G·d] per sample). It tells what a linear map finds in the embeddings,
+// The linear read-outs of a frozen encoder (downstream/ridge.hpp): score_ridge_on its group-mean
+// embeddings and on its token components. They tell what a linear map finds in the embeddings,
 // apart from what a head learns to find.
-inline GraspScores score_linear_readout(std::span<const float> train_embeddings, const GraspTasks& tr,
-                                        std::span<const float> test_embeddings, const GraspTasks& te, int N, int d,
-                                        std::span<const int> group, int num_groups, std::uint64_t seed) {
-  auto features = [&](bool test, std::span<const std::int64_t> rows) {
-    return group_mean_embeddings(test ? test_embeddings : train_embeddings, N, d, rows, group, num_groups);
-  };
-  return score_ridge_on(features, tr, te, seed);
+struct LinearReadoutConfig {
+  std::span<const int> group;  // [N] each token's pad (TaxelLayout::group)
+  int num_groups = 0;
+  int components = 3;          // k of the token components
+  std::uint64_t seed = 0;      // of the λ splits
+};
+struct LinearReadoutScores {
+  GraspScores group_means{}, token_components{};
+};
+inline LinearReadoutScores score_linear_readouts(std::span<const float> train_embeddings, const GraspTasks& tr,
+                                                 std::span<const float> test_embeddings, const GraspTasks& te, int N,
+                                                 int d, const LinearReadoutConfig& c) {
+  LinearReadoutScores out;
+  out.group_means = score_ridge_on(
+      [&](bool test, std::span<const std::int64_t> rows) {
+        return group_mean_embeddings(test ? test_embeddings : train_embeddings, N, d, rows, c.group, c.num_groups);
+      },
+      tr, te, c.seed);
+  std::vector<std::int64_t> all(tr.windows.size());
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::int64_t>(i);
+  const TokenComponents tc = TokenComponents::fit(train_embeddings, N, d, all, c.components);
+  out.token_components = score_ridge_on(
+      [&](bool test, std::span<const std::int64_t> rows) {
+        return tc.features(test ? test_embeddings : train_embeddings, rows);
+      },
+      tr, te, c.seed);
+  return out;
 }
 
 // The scores of a frozen encoder: its heads (one GraspScores per head seed) and, when asked for,
-// its linear read-out (score_linear_readout).
+// its linear read-outs.
 struct FrozenEncoderScores {
   std::vector<GraspScores> heads;
-  std::optional<GraspScores> linear;
-};
-
-// The token groups of a linear read-out (TaxelLayout::group, num_groups) and the seed of its λ split.
-struct LinearReadoutConfig {
-  std::span<const int> group;
-  int num_groups = 0;
-  std::uint64_t seed = 0;
+  std::optional<LinearReadoutScores> linear;
 };
 
 // A frozen encoder: embeds every window of each split once, then trains the heads of `head_seeds`
-// and (readout given) fits its linear read-out on the same embeddings.
+// and (readout given) fits its linear read-outs on the same embeddings.
 inline FrozenEncoderScores score_frozen_encoder(const ParamSet<float>& params, const Tokenizer& tokenizer,
                                                 const Encoder& encoder, const WindowSource& train_src,
                                                 const GraspTasks& tr, const WindowSource& test_src,
@@ -403,11 +416,12 @@ inline FrozenEncoderScores score_frozen_encoder(const ParamSet<float>& params, c
   for (std::uint64_t h : head_seeds)
     out.heads.push_back(score_heads<float>([&](int) { return std::pair{&ftr, &fte}; }, tr, te, c, false, h, progress));
   if (readout) {
-    out.linear = score_linear_readout(ftr.embeddings(), tr, fte.embeddings(), te, N, d, readout->group,
-                                      readout->num_groups, readout->seed);
+    out.linear = score_linear_readouts(ftr.embeddings(), tr, fte.embeddings(), te, N, d, *readout);
     if (progress)
-      progress("linear read-out: object " + std::to_string((*out.linear)[kObjectAccuracy]) + " %, force " +
-               std::to_string((*out.linear)[kForceRmse]) + " N, θ " + std::to_string((*out.linear)[kPoseTheta]) + " deg");
+      for (const auto& [what, sc] : {std::pair{"pad means", out.linear->group_means},
+                                     std::pair{"token components", out.linear->token_components}})
+        progress(std::string("linear read-out on ") + what + ": object " + std::to_string(sc[kObjectAccuracy]) +
+                 " %, force " + std::to_string(sc[kForceRmse]) + " N, pose θ " + std::to_string(sc[kPoseTheta]) + " deg");
   }
   return out;
 }

@@ -19,6 +19,7 @@
 // the predicted class the argmax.
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <cmath>
@@ -33,14 +34,33 @@
 
 namespace tjepa {
 
-// The linear read-out of a frozen encoder: rows [n, G·d] of the mean embedding of each group's
-// tokens, for samples `rows` of embeddings [S, N, d] (embed_windows). group [N]: each token's
-// pad / group in [0, num_groups); every group must hold a token.
+namespace detail {
+// The number of samples S of embeddings [S, N, d]; throws unless the size is a multiple of N·d
+// and every row is in [0, S).
+inline std::int64_t embedding_samples(std::span<const float> embeddings, int N, int d, std::span<const std::int64_t> rows,
+                                      const char* who) {
+  require<ShapeError>(N > 0 && d > 0 && embeddings.size() % (static_cast<std::size_t>(N) * d) == 0, who, ": ",
+                      embeddings.size(), " values, expected a multiple of N*d = ", N, "*", d);
+  const auto S = static_cast<std::int64_t>(embeddings.size() / (static_cast<std::size_t>(N) * d));
+  for (std::int64_t r : rows) require<DataError>(r >= 0 && r < S, who, ": row ", r, ", expected in [0, ", S, ")");
+  return S;
+}
+}  // namespace detail
+
+// Linear read-outs of a frozen encoder's embeddings [S, N, d] (embed_windows), features for ridge:
+//   group means       [G·d] per sample: the mean embedding of each pad's (group's) tokens — what
+//                     each pad holds, not where on the pad (group_mean_embeddings)
+//   token components  [N·k] per sample: each token's embedding minus its mean over the fitting
+//                     samples, projected on the k leading principal directions of those residuals
+//                     (pooled over tokens and fitting samples) — where on the skin, at k numbers per
+//                     taxel (TokenComponents; k = 3 keeps as many as a raw window's 3 axes)
+
+// Group means for samples `rows`. group [N]: each token's group in [0, num_groups); every group
+// must hold a token.
 inline Eigen::MatrixXd group_mean_embeddings(std::span<const float> embeddings, int N, int d,
                                              std::span<const std::int64_t> rows, std::span<const int> group,
                                              int num_groups) {
-  require<ShapeError>(N > 0 && d > 0 && embeddings.size() % (static_cast<std::size_t>(N) * d) == 0,
-                      "group_mean_embeddings: ", embeddings.size(), " values, expected a multiple of N*d = ", N, "*", d);
+  detail::embedding_samples(embeddings, N, d, rows, "group_mean_embeddings");
   require<ShapeError>(group.size() == static_cast<std::size_t>(N), "group_mean_embeddings: group has ", group.size(),
                       " entries, expected one per token (", N, ")");
   require<ConfigError>(num_groups > 0, "group_mean_embeddings: num_groups = ", num_groups, ", expected > 0");
@@ -52,19 +72,70 @@ inline Eigen::MatrixXd group_mean_embeddings(std::span<const float> embeddings, 
   }
   for (int g = 0; g < num_groups; ++g)
     require<DataError>(count[static_cast<std::size_t>(g)] > 0, "group_mean_embeddings: group ", g, " has no token");
-  const auto S = static_cast<std::int64_t>(embeddings.size() / (static_cast<std::size_t>(N) * d));
   Eigen::MatrixXd f = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(rows.size()), static_cast<Eigen::Index>(num_groups) * d);
-  for (std::size_t r = 0; r < rows.size(); ++r) {
-    require<DataError>(rows[r] >= 0 && rows[r] < S, "group_mean_embeddings: row ", rows[r], ", expected in [0, ", S, ")");
+  for (std::size_t r = 0; r < rows.size(); ++r)
     for (int n = 0; n < N; ++n) {
       const float* x = embeddings.data() + (static_cast<std::size_t>(rows[r]) * N + n) * d;
       const double w = 1.0 / count[static_cast<std::size_t>(group[n])];
       const Eigen::Index c0 = static_cast<Eigen::Index>(group[n]) * d;
       for (int i = 0; i < d; ++i) f(static_cast<Eigen::Index>(r), c0 + i) += w * x[i];
     }
-  }
   return f;
 }
+
+// Token components (see above), fitted on samples `rows` of the training embeddings.
+struct TokenComponents {
+  int N = 0, d = 0;
+  Eigen::MatrixXd mean;              // [N, d] each token's mean embedding over the fitting samples
+  Eigen::MatrixXd directions;        // [d, k] leading principal directions of the residuals, first first
+  Eigen::VectorXd variance_share;    // [k] share of the residuals' variance along each direction
+
+  int components() const { return static_cast<int>(directions.cols()); }
+
+  static TokenComponents fit(std::span<const float> embeddings, int N, int d, std::span<const std::int64_t> rows, int k) {
+    detail::embedding_samples(embeddings, N, d, rows, "TokenComponents::fit");
+    require<ConfigError>(k > 0 && k <= d, "TokenComponents::fit: k = ", k, ", expected in [1, d = ", d, "]");
+    require<DataError>(rows.size() >= 2, "TokenComponents::fit: ", rows.size(), " samples, expected at least 2");
+    using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    auto sample = [&](std::int64_t r) {
+      return Eigen::Map<const RowMajor>(embeddings.data() + static_cast<std::size_t>(r) * N * d, N, d).cast<double>();
+    };
+    TokenComponents t;
+    t.N = N;
+    t.d = d;
+    t.mean = Eigen::MatrixXd::Zero(N, d);
+    for (std::int64_t r : rows) t.mean += sample(r);
+    t.mean /= static_cast<double>(rows.size());
+    Eigen::MatrixXd C = Eigen::MatrixXd::Zero(d, d), R(N, d);
+    for (std::int64_t r : rows) {
+      R = sample(r) - t.mean;
+      C.noalias() += R.transpose() * R;
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(C);  // eigenvalues ascending
+    require<NumericError>(es.info() == Eigen::Success, "TokenComponents::fit: the eigen-decomposition failed");
+    const double total = es.eigenvalues().sum();
+    require<DataError>(total > 0, "TokenComponents::fit: the embeddings do not vary over the samples");
+    t.directions = es.eigenvectors().rightCols(k).rowwise().reverse();
+    t.variance_share = es.eigenvalues().tail(k).reverse() / total;
+    return t;
+  }
+
+  // Features [rows, N·k] of samples `rows` of embeddings [S, N, d]: feature n·k + j is token n's
+  // residual along direction j.
+  Eigen::MatrixXd features(std::span<const float> embeddings, std::span<const std::int64_t> rows) const {
+    detail::embedding_samples(embeddings, N, d, rows, "TokenComponents::features");
+    using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    const int k = components();
+    Eigen::MatrixXd f(static_cast<Eigen::Index>(rows.size()), static_cast<Eigen::Index>(N) * k);
+    Eigen::MatrixXd P(N, k);
+    for (std::size_t r = 0; r < rows.size(); ++r) {
+      const auto x = Eigen::Map<const RowMajor>(embeddings.data() + static_cast<std::size_t>(rows[r]) * N * d, N, d);
+      P.noalias() = (x.cast<double>() - mean) * directions;
+      for (int n = 0; n < N; ++n) f.row(static_cast<Eigen::Index>(r)).segment(static_cast<Eigen::Index>(n) * k, k) = P.row(n);
+    }
+    return f;
+  }
+};
 
 // Features [B, G·m + N·m] of a batch of windows (see the top). group [N]: each taxel's pad /
 // group in [0, num_groups) (TaxelLayout::group).
