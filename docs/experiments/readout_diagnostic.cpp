@@ -1,0 +1,208 @@
+// Diagnostics of docs/evaluation.md ("Where the pose and the force are", eighth session): the grasp
+// protocol's data (GraspEvalConfig defaults), one encoder at a time. A throwaway driver kept so that
+// the numbers quoted there can be rerun; the protocol's own read-outs are in tjepa eval's linear
+// table (score_linear_readouts). Build from the repository root:
+//   g++ -std=gnu++20 -O2 -DNDEBUG -march=native -fopenmp -Iinclude -isystem /usr/include/eigen3 \
+//       docs/experiments/readout_diagnostic.cpp -o /tmp/readout_diagnostic
+// Modes (ENCODER: "random" for the random initial encoder of seed 0, or a checkpoint from "pretrain"):
+//   pretrain FILE [SEED]    Tactile-JEPA, 3000 bf16 steps, grasp_pretrain_config(); saves the target encoder
+//   rawpose x               ridge on raw window features: pad sums, taxel means, both
+//   diag ENCODER            ridge on pad-mean embeddings (label pad only, all pads) for each task
+//   pcapose ENCODER         ridge on per-token residuals projected on k = 1, 3, 8 principal directions
+//   seq ENCODER             the sequence head's learning curves (patience 5, 20; lr 3e-4), head seeds 0, 1
+//   heads ENCODER           the three heads of the protocol, head seeds 0, 1 (CENTER=1: center_token_embeddings first)
+#include <tjepa/tjepa.hpp>
+#include <cstdio>
+#include <iostream>
+using namespace tjepa;
+
+int main(int argc, char** argv) {
+  std::string mode = argv[1];
+  GraspEvalConfig c;
+  c.train.precision = "bf16";
+  c.train.steps = 3000;
+  auto t0 = std::chrono::steady_clock::now();
+  const GraspEvalData d = simulate_grasp_eval_data(c);
+  const GraspTasks &tr = d.train_tasks, &te = d.test_tasks;
+  const int axes = d.pretrain->axes();
+  const TaxelGraph& graph = d.skin.graph;
+  if (mode == "rawpose") {
+    const auto& group = d.skin.layout.group;
+    const int G = d.skin.layout.num_groups();
+    for (int which = 0; which < 3; ++which) {
+      auto features = [&](bool test, std::span<const std::int64_t> rows) {
+        const GraspTasks& t = test ? te : tr;
+        std::vector<std::int64_t> ids;
+        for (std::int64_t r : rows) ids.push_back(t.windows[static_cast<std::size_t>(r)]);
+        WindowBatch wb;
+        (test ? *d.test : *d.train).gather(ids, wb);
+        Eigen::MatrixXd f = window_features(wb, group, G);
+        const int m = wb.axes;
+        if (which == 0) return Eigen::MatrixXd(f.leftCols(G * m));
+        if (which == 1) return Eigen::MatrixXd(f.rightCols(f.cols() - G * m));
+        return f;
+      };
+      GraspScores sc = score_ridge_on(features, tr, te, 0);
+      std::printf("%s: object %.1f force %.3f pose x %.3f y %.3f th %.2f\n", which == 0 ? "pad sums" : which == 1 ? "taxel means" : "both",
+                  sc[kObjectAccuracy], sc[kForceRmse], sc[kPoseX], sc[kPoseY], sc[kPoseTheta]);
+    }
+    return 0;
+  }
+  std::uint64_t s = argc > 3 ? std::stoull(argv[3]) : 0;
+  TrainConfig cfg = c.train;
+  cfg.seed = s;
+  auto model = make_jepa_model<float>(cfg, graph, axes, s);
+  if (mode == "pretrain") {
+    MaskCollator collator(graph, cfg.masks());
+    Trainer<float> trainer(*model, *d.pretrain, std::move(collator), cfg);
+    trainer.on_step = [&](const JepaStepStats& st) {
+      if ((st.step + 1) % 300 == 0) std::printf("step %ld loss %g std %g\n", long(st.step + 1), st.loss, st.target_sample_std), fflush(stdout);
+    };
+    trainer.run();
+    save_checkpoint<float>(argv[2], {{"target.", &model->target}}, nullptr, CheckpointState{});
+    return 0;
+  }
+  if (std::string(argv[2]) != "random") load_checkpoint<float>(argv[2], {{"target.", &model->target}}, nullptr);
+  const int N = model->encoder.num_tokens(), dd = model->encoder.dim();
+  AlignedVector<float> etr = embed_windows(model->target, model->tokenizer, model->encoder, *d.train, tr.windows);
+  AlignedVector<float> ete = embed_windows(model->target, model->tokenizer, model->encoder, *d.test, te.windows);
+  if (std::getenv("CENTER")) {
+    std::span<float> o(ete.data(), ete.size());
+    center_token_embeddings<float>(std::span<float>(etr.data(), etr.size()), std::span<const std::span<float>>(&o, 1), N, dd);
+    std::printf("centered\n");
+  }
+  FrozenFeatures<float> ftr(std::move(etr), N, dd);
+  FrozenFeatures<float> fte(std::move(ete), N, dd);
+  if (mode == "pcapose") {
+    // Per-token linear read-out: each token's embedding minus its training mean, projected on the
+    // top-k principal directions of those residuals; ridge on the N*k features.
+    auto etr_ = ftr.embeddings();
+    auto ete_ = fte.embeddings();
+    const std::size_t per = std::size_t(N) * dd;
+    const std::size_t S = etr_.size() / per;
+    std::vector<double> mu(per, 0.0);
+    for (std::size_t s2 = 0; s2 < S; ++s2) for (std::size_t i = 0; i < per; ++i) mu[i] += etr_[s2 * per + i];
+    for (double& v : mu) v /= double(S);
+    Eigen::MatrixXd C = Eigen::MatrixXd::Zero(dd, dd);
+    Eigen::VectorXd r(dd);
+    for (std::size_t s2 = 0; s2 < S; s2 += 4)
+      for (int n = 0; n < N; ++n) {
+        for (int i = 0; i < dd; ++i) r(i) = etr_[s2 * per + std::size_t(n) * dd + i] - mu[std::size_t(n) * dd + i];
+        C.selfadjointView<Eigen::Lower>().rankUpdate(r);
+      }
+    C = C.selfadjointView<Eigen::Lower>();
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(C);
+    const Eigen::VectorXd ev = es.eigenvalues().reverse();
+    std::printf("top eigenvalue shares:");
+    for (int i = 0; i < 8; ++i) std::printf(" %.3f", ev(i) / ev.sum());
+    std::printf("\n");
+    for (int k : {1, 3, 8}) {
+      const Eigen::MatrixXd U = es.eigenvectors().rightCols(k);
+      auto features = [&](bool test, std::span<const std::int64_t> rows) {
+        auto e = test ? ete_ : etr_;
+        Eigen::MatrixXd f(Eigen::Index(rows.size()), Eigen::Index(N) * k);
+        for (std::size_t q = 0; q < rows.size(); ++q)
+          for (int n = 0; n < N; ++n) {
+            for (int i = 0; i < dd; ++i) r(i) = e[std::size_t(rows[q]) * per + std::size_t(n) * dd + i] - mu[std::size_t(n) * dd + i];
+            f.block(Eigen::Index(q), Eigen::Index(n) * k, 1, k) = (r.transpose() * U);
+          }
+        return f;
+      };
+      GraspScores sc = score_ridge_on(features, tr, te, 0);
+      std::printf("pca k=%d: object %.1f force %.3f pose x %.3f y %.3f th %.2f\n", k, sc[kObjectAccuracy], sc[kForceRmse], sc[kPoseX], sc[kPoseY], sc[kPoseTheta]);
+      fflush(stdout);
+    }
+    return 0;
+  }
+  if (mode == "heads") {
+    GraspHeadConfig hc;
+    for (std::uint64_t hs : {0, 1}) {
+      GraspScores sc = score_heads<float>([&](int) { return std::pair{&ftr, &fte}; }, tr, te, hc, false, hs,
+                                          [](const std::string& s) { std::printf("  %s\n", s.c_str()); fflush(stdout); });
+      (void)sc;
+    }
+    return 0;
+  }
+  std::printf("embedded %zu+%zu in %.1f s\n", tr.windows.size(), te.windows.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+
+  if (mode == "diag") {
+    // Linear read-outs of frozen features: ridge on pad-pooled token embeddings.
+    const auto& group = d.skin.layout.group;
+    const int G = d.skin.layout.num_groups();
+    auto pooled = [&](FrozenFeatures<float>& f, std::span<const std::int64_t> rows, int only_pad) {
+      const int P = only_pad >= 0 ? 1 : G;
+      Eigen::MatrixXd X = Eigen::MatrixXd::Zero(Eigen::Index(rows.size()), Eigen::Index(P) * dd);
+      std::vector<int> cnt(G, 0);
+      for (int n = 0; n < N; ++n) cnt[group[n]]++;
+      auto e = f.embeddings();
+      for (std::size_t r = 0; r < rows.size(); ++r)
+        for (int n = 0; n < N; ++n) {
+          const int g = group[n];
+          if (only_pad >= 0 && g != only_pad) continue;
+          const int col = only_pad >= 0 ? 0 : g;
+          const float* x = e.data() + (std::size_t(rows[r]) * N + n) * dd;
+          for (int i = 0; i < dd; ++i) X(Eigen::Index(r), Eigen::Index(col) * dd + i) += x[i] / cnt[g];
+        }
+      return X;
+    };
+    auto targets = [](const std::vector<float>& v) {
+      Eigen::MatrixXd y(static_cast<Eigen::Index>(v.size() / 3), 3);
+      for (Eigen::Index i = 0; i < y.rows(); ++i)
+        for (int a = 0; a < 3; ++a) y(i, a) = v[static_cast<std::size_t>(i) * 3 + a];
+      return y;
+    };
+    static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
+    for (int pad : {c.tasks.label_pad, -1}) {
+      const RidgeModel m = fit_ridge(pooled(ftr, tr.force_rows, pad), targets(tr.force.value), lambdas, 0.2, 0, tr.force.groups);
+      const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y = predict(m, pooled(fte, te.force_rows, pad));
+      GraspScores sc{};
+      score_force(sc, y.data(), 3, te);
+      std::printf("force ridge on %s: RMSE %.3f N\n", pad >= 0 ? "label pad mean" : "all pad means", sc[kForceRmse]);
+    }
+    {
+      const RidgeModel m = fit_ridge_classifier(pooled(ftr, tr.object_rows, -1), tr.object.label, tr.object.classes, lambdas, 0.2, 0, tr.object.groups);
+      GraspScores sc{};
+      score_object(sc, predict_class(m, pooled(fte, te.object_rows, -1)), te);
+      std::printf("object ridge on pad means: %.1f %%\n", sc[kObjectAccuracy]);
+    }
+    {
+      SampleGroups per_window;
+      for (std::size_t q = 0; q < tr.pose.groups.group.size(); ++q)
+        for (int l = 0; l < tr.pose.length; ++l) {
+          per_window.group.push_back(tr.pose.groups.group[q]);
+          if (!tr.pose.groups.stratum.empty()) per_window.stratum.push_back(tr.pose.groups.stratum[q]);
+        }
+      const RidgeModel m = fit_ridge(pooled(ftr, tr.pose.window, -1), targets(tr.pose.value), lambdas, 0.2, 0, per_window);
+      const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y = predict(m, pooled(fte, te.pose.window, -1));
+      GraspScores sc{};
+      score_pose(sc, y.data(), 3, te);
+      std::printf("pose ridge on pad means: x %.3f y %.3f th %.2f\n", sc[kPoseX], sc[kPoseY], sc[kPoseTheta]);
+    }
+    return 0;
+  }
+  auto run_seq = [&](const char* name, HeadTrainConfig h, std::uint64_t hs) {
+    h.seed = hs;
+    SequenceHeadConfig hc;
+    hc.dim = dd; hc.heads = 3; hc.length = tr.pose.length; hc.outputs = 3;
+    SequenceModel<float> m(hc, hs ^ 0x706f7365ull);
+    auto r = train_sequence_head(m, ftr, tr.pose, h);
+    const std::vector<float> y = predict_sequence_head(m, fte, te.pose);
+    GraspScores sc{};
+    score_pose(sc, y.data(), 3, te);
+    std::printf("%s seed %lu: epochs %d best %d  x %.3f y %.3f th %.2f | train:", name, (unsigned long)hs, r.epochs(), r.best_epoch,
+                sc[kPoseX], sc[kPoseY], sc[kPoseTheta]);
+    for (int e = 0; e < r.epochs(); ++e) std::printf(" %.3f/%.3f", r.train_loss[e], r.validation_loss[e]);
+    std::printf("\n");
+    fflush(stdout);
+  };
+  GraspHeadConfig base;
+  for (std::uint64_t hs : {0, 1}) {
+    run_seq("default p5", base.sequence, hs);
+    HeadTrainConfig h = base.sequence; h.patience = 20; h.max_epochs = 60;
+    run_seq("p20 e60", h, hs);
+    h = base.sequence; h.lr = 3e-4; h.patience = 20; h.max_epochs = 60;
+    run_seq("lr3e-4 p20", h, hs);
+  }
+  return 0;
+}
