@@ -170,7 +170,7 @@ int main(int argc, char** argv) {
   eval->add_flag("--no-jepa", [&ev](std::int64_t) { ev.eval.jepa = false; },
                  "skip the Tactile-JEPA row (with --no-ablation)");
   eval->add_flag("--no-linear", [&ev](std::int64_t) { ev.eval.linear_readout = false; },
-                 "skip the linear read-out table (ridge on each frozen encoder's pad-mean embeddings)");
+                 "skip the linear read-out table (ridge on each frozen encoder's pad-mean embeddings and token components)");
   eval->add_option("--out", ev.out, "output directory")->capture_default_str();
   eval->add_flag("--force", ev.force, "overwrite --out");
   eval->add_flag("--quiet", ev.quiet, "no progress lines");
