@@ -45,6 +45,11 @@ inline std::int64_t embedding_samples(std::span<const float> embeddings, int N, 
   for (std::int64_t r : rows) require<DataError>(r >= 0 && r < S, who, ": row ", r, ", expected in [0, ", S, ")");
   return S;
 }
+// Sample r of embeddings [S, N, d] as an [N, d] expression in double.
+inline auto embedding_sample(std::span<const float> embeddings, std::int64_t r, int N, int d) {
+  using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  return Eigen::Map<const RowMajor>(embeddings.data() + static_cast<std::size_t>(r) * N * d, N, d).cast<double>();
+}
 }  // namespace detail
 
 // Linear read-outs of a frozen encoder's embeddings [S, N, d] (embed_windows), features for ridge:
@@ -85,30 +90,25 @@ inline Eigen::MatrixXd group_mean_embeddings(std::span<const float> embeddings, 
 
 // Token components (see above), fitted on samples `rows` of the training embeddings.
 struct TokenComponents {
-  int N = 0, d = 0;
   Eigen::MatrixXd mean;              // [N, d] each token's mean embedding over the fitting samples
   Eigen::MatrixXd directions;        // [d, k] leading principal directions of the residuals, first first
   Eigen::VectorXd variance_share;    // [k] share of the residuals' variance along each direction
 
+  int tokens() const { return static_cast<int>(mean.rows()); }
+  int dim() const { return static_cast<int>(mean.cols()); }
   int components() const { return static_cast<int>(directions.cols()); }
 
   static TokenComponents fit(std::span<const float> embeddings, int N, int d, std::span<const std::int64_t> rows, int k) {
     detail::embedding_samples(embeddings, N, d, rows, "TokenComponents::fit");
     require<ConfigError>(k > 0 && k <= d, "TokenComponents::fit: k = ", k, ", expected in [1, d = ", d, "]");
     require<DataError>(rows.size() >= 2, "TokenComponents::fit: ", rows.size(), " samples, expected at least 2");
-    using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-    auto sample = [&](std::int64_t r) {
-      return Eigen::Map<const RowMajor>(embeddings.data() + static_cast<std::size_t>(r) * N * d, N, d).cast<double>();
-    };
     TokenComponents t;
-    t.N = N;
-    t.d = d;
     t.mean = Eigen::MatrixXd::Zero(N, d);
-    for (std::int64_t r : rows) t.mean += sample(r);
+    for (std::int64_t r : rows) t.mean += detail::embedding_sample(embeddings, r, N, d);
     t.mean /= static_cast<double>(rows.size());
     Eigen::MatrixXd C = Eigen::MatrixXd::Zero(d, d), R(N, d);
     for (std::int64_t r : rows) {
-      R = sample(r) - t.mean;
+      R = detail::embedding_sample(embeddings, r, N, d) - t.mean;
       C.noalias() += R.transpose() * R;
     }
     const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(C);  // eigenvalues ascending
@@ -123,14 +123,12 @@ struct TokenComponents {
   // Features [rows, N·k] of samples `rows` of embeddings [S, N, d]: feature n·k + j is token n's
   // residual along direction j.
   Eigen::MatrixXd features(std::span<const float> embeddings, std::span<const std::int64_t> rows) const {
+    const int N = tokens(), d = dim(), k = components();
     detail::embedding_samples(embeddings, N, d, rows, "TokenComponents::features");
-    using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-    const int k = components();
     Eigen::MatrixXd f(static_cast<Eigen::Index>(rows.size()), static_cast<Eigen::Index>(N) * k);
     Eigen::MatrixXd P(N, k);
     for (std::size_t r = 0; r < rows.size(); ++r) {
-      const auto x = Eigen::Map<const RowMajor>(embeddings.data() + static_cast<std::size_t>(rows[r]) * N * d, N, d);
-      P.noalias() = (x.cast<double>() - mean) * directions;
+      P.noalias() = (detail::embedding_sample(embeddings, rows[r], N, d) - mean) * directions;
       for (int n = 0; n < N; ++n) f.row(static_cast<Eigen::Index>(r)).segment(static_cast<Eigen::Index>(n) * k, k) = P.row(n);
     }
     return f;
