@@ -51,12 +51,14 @@ inline int run_eval(const EvalOptions& o, std::ostream& out) {
     std::string md = "# " + o.command + "\n\n" + r.main.markdown();
     if (!r.ablation.rows.empty()) md += "\n" + r.ablation.markdown();
     if (!r.linear.rows.empty()) md += "\n" + r.linear.markdown();
+    if (!r.ablation_linear.rows.empty()) md += "\n" + r.ablation_linear.markdown();
     write_file_atomic(dir / "results.md", md);
     nlohmann::json j = r.info;
     j["command"] = o.command;
     j["main"] = r.main.to_json();
     if (!r.ablation.rows.empty()) j["ablation"] = r.ablation.to_json();
     if (!r.linear.rows.empty()) j["linear"] = r.linear.to_json();
+    if (!r.ablation_linear.rows.empty()) j["ablation_linear"] = r.ablation_linear.to_json();
     write_file_atomic(dir / "results.json", j.dump(2));
     write_file_atomic(dir / "results.svg", r.main.svg());
     if (!r.ablation.rows.empty()) write_file_atomic(dir / "ablation.svg", r.ablation.svg());

@@ -899,7 +899,15 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK(r.linear.rows[1].name == "random init: pad means");
   CHECK(r.linear.rows[6].name == "Tactile-JEPA: token components");
   for (std::size_t i = 1; i < 7; ++i) CHECK(r.linear.rows[i].runs.front().size() == 1);
-  for (const EvalTable* t : {&r.main, &r.ablation, &r.linear})
+  // The ablation's linear read-outs: two rows per mask variant, the default's the same runs as the
+  // Tactile-JEPA rows of the linear table.
+  REQUIRE(r.ablation_linear.rows.size() == 10);
+  CHECK(r.ablation_linear.rows[0].name == "2L+2G (default): pad means");
+  CHECK(r.ablation_linear.rows[0].runs == r.linear.rows[5].runs);
+  CHECK(r.ablation_linear.rows[1].runs == r.linear.rows[6].runs);
+  CHECK(r.ablation_linear.rows[3].name == "4L: token components");
+  CHECK(r.ablation_linear.rows[9].name == "2L+2G, local context: token components");
+  for (const EvalTable* t : {&r.main, &r.ablation, &r.linear, &r.ablation_linear})
     for (const EvalRow& row : t->rows) {
       REQUIRE(row.runs.size() == 2);
       for (const auto& heads : row.runs)
@@ -911,6 +919,7 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK(again.main.to_json() == r.main.to_json());
   CHECK(again.ablation.to_json() == r.ablation.to_json());
   CHECK(again.linear.to_json() == r.linear.to_json());
+  CHECK(again.ablation_linear.to_json() == r.ablation_linear.to_json());
   c.tasks.label_pad = 5;
   CHECK_THROWS_AS(run_grasp_eval(c), ConfigError);
   c.tasks.label_pad = c.sim.label_pad;

@@ -209,7 +209,9 @@ inline std::vector<MaskVariant> grasp_mask_ablation(const TrainConfig& c) {
 }
 
 struct GraspEvalResult {
-  EvalTable main, ablation, linear;
+  // linear: the linear read-outs of the main rows' frozen encoders; ablation_linear: of the
+  // ablation's encoders (both with linear_readout).
+  EvalTable main, ablation, linear, ablation_linear;
   nlohmann::json info;  // config, data sizes, timings, pre-training losses
 };
 
@@ -243,6 +245,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
   res.main.title = "Simulated grasping hand: frozen encoders, baselines, end to end";
   res.ablation.title = "Mask ablation (Tactile-JEPA, frozen)";
   res.linear.title = "Linear read-outs of the frozen encoders (ridge on pad-mean embeddings, on token components)";
+  res.ablation_linear.title = "Mask ablation: linear read-outs (Tactile-JEPA, frozen)";
   const int axes = d.pretrain->axes();
   const TaxelGraph& graph = d.skin.graph;
   const GraspHeadConfig& hc = c.heads;
@@ -299,20 +302,22 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       say("ridge: done (" + std::to_string(seconds(t)) + " s)");
     }
   }
-  // A frozen main row: its heads in the main table, its linear read-out in the linear table.
-  auto frozen_row = [&](const std::string& name, const std::string& linear_name, std::uint64_t s,
-                        const ParamSet<float>& params, const Tokenizer& tokenizer, const Encoder& encoder) {
+  // A frozen encoder's scores: its heads in `heads` under name, its linear read-outs (with
+  // linear_readout) in `linear` under "<linear_name>: pad means" and ": token components".
+  auto frozen_row = [&](EvalTable& heads, EvalTable& linear, const std::string& name, const std::string& linear_name,
+                        std::uint64_t s, const ParamSet<float>& params, const Tokenizer& tokenizer,
+                        const Encoder& encoder) {
     std::optional<LinearReadoutConfig> readout;
     if (c.linear_readout)
       readout = LinearReadoutConfig{d.skin.layout.group, d.skin.layout.num_groups(), c.readout_components, s};
     FrozenEncoderScores f = score_frozen_encoder(params, tokenizer, encoder, *d.train, tr, *d.test, te, hc,
                                                  seeds_of(s), stage(name), readout);
-    row(res.main, name).runs.push_back(f.heads);
+    row(heads, name).runs.push_back(f.heads);
     if (f.linear) {
-      row(res.linear, linear_name + ": pad means").runs.push_back({f.linear->group_means});
-      row(res.linear, linear_name + ": token components").runs.push_back({f.linear->token_components});
+      row(linear, linear_name + ": pad means").runs.push_back({f.linear->group_means});
+      row(linear, linear_name + ": token components").runs.push_back({f.linear->token_components});
     }
-    return f.heads;
+    return f;
   };
   if (c.linear_readout && c.ridge) row(res.linear, "ridge (pad sums + taxel means)") = row(res.main, "ridge (pad sums + taxel means)");
   for (std::uint64_t s : c.seeds) {
@@ -321,7 +326,9 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       TrainConfig cfg = c.train;
       cfg.seed = s;
       auto model = make_jepa_model<float>(cfg, graph, axes, s);
-      if (c.random) frozen_row("random init, frozen", "random init", s, model->target, model->tokenizer, model->encoder);
+      if (c.random)
+        frozen_row(res.main, res.linear, "random init, frozen", "random init", s, model->target, model->tokenizer,
+                   model->encoder);
       if (c.end_to_end)
         row(res.main, "end to end")
             .runs.push_back(score_end_to_end(model->context, model->tokenizer, model->encoder, *d.train, tr, *d.test, te,
@@ -341,12 +348,19 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       });
       res.info["pretraining"].push_back({{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss},
                                          {"last_loss", log.back().loss}, {"seconds", seconds(t)}});
-      frozen_row("MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
+      frozen_row(res.main, res.linear, "MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
     }
     if (c.jepa) {
       auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);
-      auto scores = frozen_row("Tactile-JEPA, frozen", "Tactile-JEPA", s, model->target, model->tokenizer, model->encoder);
-      if (c.ablation) row(res.ablation, "2L+2G (default)").runs.push_back(scores);
+      const FrozenEncoderScores f = frozen_row(res.main, res.linear, "Tactile-JEPA, frozen", "Tactile-JEPA", s,
+                                               model->target, model->tokenizer, model->encoder);
+      if (c.ablation) {
+        row(res.ablation, "2L+2G (default)").runs.push_back(f.heads);
+        if (f.linear) {
+          row(res.ablation_linear, "2L+2G (default): pad means").runs.push_back({f.linear->group_means});
+          row(res.ablation_linear, "2L+2G (default): token components").runs.push_back({f.linear->token_components});
+        }
+      }
     }
     res.info["total_seconds"] = seconds(t0);
     if (after_seed) after_seed(res);
@@ -357,10 +371,8 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       say("mask ablation, seed " + std::to_string(s));
       for (const MaskVariant& v : grasp_mask_ablation(c.train)) {
         auto model = pretrain_jepa(v.name, s, &v);
-        row(res.ablation, v.name)
-            .runs.push_back(score_frozen_encoder(model->target, model->tokenizer, model->encoder, *d.train, tr, *d.test,
-                                                 te, hc, seeds_of(s), stage(v.name))
-                                .heads);
+        frozen_row(res.ablation, res.ablation_linear, v.name, v.name, s, model->target, model->tokenizer,
+                   model->encoder);
       }
       res.info["total_seconds"] = seconds(t0);
       if (after_seed) after_seed(res);
