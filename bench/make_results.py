@@ -129,10 +129,17 @@ blas_name = ", ".join(blas) if blas else "not recorded"
 print("# Benchmark results\n")
 print(f"- date: {datetime.date.today().isoformat()}")
 cpu = sh("lscpu | sed -n 's/^Model name: *//p'")
+# Hosts of one model name differ (an EPYC of family 25 runs AVX-512 on 256-bit units, one of
+# family 26 on 512-bit units): the family and model numbers say which core ran.
+family = sh("sed -n 's/^cpu family[^:]*: *//p' /proc/cpuinfo | head -1")
+model = sh("sed -n 's/^model[^:]*: *//p' /proc/cpuinfo | head -1")
+if family and model:
+    cpu += f" (cpu family {family}, model {model})"
 torch_version = sh("/usr/bin/python3 -c 'import torch; print(torch.__version__)'")
 print(f"- machine: {cpu}, {sh('nproc')} vCPU, "
       f"{platform.system()} {platform.release()}")
-print(f"- tjepa: git {sh('git rev-parse --short HEAD')}, {sh('c++ --version | head -1')}, "
+dirty = " (with uncommitted changes)" if sh("git status --porcelain --untracked-files=no include bench/*.cpp examples") else ""
+print(f"- tjepa: git {sh('git rev-parse --short HEAD')}{dirty}, {sh('c++ --version | head -1')}, "
       "preset `release` (-O3 -march=native), OpenMP threads = column 'threads'")
 print(f"- PyTorch: {torch_version} "
       "(Debian python3-torch), plain nn modules with manual attention (bench/compare_torch.py), "
@@ -363,6 +370,12 @@ for key, what in (("encoder_forward_frozen", "frozen weights (inference)"),
     enc = [v for v in enc if v is not None]
     goal22(f"fp32 encoder forward B1, 1 thread, {what}: ≥ 85% of the FMA peak (L 368, 528, 2124; lowest)",
            f"{100 * min(enc):.0f}%" if enc else "?", bool(enc) and min(enc) >= 0.85)
+kern = {f"{k}/B{B}/L{L}": peak_fraction(f"{k}/B{B}/L{L}", 1) for k in ("attention_forward", "attention_forward_backward")
+        for B in (1, 8) for L in (368, 528, 2124)}
+kern = {k: v for k, v in kern.items() if v is not None}
+low = min(kern, key=kern.get) if kern else None
+goal22("fp32 attention kernels, 1 thread: ≥ 85% of the FMA peak (forward and forward+backward, B 1 and 8, "
+       "L 368, 528, 2124; lowest)", f"{100 * kern[low]:.0f}% ({low})" if low else "?", bool(kern) and kern[low] >= 0.85)
 for N in (368, 528):
     for t in (1, 2):
         x = ratio(f"jepa_step/{N}", t, "torch_ms", "tjepa_ms")

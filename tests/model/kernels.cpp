@@ -165,6 +165,18 @@ TEST_SUITE("nn") {
     }
   }
 
+  TEST_CASE("transpose16 (the packing's 16 x 16 block transpose in registers) equals the scalar transpose") {
+    // Rows at any offset and stride, a destination stride that is not 16; every element distinct.
+    std::vector<float> src(16 * 37 + 5), dst(16 * 21, -1.0f);
+    for (std::size_t i = 0; i < src.size(); ++i) src[i] = float(i) + 0.5f;
+    detail::transpose16([&](int r) { return src.data() + 3 + r * 37; }, dst.data() + 1, 21);
+    for (int c = 0; c < 16; ++c)
+      for (int r = 0; r < 16; ++r) CHECK(dst[std::size_t(1 + c * 21 + r)] == src[std::size_t(3 + r * 37 + c)]);
+    for (int c = 0; c < 16; ++c)
+      for (int r = 16; r < 20; ++r) CHECK(dst[std::size_t(1 + c * 21 + r)] == -1.0f);  // untouched
+    MESSAGE("transpose16 in registers (AVX-512): ", detail::kTranspose16Native);
+  }
+
   TEST_CASE("a large GEMM split over threads equals the scalar reference") {
     Rng rng(22);
     const int M = 301, K = 67, N = 131;

@@ -20,6 +20,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/detail/parallel.hpp"
+#include "tjepa/core/detail/transpose.hpp"
 #include "tjepa/model/kernels/gelu.hpp"
 
 namespace tjepa::detail::sgemm {
@@ -210,11 +211,16 @@ inline void pack_panel(float* dst, const float* b, std::ptrdiff_t ldb, Order ord
     return;
   }
   // A transpose in 16 × nc tiles: each source row's cache line is read once, each packed row
-  // written whole.
+  // written whole; whole 16 × 16 blocks in registers (transpose16).
   constexpr int T = 16;
   for (int t0 = k0; t0 < k1; t0 += T) {
     const int kt = std::min(T, k1 - t0);
-    for (int j = 0; j < nc; ++j) {
+    int j = 0;
+    if (kt == T)
+      for (; j + T <= nc; j += T)
+        transpose16([&](int i) { return b + std::ptrdiff_t(n0 + j + i) * ldb + t0; }, d + std::ptrdiff_t(t0) * pw + j,
+                    pw);
+    for (; j < nc; ++j) {
       const float* s = b + std::ptrdiff_t(n0 + j) * ldb + t0;
       for (int k = 0; k < kt; ++k) d[std::ptrdiff_t(t0 + k) * pw + j] = s[k];
     }

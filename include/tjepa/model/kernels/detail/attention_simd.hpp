@@ -13,6 +13,7 @@
 #include "tjepa/core/detail/vendor.hpp"
 
 #include "tjepa/core/detail/simd.hpp"
+#include "tjepa/core/detail/transpose.hpp"
 #include "tjepa/model/detail/bgemm.hpp"
 
 namespace tjepa::detail::attn {
@@ -284,11 +285,26 @@ inline void prefetch_row(const T* src, std::ptrdiff_t lds, const int* rows, int 
 template <class T>
 inline void pack_transposed(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
                             std::ptrdiff_t n_pad, int panel) {
-  for (std::ptrdiff_t r = 0; r < n_pad; ++r) {
+  auto source = [&](std::ptrdiff_t r) { return src + (rows == nullptr ? r : rows[r]) * lds; };
+  std::ptrdiff_t r = 0;
+  // Float with AVX-512: 16 rows at a time, their 16-column blocks transposed in registers (a
+  // panel holds whole 16-row blocks: panel is a multiple of 16 there).
+  if constexpr (std::is_same_v<T, float> && kTranspose16Native) {
+    for (; r + 16 <= n && panel % 16 == 0; r += 16) {
+      for (int i = 0; i < 16; ++i) prefetch_row(src, lds, rows, static_cast<int>(r + i), n, Dh);
+      T* d = dst + (r / panel) * Dh * panel + r % panel;
+      int p = 0;
+      for (; p + 16 <= Dh; p += 16)
+        transpose16([&](int i) { return source(r + i) + p; }, d + std::ptrdiff_t(p) * panel, panel);
+      for (int i = 0; i < 16; ++i)
+        for (int c = p; c < Dh; ++c) d[c * panel + i] = source(r + i)[c];
+    }
+  }
+  for (; r < n_pad; ++r) {
     T* d = dst + (r / panel) * Dh * panel + r % panel;
     if (r < n) {
       prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
-      const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
+      const T* sr = source(r);
       for (int p = 0; p < Dh; ++p) d[p * panel] = sr[p];
     } else {
       for (int p = 0; p < Dh; ++p) d[p * panel] = T(0);
