@@ -1,10 +1,12 @@
 #pragma once
-// A 16 x 16 float block transposed in registers (AVX-512: 64 shuffles instead of 256 scalar
-// loads and stores), for the packing routines that turn rows into columns: the GEMM's weight
-// panels (detail/sgemm.hpp, a PyTorch weight [out, in] read as its transpose) and the attention
-// kernels' Q^T panels (kernels/detail/attention_simd.hpp). Without AVX-512 the same function runs
+// A 16 x 16 block of 32-bit values (floats, or the bf16 pairs of detail/bgemm.hpp) transposed in
+// registers (AVX-512: 64 shuffles instead of 256 scalar loads and stores), for the packing
+// routines that turn rows into columns: the GEMMs' weight panels (detail/sgemm.hpp and
+// detail/bgemm.hpp, a PyTorch weight [out, in] read as its transpose) and the attention kernels'
+// Q^T panels (kernels/detail/attention_simd.hpp). Without AVX-512 the same function runs
 // as scalar loops, so callers need no second path; kTranspose16Native says which one compiled.
 #include <cstddef>
+#include <type_traits>
 
 #if defined(__AVX512F__)
 #include <immintrin.h>
@@ -18,13 +20,15 @@ inline constexpr bool kTranspose16Native = true;
 inline constexpr bool kTranspose16Native = false;
 #endif
 
-// dst[c * ldd + r] = row(r)[c] for r, c in [0, 16). row(r) returns a const float* to 16 readable
-// floats (any alignment); dst rows need not be aligned.
-template <class Row>
-inline void transpose16(Row&& row, float* dst, std::ptrdiff_t ldd) {
+// dst[c * ldd + r] = row(r)[c] for r, c in [0, 16). row(r) returns a const T* to 16 readable
+// values (any alignment); dst rows need not be aligned. T: any 4-byte trivially copyable type (the
+// shuffles move bits, they do no arithmetic).
+template <class T, class Row>
+inline void transpose16(Row&& row, T* dst, std::ptrdiff_t ldd) {
+  static_assert(sizeof(T) == 4 && std::is_trivially_copyable_v<T>, "transpose16: 32-bit values");
 #if defined(__AVX512F__)
   __m512 r[16], t[16];
-  for (int i = 0; i < 16; ++i) r[i] = _mm512_loadu_ps(row(i));
+  for (int i = 0; i < 16; ++i) r[i] = _mm512_loadu_ps(static_cast<const void*>(row(i)));
   // Stage 1: interleave pairs of rows (32-bit elements).
   for (int i = 0; i < 16; i += 2) {
     t[i] = _mm512_unpacklo_ps(r[i], r[i + 1]);
@@ -56,10 +60,10 @@ inline void transpose16(Row&& row, float* dst, std::ptrdiff_t ldd) {
     r[j] = _mm512_shuffle_f32x4(t[j], t[8 + j], 0x88);
     r[8 + j] = _mm512_shuffle_f32x4(t[j], t[8 + j], 0xdd);
   }
-  for (int j = 0; j < 16; ++j) _mm512_storeu_ps(dst + j * ldd, r[j]);
+  for (int j = 0; j < 16; ++j) _mm512_storeu_ps(static_cast<void*>(dst + j * ldd), r[j]);
 #else
   for (int i = 0; i < 16; ++i) {
-    const float* s = row(i);
+    const T* s = row(i);
     for (int c = 0; c < 16; ++c) dst[c * ldd + i] = s[c];
   }
 #endif

@@ -130,18 +130,32 @@ inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, O
     }
     return;
   }
-  for (int j = 0; j < NR; ++j) {
+  // Column j's pairs [qa, qb) (zero past nc).
+  auto column = [&](int j, int qa, int qb) {
     if (j >= nc) {
-      for (int q = p0; q < p1; ++q) d[std::ptrdiff_t(q) * NR + j] = 0u;
-      continue;
+      for (int q = qa; q < qb; ++q) d[std::ptrdiff_t(q) * NR + j] = 0u;
+      return;
     }
     const float* col = b + std::ptrdiff_t(n0 + j) * ldb;
-    for (int q0 = p0; q0 < p1; q0 += L) {
+    for (int q0 = qa; q0 < qb; q0 += L) {
       alignas(64) std::uint32_t w[L];
       _mm512_store_si512(w, row_pairs(col + 2 * q0, std::min(2 * L, depth - 2 * q0)));
-      for (int q = q0; q < std::min(p1, q0 + L); ++q) d[std::ptrdiff_t(q) * NR + j] = w[q - q0];
+      for (int q = q0; q < std::min(qb, q0 + L); ++q) d[std::ptrdiff_t(q) * NR + j] = w[q - q0];
     }
+  };
+  // 16 columns x 16 pairs at a time: converted row by row, then transposed in registers.
+  int j = 0;
+  for (; j + L <= nc; j += L) {
+    int q0 = p0;
+    for (; q0 + L <= p1; q0 += L) {
+      alignas(64) std::uint32_t w[L][L];
+      for (int i = 0; i < L; ++i)
+        _mm512_store_si512(w[i], row_pairs(b + std::ptrdiff_t(n0 + j + i) * ldb + 2 * q0, std::min(2 * L, depth - 2 * q0)));
+      transpose16([&](int i) { return static_cast<const std::uint32_t*>(w[i]); }, d + std::ptrdiff_t(q0) * NR + j, NR);
+    }
+    for (int i = 0; i < L && q0 < p1; ++i) column(j + i, q0, p1);
   }
+  for (; j < NR; ++j) column(j, p0, p1);
 }
 
 // A's rows [0, R) × depths [0, kc) as bf16 pairs for the micro-kernel, a(i, k) = a[i·ars + k·acs]:

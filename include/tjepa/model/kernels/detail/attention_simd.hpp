@@ -338,7 +338,27 @@ inline void pack_row_pairs(const float* src, std::ptrdiff_t lds, const int* rows
   namespace bg = bgemm;
   const int Dh2 = (Dh + 1) / 2;
   alignas(64) std::uint32_t words[bg::L];
-  for (std::ptrdiff_t r = 0; r < n_pad; ++r) {
+  std::ptrdiff_t r = 0;
+  // Transposed: 16 rows at a time, converted row by row, their 16-word blocks transposed in
+  // registers (a panel holds whole 16-row blocks when panel is a multiple of 16).
+  if (transposed && panel % bg::L == 0)
+    for (; r + bg::L <= n; r += bg::L) {
+      std::uint32_t* d = dst + (r / panel) * Dh2 * panel + r % panel;
+      for (int i = 0; i < bg::L; ++i) prefetch_row(src, lds, rows, static_cast<int>(r + i), n, Dh);
+      for (int k = 0; k < Dh; k += 2 * bg::L) {
+        alignas(64) std::uint32_t block[bg::L][bg::L];
+        for (int i = 0; i < bg::L; ++i)
+          _mm512_store_si512(block[i], bg::row_pairs(src + (rows == nullptr ? r + i : rows[r + i]) * lds + k,
+                                                     std::min(2 * bg::L, Dh - k)));
+        const int w = std::min(bg::L, Dh2 - k / 2);  // words of this block
+        if (w == bg::L)
+          transpose16([&](int i) { return static_cast<const std::uint32_t*>(block[i]); }, d + (k / 2) * panel, panel);
+        else
+          for (int i = 0; i < bg::L; ++i)
+            for (int p = 0; p < w; ++p) d[(k / 2 + p) * panel + i] = block[i][p];
+      }
+    }
+  for (; r < n_pad; ++r) {
     std::uint32_t* d = transposed ? dst + (r / panel) * Dh2 * panel + r % panel : dst + r * Dh2;
     const std::ptrdiff_t step = transposed ? panel : 1;
     if (r >= n) {
