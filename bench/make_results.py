@@ -247,7 +247,7 @@ if any(streams.values()):
     print("`OMP_NUM_THREADS=1 taskset -c 0 build/release/examples/tjepa_streaming --ticks 2000 <mode>`: the demo's "
           "encoder (d = 96, 4 blocks, 368 taxels, batch 1, weights packed once) and the attentive probe, one thread, "
           "pinned to core 0 (the virtio interrupts go to core 1 here). The controls time an FMA loop in registers "
-          "and read-modify-write sweeps over 1 MiB (fits the 2 MiB L2) and 4 MiB buffers, each as long as the "
+          "and read-modify-write sweeps over 1 MiB (the size of one core's L2 on a Zen 4 or Zen 5) and 4 MiB buffers, each as long as the "
           "median tick, the same way: the machine's own spread.\n")
     print("| mode | p50 µs | p99 µs | p99/p50 | ticks preempted | p99/p50 of the others | FMA control p99/p50 | "
           + "".join(f"{k} KiB sweep p99/p50 | " for k in sizes) + "allocations in steady state |")
