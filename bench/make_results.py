@@ -132,7 +132,7 @@ cpu = sh("lscpu | sed -n 's/^Model name: *//p'")
 # Hosts of one model name differ (an EPYC of family 25 runs AVX-512 on 256-bit units, one of
 # family 26 on 512-bit units): the family and model numbers say which core ran.
 family = sh("sed -n 's/^cpu family[^:]*: *//p' /proc/cpuinfo | head -1")
-model = sh("sed -n 's/^model[^:]*: *//p' /proc/cpuinfo | head -1")
+model = sh("sed -n 's/^model[[:space:]]*: *//p' /proc/cpuinfo | head -1")
 if family and model:
     cpu += f" (cpu family {family}, model {model})"
 torch_version = sh("/usr/bin/python3 -c 'import torch; print(torch.__version__)'")

@@ -302,8 +302,17 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       say("ridge: done (" + std::to_string(seconds(t)) + " s)");
     }
   }
-  // A frozen encoder's scores: its heads in `heads` under name, its linear read-outs (with
-  // linear_readout) in `linear` under "<linear_name>: pad means" and ": token components".
+  // A frozen encoder's scores recorded: its heads in `heads` under name, its linear read-outs (if
+  // any) in `linear` under "<linear_name>: pad means" and ": token components".
+  auto record = [&](const FrozenEncoderScores& f, EvalTable& heads, EvalTable& linear, const std::string& name,
+                    const std::string& linear_name) {
+    row(heads, name).runs.push_back(f.heads);
+    if (f.linear) {
+      row(linear, linear_name + ": pad means").runs.push_back({f.linear->group_means});
+      row(linear, linear_name + ": token components").runs.push_back({f.linear->token_components});
+    }
+  };
+  // A frozen encoder scored (heads, and the linear read-outs with linear_readout) and recorded.
   auto frozen_row = [&](EvalTable& heads, EvalTable& linear, const std::string& name, const std::string& linear_name,
                         std::uint64_t s, const ParamSet<float>& params, const Tokenizer& tokenizer,
                         const Encoder& encoder) {
@@ -312,11 +321,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       readout = LinearReadoutConfig{d.skin.layout.group, d.skin.layout.num_groups(), c.readout_components, s};
     FrozenEncoderScores f = score_frozen_encoder(params, tokenizer, encoder, *d.train, tr, *d.test, te, hc,
                                                  seeds_of(s), stage(name), readout);
-    row(heads, name).runs.push_back(f.heads);
-    if (f.linear) {
-      row(linear, linear_name + ": pad means").runs.push_back({f.linear->group_means});
-      row(linear, linear_name + ": token components").runs.push_back({f.linear->token_components});
-    }
+    record(f, heads, linear, name, linear_name);
     return f;
   };
   if (c.linear_readout && c.ridge) row(res.linear, "ridge (pad sums + taxel means)") = row(res.main, "ridge (pad sums + taxel means)");
@@ -354,13 +359,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);
       const FrozenEncoderScores f = frozen_row(res.main, res.linear, "Tactile-JEPA, frozen", "Tactile-JEPA", s,
                                                model->target, model->tokenizer, model->encoder);
-      if (c.ablation) {
-        row(res.ablation, "2L+2G (default)").runs.push_back(f.heads);
-        if (f.linear) {
-          row(res.ablation_linear, "2L+2G (default): pad means").runs.push_back({f.linear->group_means});
-          row(res.ablation_linear, "2L+2G (default): token components").runs.push_back({f.linear->token_components});
-        }
-      }
+      if (c.ablation) record(f, res.ablation, res.ablation_linear, "2L+2G (default)", "2L+2G (default)");
     }
     res.info["total_seconds"] = seconds(t0);
     if (after_seed) after_seed(res);

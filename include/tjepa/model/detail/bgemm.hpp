@@ -114,6 +114,22 @@ inline __m512i row_pairs(const float* x, int n) {
       _mm512_cvtne2ps_pbh(_mm512_maskz_loadu_ps(first_lanes(n - L), x + L), _mm512_maskz_loadu_ps(first_lanes(n), x)));
 }
 
+// 16 rows of n < 33 values each (row(i): a const float*) as their ⌈n/2⌉ ≤ 16 pair words,
+// transposed: dst[q·ldd + i] = word q of row i, q < words (the packing of B panels and of
+// attention's Q^T pairs; a whole block of 16 words in registers, transpose16).
+template <class Row>
+inline void pairs_transposed16(Row&& row, int n, std::uint32_t* dst, std::ptrdiff_t ldd) {
+  alignas(64) std::uint32_t block[L][L];
+  for (int i = 0; i < L; ++i) _mm512_store_si512(block[i], row_pairs(row(i), n));
+  const int words = (n + 1) / 2;
+  if (words == L) {
+    transpose16([&](int i) { return static_cast<const std::uint32_t*>(block[i]); }, dst, ldd);
+    return;
+  }
+  for (int i = 0; i < L; ++i)
+    for (int q = 0; q < words; ++q) dst[q * ldd + i] = block[i][q];
+}
+
 // pack_panel_ref's result, vectorized: row-major B converts two depths × 16 columns per step;
 // column-major B converts 32 depths of a column per step and stores its words down the panel.
 inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, Order order, int depth, int cols, int p,
@@ -147,12 +163,9 @@ inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, O
   int j = 0;
   for (; j + L <= nc; j += L) {
     int q0 = p0;
-    for (; q0 + L <= p1; q0 += L) {
-      alignas(64) std::uint32_t w[L][L];
-      for (int i = 0; i < L; ++i)
-        _mm512_store_si512(w[i], row_pairs(b + std::ptrdiff_t(n0 + j + i) * ldb + 2 * q0, std::min(2 * L, depth - 2 * q0)));
-      transpose16([&](int i) { return static_cast<const std::uint32_t*>(w[i]); }, d + std::ptrdiff_t(q0) * NR + j, NR);
-    }
+    for (; q0 + L <= p1; q0 += L)  // 16 pairs: 2q0 + 32 <= 2p1 <= depth + 1, so n = 31 or 32
+      pairs_transposed16([&](int i) { return b + std::ptrdiff_t(n0 + j + i) * ldb + 2 * q0; },
+                         std::min(2 * L, depth - 2 * q0), d + std::ptrdiff_t(q0) * NR + j, NR);
     for (int i = 0; i < L && q0 < p1; ++i) column(j + i, q0, p1);
   }
   for (; j < NR; ++j) column(j, p0, p1);

@@ -287,9 +287,9 @@ inline void pack_transposed(const T* src, std::ptrdiff_t lds, const int* rows, i
                             std::ptrdiff_t n_pad, int panel) {
   auto source = [&](std::ptrdiff_t r) { return src + (rows == nullptr ? r : rows[r]) * lds; };
   std::ptrdiff_t r = 0;
-  // Float with AVX-512: 16 rows at a time, their 16-column blocks transposed in registers (a
-  // panel holds whole 16-row blocks: panel is a multiple of 16 there).
-  if constexpr (std::is_same_v<T, float> && kTranspose16Native) {
+  // Float: 16 rows at a time, their 16-column blocks transposed (in registers with AVX-512; a
+  // panel holds whole 16-row blocks when panel is a multiple of 16).
+  if constexpr (std::is_same_v<T, float>) {
     for (; r + 16 <= n && panel % 16 == 0; r += 16) {
       for (int i = 0; i < 16; ++i) prefetch_row(src, lds, rows, static_cast<int>(r + i), n, Dh);
       T* d = dst + (r / panel) * Dh * panel + r % panel;
@@ -338,25 +338,17 @@ inline void pack_row_pairs(const float* src, std::ptrdiff_t lds, const int* rows
   namespace bg = bgemm;
   const int Dh2 = (Dh + 1) / 2;
   alignas(64) std::uint32_t words[bg::L];
+  auto source = [&](std::ptrdiff_t r) { return src + (rows == nullptr ? r : rows[r]) * lds; };
   std::ptrdiff_t r = 0;
-  // Transposed: 16 rows at a time, converted row by row, their 16-word blocks transposed in
-  // registers (a panel holds whole 16-row blocks when panel is a multiple of 16).
+  // Transposed: 16 rows at a time, their words transposed in 16 x 16 blocks (a panel holds whole
+  // 16-row blocks when panel is a multiple of 16).
   if (transposed && panel % bg::L == 0)
     for (; r + bg::L <= n; r += bg::L) {
       std::uint32_t* d = dst + (r / panel) * Dh2 * panel + r % panel;
       for (int i = 0; i < bg::L; ++i) prefetch_row(src, lds, rows, static_cast<int>(r + i), n, Dh);
-      for (int k = 0; k < Dh; k += 2 * bg::L) {
-        alignas(64) std::uint32_t block[bg::L][bg::L];
-        for (int i = 0; i < bg::L; ++i)
-          _mm512_store_si512(block[i], bg::row_pairs(src + (rows == nullptr ? r + i : rows[r + i]) * lds + k,
-                                                     std::min(2 * bg::L, Dh - k)));
-        const int w = std::min(bg::L, Dh2 - k / 2);  // words of this block
-        if (w == bg::L)
-          transpose16([&](int i) { return static_cast<const std::uint32_t*>(block[i]); }, d + (k / 2) * panel, panel);
-        else
-          for (int i = 0; i < bg::L; ++i)
-            for (int p = 0; p < w; ++p) d[(k / 2 + p) * panel + i] = block[i][p];
-      }
+      for (int k = 0; k < Dh; k += 2 * bg::L)
+        bg::pairs_transposed16([&](int i) { return source(r + i) + k; }, std::min(2 * bg::L, Dh - k),
+                               d + (k / 2) * panel, panel);
     }
   for (; r < n_pad; ++r) {
     std::uint32_t* d = transposed ? dst + (r / panel) * Dh2 * panel + r % panel : dst + r * Dh2;
@@ -366,7 +358,7 @@ inline void pack_row_pairs(const float* src, std::ptrdiff_t lds, const int* rows
       continue;
     }
     prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
-    const float* sr = src + (rows == nullptr ? r : rows[r]) * lds;
+    const float* sr = source(r);
     for (int k = 0; k < Dh; k += 2 * bg::L) {
       _mm512_store_si512(words, bg::row_pairs(sr + k, std::min(2 * bg::L, Dh - k)));
       for (int p = k / 2; p < std::min(Dh2, k / 2 + bg::L); ++p) d[p * step] = words[p - k / 2];
