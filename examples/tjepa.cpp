@@ -171,6 +171,8 @@ int main(int argc, char** argv) {
                  "skip the Tactile-JEPA row (with --no-ablation)");
   eval->add_flag("--no-linear", [&ev](std::int64_t) { ev.eval.linear_readout = false; },
                  "skip the linear read-out table (ridge on each frozen encoder's pad-mean embeddings and token components)");
+  eval->add_flag("--standardize-features", ev.eval.heads.standardize_features,
+                 "the frozen rows' heads read the embeddings standardized per channel (statistics of the training windows)");
   eval->add_option("--out", ev.out, "output directory")->capture_default_str();
   eval->add_flag("--force", ev.force, "overwrite --out");
   eval->add_flag("--quiet", ev.quiet, "no progress lines");

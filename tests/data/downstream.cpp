@@ -186,6 +186,53 @@ TEST_CASE("center_token_embeddings: one shared resting embedding / differences b
   CHECK_THROWS_AS(center_token_embeddings<float>(none, {}, L, d), ShapeError);
 }
 
+TEST_CASE("standardize_channels: training channels at mean 0 and sd 1 / held-out windows by the training statistics") {
+  Rng rng(13);
+  const int S = 40, T2 = 7, L = 5, d = 4;
+  const std::size_t per = std::size_t(L) * d;
+  // One large shared vector (what every token of every window holds), a per-token offset and a
+  // window-dependent part of a different scale in each channel.
+  std::vector<double> shared(d), scale(d);
+  for (int c = 0; c < d; ++c) shared[c] = 20 * rng.normal(), scale[c] = 0.01 * (c + 1);
+  std::vector<float> offset(per);
+  for (auto& v : offset) v = static_cast<float>(0.05 * rng.normal());
+  auto make = [&](int windows) {
+    std::vector<float> x(windows * per);
+    for (std::size_t i = 0; i < x.size(); ++i)
+      x[i] = static_cast<float>(shared[i % d] + offset[i % per] + scale[i % d] * rng.normal());
+    return x;
+  };
+  std::vector<float> train = make(S), test = make(T2);
+  const std::vector<float> train0 = train, test0 = test;
+  const std::span<float> test_span(test);
+  const auto [mean, sd] = standardize_channels<float>(train, std::span<const std::span<float>>(&test_span, 1), d);
+  REQUIRE(mean.size() == std::size_t(d));
+  for (int c = 0; c < d; ++c) {
+    double m = 0, m0 = 0, v = 0;
+    for (int r = 0; r < S * L; ++r) m += train[r * d + c], m0 += train0[r * d + c];
+    m /= S * L;
+    for (int r = 0; r < S * L; ++r) v += (train[r * d + c] - m) * (train[r * d + c] - m);
+    CHECK(std::abs(m) < 1e-3);
+    CHECK(std::sqrt(v / (S * L)) == doctest::Approx(1.0).epsilon(1e-3));
+    CHECK(mean[c] == doctest::Approx(m0 / (S * L)).epsilon(1e-9));
+    // Held-out values: the same affine map, with the training statistics.
+    for (int r = 0; r < T2 * L; ++r)
+      CHECK(test[r * d + c] == doctest::Approx((test0[r * d + c] - mean[c]) / std::sqrt(sd[c] * sd[c] + 1e-6)).epsilon(1e-3));
+  }
+  // What differs between tokens is kept, only rescaled: unlike center_token_embeddings, the map is
+  // the same for every token.
+  for (int s = 0; s < S; ++s)
+    for (int c = 0; c < d; ++c)
+      CHECK(train[s * per + c] - train[s * per + d + c] ==
+            doctest::Approx((train0[s * per + c] - train0[s * per + d + c]) / std::sqrt(sd[c] * sd[c] + 1e-6)).epsilon(1e-3).scale(1e-2));
+  std::vector<float> bad(7);
+  CHECK_THROWS_WITH_AS(standardize_channels<float>(bad, {}, d), doctest::Contains("multiple of dim = 4"), ShapeError);
+  std::vector<float> none;
+  CHECK_THROWS_AS(standardize_channels<float>(none, {}, d), ShapeError);
+  std::vector<float> nan_values(per, std::nanf(""));
+  CHECK_THROWS_WITH_AS(standardize_channels<float>(nan_values, {}, d), doctest::Contains("expected finite"), NumericError);
+}
+
 TEST_CASE("select_probe_lr: the rate whose probe does best on a held-out split wins") {
   const int S = 160, L = 1, d = 12;
   const auto [v, lab] = encoded_features(S, d, 9, 0.5f, 100);

@@ -920,6 +920,26 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK(again.ablation.to_json() == r.ablation.to_json());
   CHECK(again.linear.to_json() == r.linear.to_json());
   CHECK(again.ablation_linear.to_json() == r.ablation_linear.to_json());
+  {
+    // Standardized features for the frozen rows' heads: the same encoders, so the same linear
+    // read-outs (they read the raw embeddings); the frozen rows' heads read other inputs.
+    GraspEvalConfig cs = c;
+    cs.seeds = {0};
+    cs.end_to_end = cs.mae = cs.ablation = false;
+    cs.heads.standardize_features = true;
+    const GraspEvalResult s = run_grasp_eval(cs);
+    REQUIRE(s.main.rows.size() == 4);
+    REQUIRE(s.linear.rows.size() == 5);
+    CHECK(s.main.rows[2].name == "random init, frozen");
+    for (std::size_t i : {1, 2}) CHECK(s.linear.rows[i].runs.front() == r.linear.rows[i].runs.front());  // random init
+    for (std::size_t i : {3, 4}) CHECK(s.linear.rows[i].runs.front() == r.linear.rows[i + 2].runs.front());  // Tactile-JEPA
+    CHECK(s.main.rows[2].runs.front() != r.main.rows[2].runs.front());
+    CHECK(s.main.rows[3].runs.front() != r.main.rows[5].runs.front());
+    for (const EvalRow& row : s.main.rows)
+      for (const GraspScores& sc : row.runs.front())
+        for (double v : sc) CHECK(std::isfinite(v));
+    CHECK(cs.to_json()["heads"]["standardize_features"] == true);
+  }
   c.tasks.label_pad = 5;
   CHECK_THROWS_AS(run_grasp_eval(c), ConfigError);
   c.tasks.label_pad = c.sim.label_pad;

@@ -121,7 +121,8 @@ struct GraspEvalConfig {
                        {"validation_by_episode", heads.probe.validation_groups && heads.sequence.validation_groups},
                        {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
                        {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
-                       {"end_to_end_patience", heads.end_to_end_patience}}},
+                       {"end_to_end_patience", heads.end_to_end_patience},
+                       {"standardize_features", heads.standardize_features}}},
             {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}, {"readout_components", readout_components}}}};
   }
 };

@@ -179,6 +179,50 @@ void center_token_embeddings(std::span<T> train, std::span<const std::span<T>> o
   apply(train);
 }
 
+// Frozen features standardized per channel before a head (MAE's linear probe: a BatchNorm without
+// affine parameters in front of the head): with μ_c and σ_c the mean and standard deviation of
+// channel c over every token of every training window,
+//   x[s, n, c] ← (x[s, n, c] − μ_c) / sqrt(σ_c² + eps)     for every window of `train` and of each `other`
+// (statistics from `train` only). An encoder whose tokens share one large vector (a random
+// encoder's output LayerNorm, a pre-trained encoder's common offset) gives keys, values and
+// LayerNorm inputs that differ across tokens and windows by a small fraction of their norm; the
+// probe then spends its steps on that scale. Unlike center_token_embeddings, what differs between
+// tokens (their positions) is kept. Returns the statistics (μ_c, σ_c) [dim] each.
+template <class T>
+std::pair<std::vector<double>, std::vector<double>> standardize_channels(std::span<T> train,
+                                                                         std::span<const std::span<T>> others, int dim,
+                                                                         double eps = 1e-6) {
+  require<ShapeError>(dim > 0, "standardize_channels: dim = ", dim, ", expected > 0");
+  const auto D = static_cast<std::size_t>(dim);
+  require<ShapeError>(!train.empty() && train.size() % D == 0, "standardize_channels: ", train.size(),
+                      " training values, expected a positive multiple of dim = ", dim);
+  for (const auto& o : others)
+    require<ShapeError>(o.size() % D == 0, "standardize_channels: ", o.size(), " values, expected a multiple of dim = ", dim);
+  const std::size_t R = train.size() / D;
+  std::vector<double> mean(D, 0.0), sd(D, 0.0);
+  for (std::size_t r = 0; r < R; ++r)
+    for (std::size_t c = 0; c < D; ++c) mean[c] += static_cast<double>(train[r * D + c]);
+  for (double& m : mean) m /= static_cast<double>(R);
+  for (std::size_t r = 0; r < R; ++r)
+    for (std::size_t c = 0; c < D; ++c) {
+      const double e = static_cast<double>(train[r * D + c]) - mean[c];
+      sd[c] += e * e;
+    }
+  for (double& s : sd) s = std::sqrt(s / static_cast<double>(R));
+  for (std::size_t c = 0; c < D; ++c)
+    require<NumericError>(std::isfinite(mean[c]) && std::isfinite(sd[c]), "standardize_channels: channel ", c,
+                          " has mean ", mean[c], " and sd ", sd[c], ", expected finite");
+  std::vector<T> scale(D);
+  for (std::size_t c = 0; c < D; ++c) scale[c] = static_cast<T>(1.0 / std::sqrt(sd[c] * sd[c] + eps));
+  auto apply = [&](std::span<T> x) {
+    for (std::size_t r = 0; r < x.size() / D; ++r)
+      for (std::size_t c = 0; c < D; ++c) x[r * D + c] = (x[r * D + c] - static_cast<T>(mean[c])) * scale[c];
+  };
+  for (const auto& o : others) apply(o);
+  apply(train);
+  return {std::move(mean), std::move(sd)};
+}
+
 // What a training step reports to the progress callback.
 struct ProbeStepInfo {
   std::int64_t step = 0, total_steps = 0;
