@@ -151,7 +151,8 @@ int main(int argc, char** argv) {
   eval->add_option("--max-object-windows", ev.eval.tasks.max_object_windows, "object samples per split (0: all)");
   eval->add_option("--max-force-windows", ev.eval.tasks.max_force_windows, "force samples per split (0: all)");
   eval->add_option("--max-pose-sequences", ev.eval.tasks.max_pose_sequences, "pose sequences per split (0: all)");
-  eval->add_option("--head-epochs", ev.eval.heads.probe.max_epochs, "heads' epoch limit (early stopping)")->capture_default_str();
+  eval->add_option("--head-epochs", ev.eval.heads.probe.max_epochs, "object and force probes' epoch limit (early stopping)")->capture_default_str();
+  eval->add_option("--head-patience", ev.eval.heads.probe.patience, "object and force probes' patience (epochs)")->capture_default_str();
   eval->add_option("--sequence-epochs", ev.eval.heads.sequence.max_epochs, "sequence head's epoch limit")->capture_default_str();
   eval->add_option("--end-to-end-epochs", ev.eval.heads.end_to_end_max_epochs, "end-to-end epoch limit")->capture_default_str();
   std::string eval_config;

@@ -562,6 +562,8 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK(o.eval.data_seed == 3);
   CHECK_FALSE(o.eval.mae);
   CHECK_FALSE(o.eval.ablation);
+  CHECK(o.eval.heads.probe.max_epochs == GraspHeadConfig{}.probe.max_epochs);  // the protocol's probe limits
+  CHECK(o.eval.heads.probe.patience == GraspHeadConfig{}.probe.patience);
   o.out = (t.path / "demo").string();
   o.eval.train.update(tiny_run("allegro"), "test");
   o.eval.train.drift_time_constant = 200;

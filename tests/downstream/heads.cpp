@@ -931,6 +931,8 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
     REQUIRE(s.main.rows.size() == 4);
     REQUIRE(s.linear.rows.size() == 5);
     CHECK(s.main.rows[2].name == "random init, frozen");
+    CHECK(s.main.rows[3].name == "Tactile-JEPA, frozen");
+    CHECK(s.linear.rows[3].name == "Tactile-JEPA: pad means");
     for (std::size_t i : {1, 2}) CHECK(s.linear.rows[i].runs.front() == r.linear.rows[i].runs.front());  // random init
     for (std::size_t i : {3, 4}) CHECK(s.linear.rows[i].runs.front() == r.linear.rows[i + 2].runs.front());  // Tactile-JEPA
     CHECK(s.main.rows[2].runs.front() != r.main.rows[2].runs.front());

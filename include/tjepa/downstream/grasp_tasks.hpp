@@ -33,6 +33,7 @@
 #include "tjepa/downstream/embed.hpp"
 #include "tjepa/downstream/features.hpp"
 #include "tjepa/downstream/probe_head.hpp"
+#include "tjepa/downstream/probe_training.hpp"
 #include "tjepa/downstream/ridge.hpp"
 #include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/sim/grasp_objects.hpp"
@@ -239,8 +240,8 @@ struct GraspHeadConfig {
   // episode overlap, so a split of windows or sequences puts near-copies on both sides and early
   // stopping follows the fit; contiguous blocks hold a few of the 16 objects only.
   // The probes' validation loss sits on a plateau for 10-20 epochs before it falls (the attentive
-  // pooling has to become selective first): patience 20 waits it out, and the probes stop on their
-  // own before 100 epochs. The sequence head's training loss does not move on this data, so it
+  // pooling has to become selective first): patience 20 waits it out, and the probes usually stop
+  // on their own before 100 epochs. The sequence head's training loss does not move on this data, so it
   // keeps the shorter limits.
   HeadTrainConfig probe{.max_epochs = 100, .patience = 20, .batch = 64, .lr = 1e-3};
   HeadTrainConfig sequence{.max_epochs = 40, .patience = 5, .batch = 16, .lr = 1e-3};
@@ -407,8 +408,9 @@ struct FrozenEncoderScores {
   std::optional<LinearReadoutScores> linear;
 };
 
-// A frozen encoder: embeds every window of each split once, then trains the heads of `head_seeds`
-// and (readout given) fits its linear read-outs on the same embeddings.
+// A frozen encoder: embeds every window of each split once, fits its linear read-outs (readout
+// given) on those embeddings, then (c.standardize_features) standardizes them per channel and
+// trains the heads of `head_seeds` on them.
 inline FrozenEncoderScores score_frozen_encoder(const ParamSet<float>& params, const Tokenizer& tokenizer,
                                                 const Encoder& encoder, const WindowSource& train_src,
                                                 const GraspTasks& tr, const WindowSource& test_src,

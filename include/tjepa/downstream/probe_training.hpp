@@ -179,15 +179,17 @@ void center_token_embeddings(std::span<T> train, std::span<const std::span<T>> o
   apply(train);
 }
 
-// Frozen features standardized per channel before a head (MAE's linear probe: a BatchNorm without
-// affine parameters in front of the head): with μ_c and σ_c the mean and standard deviation of
+// Frozen features standardized per channel before a head (in the spirit of MAE's linear probe, a
+// BatchNorm without affine parameters in front of the head, here applied to every token before the
+// pooling, with fixed training statistics): with μ_c and σ_c the mean and standard deviation of
 // channel c over every token of every training window,
 //   x[s, n, c] ← (x[s, n, c] − μ_c) / sqrt(σ_c² + eps)     for every window of `train` and of each `other`
 // (statistics from `train` only). An encoder whose tokens share one large vector (a random
 // encoder's output LayerNorm, a pre-trained encoder's common offset) gives keys, values and
 // LayerNorm inputs that differ across tokens and windows by a small fraction of their norm; the
 // probe then spends its steps on that scale. Unlike center_token_embeddings, what differs between
-// tokens (their positions) is kept. Returns the statistics (μ_c, σ_c) [dim] each.
+// tokens (their positions) is kept. eps is absolute: a channel nearly constant in training is
+// scaled by up to 1/sqrt(eps). Returns the statistics (μ_c, σ_c) [dim] each.
 template <class T>
 std::pair<std::vector<double>, std::vector<double>> standardize_channels(std::span<T> train,
                                                                          std::span<const std::span<T>> others, int dim,
@@ -212,11 +214,12 @@ std::pair<std::vector<double>, std::vector<double>> standardize_channels(std::sp
   for (std::size_t c = 0; c < D; ++c)
     require<NumericError>(std::isfinite(mean[c]) && std::isfinite(sd[c]), "standardize_channels: channel ", c,
                           " has mean ", mean[c], " and sd ", sd[c], ", expected finite");
-  std::vector<T> scale(D);
-  for (std::size_t c = 0; c < D; ++c) scale[c] = static_cast<T>(1.0 / std::sqrt(sd[c] * sd[c] + eps));
-  auto apply = [&](std::span<T> x) {
+  std::vector<double> scale(D);
+  for (std::size_t c = 0; c < D; ++c) scale[c] = 1.0 / std::sqrt(sd[c] * sd[c] + eps);
+  auto apply = [&](std::span<T> x) {  // in double: a large shared offset minus its mean keeps its digits
     for (std::size_t r = 0; r < x.size() / D; ++r)
-      for (std::size_t c = 0; c < D; ++c) x[r * D + c] = (x[r * D + c] - static_cast<T>(mean[c])) * scale[c];
+      for (std::size_t c = 0; c < D; ++c)
+        x[r * D + c] = static_cast<T>((static_cast<double>(x[r * D + c]) - mean[c]) * scale[c]);
   };
   for (const auto& o : others) apply(o);
   apply(train);
