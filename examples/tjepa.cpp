@@ -154,6 +154,7 @@ int main(int argc, char** argv) {
   eval->add_option("--head-epochs", ev.eval.heads.probe.max_epochs, "object and force probes' epoch limit (early stopping)")->capture_default_str();
   eval->add_option("--head-patience", ev.eval.heads.probe.patience, "object and force probes' patience (epochs)")->capture_default_str();
   eval->add_option("--sequence-epochs", ev.eval.heads.sequence.max_epochs, "sequence head's epoch limit")->capture_default_str();
+  eval->add_option("--sequence-patience", ev.eval.heads.sequence.patience, "sequence head's patience (epochs)")->capture_default_str();
   eval->add_option("--end-to-end-epochs", ev.eval.heads.end_to_end_max_epochs, "end-to-end epoch limit")->capture_default_str();
   std::string eval_config;
   eval->add_option("--config", eval_config, "JSON pre-training configuration (TrainConfig keys); flags override it");
@@ -174,6 +175,19 @@ int main(int argc, char** argv) {
                  "skip the linear read-out table (ridge on each frozen encoder's pad-mean embeddings and token components)");
   eval->add_flag("--standardize-features", ev.eval.heads.standardize_features,
                  "the frozen rows' heads read the embeddings standardized per channel (statistics of the training windows)");
+  eval->add_option_function<std::string>(
+          "--probe-pooling", [&ev](const std::string& v) { ev.eval.heads.probe_pooling.kind = tjepa::parse_pooling(v); },
+          "the object and force probes' pooling of a window: attentive (the paper's, default) or taxel (per-taxel read-out)")
+      ->check(CLI::IsMember({"attentive", "taxel"}));
+  eval->add_option_function<std::string>(
+          "--sequence-pooling", [&ev](const std::string& v) { ev.eval.heads.sequence_pooling.kind = tjepa::parse_pooling(v); },
+          "the sequence head's pooling of each window: taxel (default) or attentive (the paper's; learns no pose here)")
+      ->check(CLI::IsMember({"attentive", "taxel"}));
+  eval->add_option_function<int>(
+          "--pooling-components",
+          [&ev](int k) { ev.eval.heads.probe_pooling.components = ev.eval.heads.sequence_pooling.components = k; },
+          "values per taxel of the taxel pooling (default 3)")
+      ->check(CLI::PositiveNumber);
   eval->add_option("--out", ev.out, "output directory")->capture_default_str();
   eval->add_flag("--force", ev.force, "overwrite --out");
   eval->add_flag("--quiet", ev.quiet, "no progress lines");

@@ -10,6 +10,8 @@
 //   diag ENCODER            ridge on pad-mean embeddings (label pad only, all pads) for each task
 //   pcapose ENCODER         ridge on per-token residuals projected on k = 1, 3, 8 principal directions
 //   seq ENCODER             the sequence head's learning curves (patience 5, 20; lr 3e-4), head seeds 0, 1
+//                           (POOL=taxel K=3: the taxel pooling; QUICK=1: the protocol's limits at head
+//                           seeds 0, 1, then patience 20 / 100 epochs at seed 0)
 //   heads ENCODER           the three heads of the protocol, head seeds 0, 1 (CENTER=1: center_token_embeddings first)
 #include <tjepa/tjepa.hpp>
 #include <cstdio>
@@ -185,6 +187,9 @@ int main(int argc, char** argv) {
     h.seed = hs;
     SequenceHeadConfig hc;
     hc.dim = dd; hc.heads = 3; hc.length = tr.pose.length; hc.outputs = 3;
+    if (const char* p = std::getenv("POOL")) hc.pooling.kind = parse_pooling(p);
+    hc.pooling.tokens = N;
+    if (const char* k = std::getenv("K")) hc.pooling.components = std::atoi(k);
     SequenceModel<float> m(hc, hs ^ 0x706f7365ull);
     auto r = train_sequence_head(m, ftr, tr.pose, h);
     const std::vector<float> y = predict_sequence_head(m, fte, te.pose);
@@ -197,6 +202,14 @@ int main(int argc, char** argv) {
     fflush(stdout);
   };
   GraspHeadConfig base;
+  base.sequence.patience = 5;  // the sequence head's limits before the eleventh session
+  base.sequence.max_epochs = 40;
+  if (std::getenv("QUICK")) {  // those limits, then patience 20 / 100 epochs (the protocol's since)
+    for (std::uint64_t hs : {0, 1}) run_seq("default p5", base.sequence, hs);
+    HeadTrainConfig h = base.sequence; h.patience = 20; h.max_epochs = 100;
+    run_seq("p20 e100", h, 0);
+    return 0;
+  }
   for (std::uint64_t hs : {0, 1}) {
     run_seq("default p5", base.sequence, hs);
     HeadTrainConfig h = base.sequence; h.patience = 20; h.max_epochs = 60;

@@ -28,7 +28,6 @@ inline EvalOptions demo_eval_options(std::uint64_t seed) {
   c.data_seed = seed;
   c.seeds = {seed};
   c.head_seeds = 1;
-  c.heads.sequence.max_epochs = 30;  // the probes keep the protocol's limits (their plateau)
   c.mae = false;
   c.ablation = false;
   o.out = "runs/demo";

@@ -73,6 +73,7 @@
 #include "tjepa/model/position_table.hpp"
 #include "tjepa/model/predictor.hpp"
 #include "tjepa/model/stage_clock.hpp"
+#include "tjepa/model/taxel_pooling.hpp"
 #include "tjepa/model/tokenizer.hpp"
 #include "tjepa/model/workspace.hpp"
 

@@ -564,6 +564,9 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK_FALSE(o.eval.ablation);
   CHECK(o.eval.heads.probe.max_epochs == GraspHeadConfig{}.probe.max_epochs);  // the protocol's probe limits
   CHECK(o.eval.heads.probe.patience == GraspHeadConfig{}.probe.patience);
+  CHECK(o.eval.heads.sequence.max_epochs == GraspHeadConfig{}.sequence.max_epochs);
+  CHECK(o.eval.heads.sequence.patience == GraspHeadConfig{}.sequence.patience);
+  CHECK(o.eval.heads.sequence_pooling.kind == PoolingKind::taxel);
   o.out = (t.path / "demo").string();
   o.eval.train.update(tiny_run("allegro"), "test");
   o.eval.train.drift_time_constant = 200;

@@ -630,51 +630,63 @@ TEST_CASE_TEMPLATE("CausalSelfAttention: against a plain-loop causal softmax", T
 
 TEST_CASE("SequenceHead: gradients of inputs and every parameter / causal predictions") {
   const int B = 2, L = 4, N = 3, d = 6, P = 3;
-  ParamSet<double> ps;
-  const SequenceHead sh(ps, SequenceHeadConfig{d, 2, L, P, 2.0, 1e-6});
-  ps.allocate();
-  test::randomize(ps, 21);
-  for (const char* name : {"pool.query_tokens", "pool.cross_attention_block.xattn.kv.weight", "pos_embed",
-                           "blocks.0.norm1.weight", "blocks.0.attn.qkv.weight", "blocks.0.attn.proj.bias",
-                           "blocks.0.mlp.fc2.weight", "norm.bias", "head.weight", "head.bias"})
-    CHECK(ps.contains(name));
-  CHECK_FALSE(ps.contains("pool.head.fc1.weight"));
-  Rng rng(22);
-  auto x = test::normal_vector(std::size_t(B) * L * N * d, rng);
-  auto w = test::normal_vector(std::size_t(B) * L * P, rng);
-  std::vector<double> y(w.size());
-  SequenceCache<double> cache, scratch;
-  Workspace<double> ws;
-  auto loss = [&] {
-    sh.forward(ps, x.data(), B, N, y.data(), scratch, ws);
-    return test::dot(w.data(), y.data(), y.size());
-  };
-  ps.zero_grad();
-  sh.forward(ps, x.data(), B, N, y.data(), cache, ws);
-  std::vector<double> dx(x.size(), 0.0);
-  sh.backward(ps, w.data(), dx.data(), cache, ws);
-  CHECK(test::gradient_error(x.data(), dx.data(), x.size(), loss, 96) < test::grad_tolerance);
-  test::check_param_gradients(ps, loss);
-  // A second backward adds the same gradient again.
-  const std::vector<double> g1(ps.grads().begin(), ps.grads().end()), dx1 = dx;
-  sh.forward(ps, x.data(), B, N, y.data(), cache, ws);
-  sh.backward(ps, w.data(), dx.data(), cache, ws);
-  for (std::size_t i = 0; i < g1.size(); ++i) REQUIRE(ps.grads()[i] == doctest::Approx(2 * g1[i]).epsilon(1e-12));
-  for (std::size_t i = 0; i < dx.size(); ++i) REQUIRE(dx[i] == doctest::Approx(2 * dx1[i]).epsilon(1e-12));
-  // The prediction after window l does not see later windows: change window 2 of sequence 1 (not
-  // by a constant shift, which LayerNorm ignores).
-  const std::vector<double> y0 = y;
-  const std::size_t changed = std::size_t(L) + 2;
-  for (int i = 0; i < N * d; ++i) x[changed * N * d + i] += rng.normal(0.0, 1.0);
-  sh.forward(ps, x.data(), B, N, y.data(), scratch, ws);
-  for (std::size_t r = 0; r < std::size_t(B) * L; ++r)
-    for (int p = 0; p < P; ++p) {
-      INFO("row ", r);
-      if (r < changed)
-        CHECK(y[r * P + p] == y0[r * P + p]);
-      else
-        CHECK(y[r * P + p] != y0[r * P + p]);
+  for (const PoolingKind pooling : {PoolingKind::attentive, PoolingKind::taxel}) {
+    INFO("pooling ", to_string(pooling));
+    ParamSet<double> ps;
+    const SequenceHead sh(ps, SequenceHeadConfig{d, 2, L, P, 2.0, 1e-6, {pooling, N, 2}});
+    ps.allocate();
+    test::randomize(ps, 21);
+    for (const char* name : {"pos_embed", "blocks.0.norm1.weight", "blocks.0.attn.qkv.weight", "blocks.0.attn.proj.bias",
+                             "blocks.0.mlp.fc2.weight", "norm.bias", "head.weight", "head.bias"})
+      CHECK(ps.contains(name));
+    if (pooling == PoolingKind::taxel) {
+      CHECK(ps.infos()[ps.id("pool.proj.weight").index].shape == std::vector<std::int64_t>{2, d});
+      CHECK(ps.infos()[ps.id("pool.fc.weight").index].shape == std::vector<std::int64_t>{d, N * 2});
+      CHECK(ps.contains("pool.norm.bias"));
+      CHECK_FALSE(ps.contains("pool.query_tokens"));
+    } else {
+      CHECK(ps.contains("pool.query_tokens"));
+      CHECK(ps.contains("pool.cross_attention_block.xattn.kv.weight"));
+      CHECK_FALSE(ps.contains("pool.fc.weight"));
     }
+    CHECK_FALSE(ps.contains("pool.head.fc1.weight"));
+    Rng rng(22);
+    auto x = test::normal_vector(std::size_t(B) * L * N * d, rng);
+    auto w = test::normal_vector(std::size_t(B) * L * P, rng);
+    std::vector<double> y(w.size());
+    SequenceCache<double> cache, scratch;
+    Workspace<double> ws;
+    auto loss = [&] {
+      sh.forward(ps, x.data(), B, N, y.data(), scratch, ws);
+      return test::dot(w.data(), y.data(), y.size());
+    };
+    ps.zero_grad();
+    sh.forward(ps, x.data(), B, N, y.data(), cache, ws);
+    std::vector<double> dx(x.size(), 0.0);
+    sh.backward(ps, w.data(), dx.data(), cache, ws);
+    CHECK(test::gradient_error(x.data(), dx.data(), x.size(), loss, 96) < test::grad_tolerance);
+    test::check_param_gradients(ps, loss);
+    // A second backward adds the same gradient again.
+    const std::vector<double> g1(ps.grads().begin(), ps.grads().end()), dx1 = dx;
+    sh.forward(ps, x.data(), B, N, y.data(), cache, ws);
+    sh.backward(ps, w.data(), dx.data(), cache, ws);
+    for (std::size_t i = 0; i < g1.size(); ++i) REQUIRE(ps.grads()[i] == doctest::Approx(2 * g1[i]).epsilon(1e-12));
+    for (std::size_t i = 0; i < dx.size(); ++i) REQUIRE(dx[i] == doctest::Approx(2 * dx1[i]).epsilon(1e-12));
+    // The prediction after window l does not see later windows: change window 2 of sequence 1 (not
+    // by a constant shift, which LayerNorm ignores).
+    const std::vector<double> y0 = y;
+    const std::size_t changed = std::size_t(L) + 2;
+    for (int i = 0; i < N * d; ++i) x[changed * N * d + i] += rng.normal(0.0, 1.0);
+    sh.forward(ps, x.data(), B, N, y.data(), scratch, ws);
+    for (std::size_t r = 0; r < std::size_t(B) * L; ++r)
+      for (int p = 0; p < P; ++p) {
+        INFO("row ", r);
+        if (r < changed)
+          CHECK(y[r * P + p] == y0[r * P + p]);
+        else
+          CHECK(y[r * P + p] != y0[r * P + p]);
+      }
+  }
 }
 
 TEST_CASE("train_sequence_head: learns a running sum of the windows with early stopping") {
@@ -704,7 +716,7 @@ TEST_CASE("train_sequence_head: learns a running sum of the windows with early s
   }
   FrozenFeatures<float> f(x, N, d);
   const HeadTrainConfig cfg = train_config(60, 8, 8, 3e-3);
-  SequenceModel<float> model(SequenceHeadConfig{d, 3, L, 3, 2.0, 1e-6}, 0);
+  SequenceModel<float> model(SequenceHeadConfig{d, 3, L, 3, 2.0, 1e-6, {}}, 0);
   const HeadTrainResult r = train_sequence_head(model, f, targets, cfg);
   REQUIRE(r.epochs() >= 1);
   CHECK(r.best_validation < 0.3 * r.validation_loss.front());
@@ -715,10 +727,54 @@ TEST_CASE("train_sequence_head: learns a running sum of the windows with early s
   CHECK(rmse[0] < 0.3 * 2.9);  // 2.9: the constant predictor on F ~ U(0, 10)
   CHECK(rmse[1] < 0.5 * 1.6);  // the running mean's spread is smaller (1.6 at l = 2)
   CHECK(rmse[2] < 1e-3);       // a constant target: the scaler's mean
-  SequenceModel<float> again(SequenceHeadConfig{d, 3, L, 3, 2.0, 1e-6}, 0);
+  SequenceModel<float> again(SequenceHeadConfig{d, 3, L, 3, 2.0, 1e-6, {}}, 0);
   CHECK(train_sequence_head(again, f, targets, cfg).validation_loss == r.validation_loss);
   targets.window[3] = S;
   CHECK_THROWS_AS(train_sequence_head(again, f, targets, cfg), DataError);
+}
+
+TEST_CASE("train_sequence_head: the taxel pooling reads where the contact is - the attentive pooling cannot") {
+  // Window i presses around a place c_i in [0, N - 1] of a row of N taxels: token n is a shared
+  // vector plus a_n = exp(-(n - c_i)²) along channel 0, with no position code. The target after
+  // window l is c of that window. The attentive pooling is invariant to the order of the tokens,
+  // so it sees the pressure values but not where they are; the taxel pooling keeps each taxel's
+  // place.
+  const int S = 240, L = 4, N = 6, d = 8, Q = S - L + 1;
+  Rng rng(41);
+  AlignedVector<float> x(std::size_t(S) * N * d, 0.0f);
+  std::vector<float> c(S);
+  for (int i = 0; i < S; ++i) {
+    c[std::size_t(i)] = static_cast<float>(rng.uniform(0, N - 1));
+    for (int n = 0; n < N; ++n) {
+      float* t = x.data() + (std::size_t(i) * N + n) * d;
+      for (int k = 1; k < d; ++k) t[k] = static_cast<float>(k % 3);
+      t[0] = static_cast<float>(3 * std::exp(-(n - c[std::size_t(i)]) * (n - c[std::size_t(i)])));
+    }
+  }
+  SequenceTargets targets{L, 3, {}, {}, {}};
+  for (int q = 0; q < Q; ++q)
+    for (int l = 0; l < L; ++l) {
+      targets.window.push_back(q + l);
+      targets.value.insert(targets.value.end(), {c[std::size_t(q + l)], 0.0f, 0.0f});
+    }
+  FrozenFeatures<float> f(x, N, d);
+  const HeadTrainConfig cfg = train_config(60, 8, 8, 3e-3);
+  const double spread = (N - 1) / std::sqrt(12.0);  // sd of U(0, N - 1)
+  auto rmse_of = [&](PoolingKind pooling) {
+    SequenceModel<float> model(SequenceHeadConfig{d, 2, L, 3, 2.0, 1e-6, {pooling, N, 2}}, 0);
+    train_sequence_head(model, f, targets, cfg);
+    return evaluate_sequence_head(model, f, targets)[0];
+  };
+  const double taxel = rmse_of(PoolingKind::taxel), attentive = rmse_of(PoolingKind::attentive);
+  INFO("taxel ", taxel, ", attentive ", attentive, ", constant ", spread);
+  CHECK(taxel < 0.25 * spread);
+  CHECK(attentive > 0.5 * spread);
+  SequenceModel<float> wrong(SequenceHeadConfig{d, 2, L, 3, 2.0, 1e-6, {PoolingKind::taxel, N + 1, 2}}, 0);
+  CHECK_THROWS_WITH_AS(train_sequence_head(wrong, f, targets, cfg), doctest::Contains("built for 7"), ShapeError);
+  CHECK_THROWS_AS(SequenceModel<float>(SequenceHeadConfig{d, 2, L, 3, 2.0, 1e-6, {PoolingKind::taxel, 0, 2}}, 0),
+                  ConfigError);
+  CHECK(parse_pooling("taxel") == PoolingKind::taxel);
+  CHECK_THROWS_WITH_AS(parse_pooling("mean"), doctest::Contains("mean"), ConfigError);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -921,12 +977,16 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK(again.linear.to_json() == r.linear.to_json());
   CHECK(again.ablation_linear.to_json() == r.ablation_linear.to_json());
   {
-    // Standardized features for the frozen rows' heads: the same encoders, so the same linear
-    // read-outs (they read the raw embeddings); the frozen rows' heads read other inputs.
+    // Standardized features for the frozen rows' heads, the taxel pooling for the probes and the
+    // attentive one for the sequence head (the defaults the other way round): the same encoders,
+    // so the same linear read-outs (they read the raw embeddings); the frozen rows' heads read
+    // other inputs.
     GraspEvalConfig cs = c;
     cs.seeds = {0};
     cs.end_to_end = cs.mae = cs.ablation = false;
     cs.heads.standardize_features = true;
+    cs.heads.probe_pooling.kind = PoolingKind::taxel;
+    cs.heads.sequence_pooling.kind = PoolingKind::attentive;
     const GraspEvalResult s = run_grasp_eval(cs);
     REQUIRE(s.main.rows.size() == 4);
     REQUIRE(s.linear.rows.size() == 5);
@@ -941,6 +1001,10 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
       for (const GraspScores& sc : row.runs.front())
         for (double v : sc) CHECK(std::isfinite(v));
     CHECK(cs.to_json()["heads"]["standardize_features"] == true);
+    CHECK(cs.to_json()["heads"]["sequence_pooling"] == "attentive");
+    CHECK(cs.to_json()["heads"]["probe_pooling"] == "taxel");
+    CHECK(c.to_json()["heads"]["sequence_pooling"] == "taxel");
+    CHECK(c.to_json()["heads"]["probe_pooling"] == "attentive");
   }
   c.tasks.label_pad = 5;
   CHECK_THROWS_AS(run_grasp_eval(c), ConfigError);

@@ -394,7 +394,7 @@ TEST_SUITE("nn") {
 
   TEST_CASE("AttentiveProbe with padded tokens: gradients of inputs and parameters") {
     ParamSet<double> ps;
-    AttentiveProbe probe(ps, ProbeConfig{12, 3, 2.0, 10, 4, 1e-6});
+    AttentiveProbe probe(ps, ProbeConfig{12, 3, 2.0, 10, 4, 1e-6, {}});
     ps.allocate();
     test::randomize(ps, 12);
     CHECK(ps.contains("probe.query_tokens"));
@@ -421,6 +421,51 @@ TEST_SUITE("nn") {
     CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
     for (int c = 0; c < d; ++c) CHECK(dx[std::size_t(2) * d + c] == 0.0);  // a padded token
     test::check_param_gradients(ps, loss);
+  }
+
+  TEST_CASE("AttentiveProbe with the taxel pooling: gradients of inputs and parameters - its own errors") {
+    const int B = 3, L = 5, d = 8, k = 2;
+    ParamSet<double> ps;
+    ProbeConfig c{d, 2, 2.0, 6, 3, 1e-6, {PoolingKind::taxel, L, k}};
+    AttentiveProbe probe(ps, c);
+    ps.allocate();
+    test::randomize(ps, 14);
+    CHECK(ps.infos()[ps.id("probe.proj.weight").index].shape == std::vector<std::int64_t>{k, d});
+    CHECK(ps.infos()[ps.id("probe.fc.weight").index].shape == std::vector<std::int64_t>{d, L * k});
+    CHECK(ps.contains("probe.norm.weight"));
+    CHECK(ps.contains("probe.head.fc2.bias"));
+    CHECK_FALSE(ps.contains("probe.query_tokens"));
+    Rng rng(15);
+    auto x = test::normal_vector(std::size_t(B) * L * d, rng);
+    auto w = test::normal_vector(std::size_t(B) * 3, rng);
+    std::vector<double> y(w.size());
+    Workspace<double> ws;
+    auto loss = [&] {
+      probe.forward(ps, x.data(), B, L, nullptr, y.data(), nullptr, ws);
+      return test::dot(w.data(), y.data(), y.size());
+    };
+    ProbeCache<double> cache;
+    ps.zero_grad();
+    probe.forward(ps, x.data(), B, L, nullptr, y.data(), &cache, ws);
+    CHECK(test::dot(w.data(), y.data(), y.size()) == doctest::Approx(loss()).epsilon(1e-13));
+    std::vector<double> dx(x.size(), 0.0);
+    probe.backward(ps, w.data(), dx.data(), cache, ws);
+    CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
+    test::check_param_gradients(ps, loss);
+    // Where a token sits matters: swapping two tokens of a sample changes its output.
+    const std::vector<double> y0 = y;
+    for (int i = 0; i < d; ++i) std::swap(x[std::size_t(i)], x[std::size_t(d + i)]);
+    loss();
+    CHECK(y[0] != y0[0]);
+    CHECK(y[3] == y0[3]);  // sample 1 unchanged
+    std::vector<std::uint8_t> valid(std::size_t(B) * L, 1);
+    CHECK_THROWS_WITH_AS(probe.forward(ps, x.data(), B, L, valid.data(), y.data(), nullptr, ws),
+                         doctest::Contains("no padded tokens"), ShapeError);
+    CHECK_THROWS_WITH_AS(probe.forward(ps, x.data(), B * L, 1, nullptr, y.data(), nullptr, ws),
+                         doctest::Contains("built for 5"), ShapeError);
+    ParamSet<double> bad;
+    c.pooling.components = 0;
+    CHECK_THROWS_AS(AttentiveProbe(bad, c), ConfigError);
   }
 
   TEST_CASE("bad input at the module boundary throws - naming the argument") {
@@ -607,7 +652,7 @@ TEST_SUITE("nn") {
     Tokenizer tok = Tokenizer::per_taxel(ps, N, 3, 10, d);
     Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
     Predictor pred(ps, PredictorConfig{d, d, 2, 3, 4.0, false, 1e-6});
-    AttentiveProbe probe(ps, ProbeConfig{d, 3, 4.0, 32, 3, 1e-6});
+    AttentiveProbe probe(ps, ProbeConfig{d, 3, 4.0, 32, 3, 1e-6, {}});
     ps.allocate();
     init_params(ps, 1);
     Rng rng(14);

@@ -122,7 +122,10 @@ struct GraspEvalConfig {
                        {"sequence_batch", heads.sequence.batch}, {"sequence_max_epochs", heads.sequence.max_epochs},
                        {"end_to_end_max_epochs", heads.end_to_end_max_epochs},
                        {"end_to_end_patience", heads.end_to_end_patience},
-                       {"standardize_features", heads.standardize_features}}},
+                       {"standardize_features", heads.standardize_features},
+                       {"probe_pooling", to_string(heads.probe_pooling.kind)},
+                       {"sequence_pooling", to_string(heads.sequence_pooling.kind)},
+                       {"pooling_components", heads.sequence_pooling.components}}},
             {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}, {"readout_components", readout_components}}}};
   }
 };

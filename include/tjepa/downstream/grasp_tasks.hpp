@@ -239,12 +239,11 @@ struct GraspHeadConfig {
   // each object's training episodes. Windows of one grasp are alike and pose sequences of one
   // episode overlap, so a split of windows or sequences puts near-copies on both sides and early
   // stopping follows the fit; contiguous blocks hold a few of the 16 objects only.
-  // The probes' validation loss sits on a plateau for 10-20 epochs before it falls (the attentive
-  // pooling has to become selective first): patience 20 waits it out, and the probes usually stop
-  // on their own before 100 epochs. The sequence head's training loss does not move on this data, so it
-  // keeps the shorter limits.
+  // The heads' validation loss sits on a plateau for 10-20 epochs before it falls (the pooling has
+  // to become selective first): patience 20 waits it out, and the heads usually stop on their own
+  // before 100 epochs.
   HeadTrainConfig probe{.max_epochs = 100, .patience = 20, .batch = 64, .lr = 1e-3};
-  HeadTrainConfig sequence{.max_epochs = 40, .patience = 5, .batch = 16, .lr = 1e-3};
+  HeadTrainConfig sequence{.max_epochs = 100, .patience = 20, .batch = 16, .lr = 1e-3};
   // End to end (the encoder trains with the head): the same, with these epoch limits (every step
   // runs the encoder forward and backward).
   int end_to_end_max_epochs = 3, end_to_end_patience = 2;
@@ -253,6 +252,12 @@ struct GraspHeadConfig {
   // (standardize_channels, statistics of the training windows). Off by default, as the paper's
   // probe; the linear read-outs read the embeddings as the encoder gives them either way.
   bool standardize_features = false;
+  // How the probes and the sequence head pool a window: the paper's attentive pooling, or the
+  // taxel pooling (model/taxel_pooling.hpp) that keeps where a feature sits. Their `tokens` are
+  // set from the features. The sequence head uses the taxel pooling: with the attentive one it
+  // learns no pose on this data for any encoder (docs/evaluation.md, eleventh session).
+  PoolingConfig probe_pooling;
+  PoolingConfig sequence_pooling{.kind = PoolingKind::taxel};
 };
 
 // What a score run reports as it goes: (task, what) lines.
@@ -273,10 +278,15 @@ GraspScores score_heads(MakeFeatures&& features_for, const GraspTasks& tr, const
     }
     return h;
   };
+  auto pooling = [&](PoolingConfig p, int tokens) {
+    p.tokens = tokens;
+    return p;
+  };
   {
     auto [train, test] = features_for(0);
     RowFeatures ftr(*train, tr.object_rows), fte(*test, te.object_rows);
-    ProbeHead<T> head(train->dim(), c.probe_heads, 0, tr.object.classes, seed ^ 0x6f626a656374ull);  // "object"
+    ProbeHead<T> head(train->dim(), c.probe_heads, 0, tr.object.classes, seed ^ 0x6f626a656374ull, 0,  // "object"
+                      pooling(c.probe_pooling, train->tokens()));
     train_head(head, ftr, tr.object, limits(c.probe));
     const std::vector<T> y = predict_head(head, fte, fte.size());
     std::vector<int> cls(static_cast<std::size_t>(fte.size()));
@@ -287,7 +297,8 @@ GraspScores score_heads(MakeFeatures&& features_for, const GraspTasks& tr, const
   {
     auto [train, test] = features_for(1);
     RowFeatures ftr(*train, tr.force_rows), fte(*test, te.force_rows);
-    ProbeHead<T> head(train->dim(), c.probe_heads, 3, 0, seed ^ 0x666f726365ull);  // "force"
+    ProbeHead<T> head(train->dim(), c.probe_heads, 3, 0, seed ^ 0x666f726365ull, 0,  // "force"
+                      pooling(c.probe_pooling, train->tokens()));
     train_head(head, ftr, tr.force, limits(c.probe));
     const std::vector<T> y = predict_head(head, fte, fte.size());
     score_force(s, y.data(), 3, te);
@@ -300,6 +311,7 @@ GraspScores score_heads(MakeFeatures&& features_for, const GraspTasks& tr, const
     hc.heads = c.probe_heads;
     hc.length = tr.pose.length;
     hc.outputs = 3;
+    hc.pooling = pooling(c.sequence_pooling, train->tokens());
     SequenceModel<T> model(hc, seed ^ 0x706f7365ull);  // "pose"
     train_sequence_head(model, *train, tr.pose, limits(c.sequence));
     const std::vector<T> y = predict_sequence_head(model, *test, te.pose);

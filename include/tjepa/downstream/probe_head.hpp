@@ -115,8 +115,10 @@ struct ProbeHead {
   ColumnScaler scaler;
   int regression = 0, classes = 0;
 
-  // head_hidden 0: dim. Parameters "probe.*" initialized from seed.
-  ProbeHead(int dim, int heads, int regression_, int classes_, std::uint64_t seed, int head_hidden = 0)
+  // head_hidden 0: dim. Parameters "probe.*" initialized from seed. pooling: the probe's pooling
+  // (attentive: the paper's).
+  ProbeHead(int dim, int heads, int regression_, int classes_, std::uint64_t seed, int head_hidden = 0,
+            const PoolingConfig& pooling = {})
       : regression(regression_), classes(classes_) {
     require<ConfigError>(regression_ >= 0 && (classes_ == 0 || classes_ > 1) && regression_ + classes_ > 0,
                          "ProbeHead: regression = ", regression_, ", classes = ", classes_,
@@ -126,6 +128,7 @@ struct ProbeHead {
     c.heads = heads;
     c.head_hidden = head_hidden > 0 ? head_hidden : dim;
     c.out_dim = outputs();
+    c.pooling = pooling;
     probe = AttentiveProbe(params, c);
     params.allocate();
     init_params(params, seed);

@@ -22,6 +22,7 @@
 #include <functional>
 #include <limits>
 #include <span>
+#include <string>
 #include <type_traits>
 #include <vector>
 
@@ -39,6 +40,7 @@
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
 #include "tjepa/optim/schedule.hpp"
+#include "tjepa/train/loss.hpp"
 
 namespace tjepa {
 
@@ -141,6 +143,20 @@ struct ForceIndenterProbe {
   int outputs() const { return force_axes + num_classes; }
 };
 
+namespace detail {
+// Statistics fitted on `train` and applied to it and to `others`, in rows of `unit` values
+// (unit_name says what a row is): returns train's row count.
+template <class T>
+std::size_t check_fit_and_apply(const char* who, std::span<T> train, std::span<const std::span<T>> others,
+                                std::size_t unit, const std::string& unit_name) {
+  require<ShapeError>(!train.empty() && train.size() % unit == 0, who, ": ", train.size(),
+                      " training values, expected a positive multiple of ", unit_name);
+  for (const auto& o : others)
+    require<ShapeError>(o.size() % unit == 0, who, ": ", o.size(), " values, expected a multiple of ", unit_name);
+  return train.size() / unit;
+}
+}  // namespace detail
+
 // Each token's resting embedding, removed from frozen features before a probe: with μ_n the mean of
 // token n's embedding over the training windows and μ̄ the mean of μ_n over tokens,
 //   x[s, n, :] ← x[s, n, :] − μ_n + μ̄          for every window s of `train` and of each `other`
@@ -156,12 +172,8 @@ void center_token_embeddings(std::span<T> train, std::span<const std::span<T>> o
   require<ShapeError>(tokens > 0 && dim > 0, "center_token_embeddings: tokens = ", tokens, ", dim = ", dim,
                       ", expected > 0");
   const std::size_t per = static_cast<std::size_t>(tokens) * dim;
-  require<ShapeError>(!train.empty() && train.size() % per == 0, "center_token_embeddings: ", train.size(),
-                      " training values, expected a positive multiple of tokens*dim = ", tokens, "*", dim);
-  for (const auto& o : others)
-    require<ShapeError>(o.size() % per == 0, "center_token_embeddings: ", o.size(),
-                        " values, expected a multiple of tokens*dim = ", tokens, "*", dim);
-  const std::size_t S = train.size() / per;
+  const std::size_t S = detail::check_fit_and_apply("center_token_embeddings", train, others, per,
+                                                    "tokens*dim = " + std::to_string(tokens) + "*" + std::to_string(dim));
   std::vector<double> mean(per, 0.0), shared(static_cast<std::size_t>(dim), 0.0);
   for (std::size_t s = 0; s < S; ++s)
     for (std::size_t i = 0; i < per; ++i) mean[i] += static_cast<double>(train[s * per + i]);
@@ -196,33 +208,17 @@ std::pair<std::vector<double>, std::vector<double>> standardize_channels(std::sp
                                                                          double eps = 1e-6) {
   require<ShapeError>(dim > 0, "standardize_channels: dim = ", dim, ", expected > 0");
   const auto D = static_cast<std::size_t>(dim);
-  require<ShapeError>(!train.empty() && train.size() % D == 0, "standardize_channels: ", train.size(),
-                      " training values, expected a positive multiple of dim = ", dim);
-  for (const auto& o : others)
-    require<ShapeError>(o.size() % D == 0, "standardize_channels: ", o.size(), " values, expected a multiple of dim = ", dim);
-  const std::size_t R = train.size() / D;
-  std::vector<double> mean(D, 0.0), sd(D, 0.0);
-  for (std::size_t r = 0; r < R; ++r)
-    for (std::size_t c = 0; c < D; ++c) mean[c] += static_cast<double>(train[r * D + c]);
-  for (double& m : mean) m /= static_cast<double>(R);
-  for (std::size_t r = 0; r < R; ++r)
-    for (std::size_t c = 0; c < D; ++c) {
-      const double e = static_cast<double>(train[r * D + c]) - mean[c];
-      sd[c] += e * e;
-    }
-  for (double& s : sd) s = std::sqrt(s / static_cast<double>(R));
-  for (std::size_t c = 0; c < D; ++c)
+  const std::size_t R = detail::check_fit_and_apply("standardize_channels", train, others, D, "dim = " + std::to_string(dim));
+  std::vector<double> mean(D), sd(D), scale(D);
+  detail::column_moments(train.data(), R, D, 0, D, mean.data(), sd.data());
+  for (std::size_t c = 0; c < D; ++c) {
+    scale[c] = 1.0 / std::sqrt(sd[c] + eps);
+    sd[c] = std::sqrt(sd[c]);
     require<NumericError>(std::isfinite(mean[c]) && std::isfinite(sd[c]), "standardize_channels: channel ", c,
                           " has mean ", mean[c], " and sd ", sd[c], ", expected finite");
-  std::vector<double> scale(D);
-  for (std::size_t c = 0; c < D; ++c) scale[c] = 1.0 / std::sqrt(sd[c] * sd[c] + eps);
-  auto apply = [&](std::span<T> x) {  // in double: a large shared offset minus its mean keeps its digits
-    for (std::size_t r = 0; r < x.size() / D; ++r)
-      for (std::size_t c = 0; c < D; ++c)
-        x[r * D + c] = static_cast<T>((static_cast<double>(x[r * D + c]) - mean[c]) * scale[c]);
-  };
-  for (const auto& o : others) apply(o);
-  apply(train);
+  }
+  for (const auto& o : others) detail::scale_columns(o.data(), o.size() / D, D, 0, D, mean.data(), scale.data());
+  detail::scale_columns(train.data(), train.size() / D, D, 0, D, mean.data(), scale.data());
   return {std::move(mean), std::move(sd)};
 }
 

@@ -10,6 +10,8 @@
 //   h₂  = h₁ + Mlp(norm2(h₁))                         blocks.0.norm2, blocks.0.mlp.{fc1,fc2}
 //   y   = head(norm(h₂))             y [B·L, P]       norm, head (a Linear)
 // Position l sees windows 0..l: the prediction after window l never depends on later windows.
+// With pooling.kind = taxel (model/taxel_pooling.hpp; not the paper's, docs/evaluation.md says
+// why it exists) pool(x) is the per-taxel read-out that keeps where on the skin each feature sits.
 #include <algorithm>
 #include <cstdint>
 #include <span>
@@ -34,6 +36,7 @@ struct SequenceHeadConfig {
   int outputs = 3;      // P: pose x, y, θ
   double mlp_ratio = 4.0;
   double eps = kernels::layer_norm_eps;
+  PoolingConfig pooling;  // attentive (the paper's) or taxel (model/taxel_pooling.hpp)
 };
 
 // Activations of one forward pass, kept for backward; also the scratch of inference.
@@ -70,6 +73,7 @@ struct SequenceHead {
     pc.mlp_ratio = c.mlp_ratio;
     pc.out_dim = 0;  // pooling only
     pc.eps = c.eps;
+    pc.pooling = c.pooling;
     pool = AttentiveProbe(ps, pc, "pool.");
     pos = ps.add("pos_embed", {1, c.length, c.dim}, ParamInit::trunc_normal);
     norm1 = NormParams::add(ps, "blocks.0.norm1", c.dim, c.eps);

@@ -6,6 +6,8 @@
 //   q₂ = q₁ + Mlp(norm2(q₁))                           [B, d]
 //   y  = head.fc2(gelu(head.fc1(q₂)))                  [B, out]
 // pool() stops at q₂ (the sequence head pools each window so); out_dim 0 builds no head.
+// pooling.kind = taxel replaces q₀ … q₂ by the taxel pooling (model/taxel_pooling.hpp, parameters
+// "<prefix>norm.*", "proj.*", "fc.*"; not in the paper); the head is the same.
 // PyTorch names (prefix "probe." by default): query_tokens; cross_attention_block.norm1.*,
 // cross_attention_block.xattn.{q,kv,proj}.*, cross_attention_block.norm2.*,
 // cross_attention_block.mlp.{fc1,fc2}.*; head.fc1.*, head.fc2.*.
@@ -15,6 +17,7 @@
 
 #include "tjepa/model/attention.hpp"
 #include "tjepa/model/mlp.hpp"
+#include "tjepa/model/taxel_pooling.hpp"
 
 namespace tjepa {
 
@@ -25,6 +28,7 @@ struct ProbeConfig {
   int head_hidden = 192;
   int out_dim = 1;
   double eps = kernels::layer_norm_eps;
+  PoolingConfig pooling;
 };
 
 template <class T>
@@ -35,6 +39,7 @@ struct ProbeCache {
   AlignedVector<T> q1, qn, mean2, rstd2, h;   // [B, d], [B, d], [B], [B], [B, hidden]
   AlignedVector<T> q2, z;                     // [B, d], [B, head_hidden]
   std::vector<std::uint8_t> key_valid;
+  TaxelPoolCache<T> taxel;                    // pooling.kind = taxel
 };
 
 struct AttentiveProbe {
@@ -43,30 +48,47 @@ struct AttentiveProbe {
   NormParams norm1, norm2;
   CrossAttention xattn;
   Mlp mlp, head;
+  TaxelPooling taxel;  // pooling.kind = taxel: instead of query … mlp
 
   AttentiveProbe() = default;
   template <class T>
   AttentiveProbe(ParamSet<T>& ps, const ProbeConfig& c, const std::string& prefix = "probe.") : config(c) {
     require<ConfigError>(c.out_dim >= 0 && (c.out_dim == 0 || c.head_hidden > 0), "AttentiveProbe: out_dim ",
                          c.out_dim, ", head_hidden ", c.head_hidden, ", expected out_dim >= 0 (0: no head) and head_hidden > 0");
-    const std::string blk = prefix + "cross_attention_block.";
-    query = ps.add(prefix + "query_tokens", {1, 1, c.dim}, ParamInit::trunc_normal);
-    norm1 = NormParams::add(ps, blk + "norm1", c.dim, c.eps);
-    xattn = CrossAttention::add(ps, blk + "xattn", c.dim, c.heads, true);
-    norm2 = NormParams::add(ps, blk + "norm2", c.dim, c.eps);
-    mlp = Mlp::add(ps, blk + "mlp", c.dim, static_cast<int>(c.dim * c.mlp_ratio), true);
+    if (taxel_pooling()) {
+      taxel = TaxelPooling::add(ps, prefix, c.dim, c.pooling, c.eps);
+    } else {
+      const std::string blk = prefix + "cross_attention_block.";
+      query = ps.add(prefix + "query_tokens", {1, 1, c.dim}, ParamInit::trunc_normal);
+      norm1 = NormParams::add(ps, blk + "norm1", c.dim, c.eps);
+      xattn = CrossAttention::add(ps, blk + "xattn", c.dim, c.heads, true);
+      norm2 = NormParams::add(ps, blk + "norm2", c.dim, c.eps);
+      mlp = Mlp::add(ps, blk + "mlp", c.dim, static_cast<int>(c.dim * c.mlp_ratio), true);
+    }
     if (c.out_dim > 0) head = Mlp::add(ps, prefix + "head", c.dim, c.head_hidden, true, c.out_dim);
   }
 
   bool has_head() const { return config.out_dim > 0; }
+  bool taxel_pooling() const { return config.pooling.kind == PoolingKind::taxel; }
+  // The pooling's last parameter (checked to belong to the ParamSet a call gets).
+  ParamId pool_last() const { return taxel_pooling() ? taxel.fc.weight : mlp.fc2.weight; }
 
   // The pooling alone (the sequence head pools each window this way): x [B, L, d] → q₂ [B, d].
   // key_valid [B, L] or nullptr. cache == nullptr: inference.
   template <class T>
   void pool(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* q2,
             std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
-    check_params(ps, mlp.fc2.weight, "AttentiveProbe::pool");
+    check_params(ps, pool_last(), "AttentiveProbe::pool");
     require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::pool: B = ", B, ", L = ", L, ", expected > 0");
+    if (taxel_pooling()) {
+      require<ShapeError>(key_valid == nullptr, "AttentiveProbe::pool: the taxel pooling takes no padded tokens");
+      if (cache) {
+        cache->B = B;
+        cache->L = L;
+      }
+      taxel.forward(ps, x, B, L, q2, cache ? &cache->taxel : nullptr, ws);
+      return;
+    }
     const int d = config.dim, H = config.heads, hid = mlp.hidden();
     const std::size_t M = std::size_t(B) * L;
     auto buf = [&](AlignedVector<T> ProbeCache<T>::*field, AlignedVector<T>& scratch, std::size_t n) {
@@ -137,8 +159,12 @@ struct AttentiveProbe {
   template <class T>
   void pool_backward(ParamSet<T>& ps, std::type_identity_t<T>* dq, std::type_identity_t<T>* dx, const ProbeCache<T>& c,
                      Workspace<T>& ws) const {
-    check_params(ps, mlp.fc2.weight, "AttentiveProbe::pool_backward");
+    check_params(ps, pool_last(), "AttentiveProbe::pool_backward");
     require<ConfigError>(c.B > 0, "AttentiveProbe::pool_backward: the cache holds no forward pass");
+    if (taxel_pooling()) {
+      taxel.backward(ps, dq, dx, c.B, c.taxel, ws);
+      return;
+    }
     const int d = config.dim, B = c.B, L = c.L, hid = mlp.hidden();
     const std::size_t M = std::size_t(B) * L;
     const std::uint8_t* kv = c.key_valid.empty() ? nullptr : c.key_valid.data();

@@ -48,6 +48,34 @@ void normalize_rows(T* x, std::size_t M, int d, double eps = target_norm_eps) {
 // variance), in place. For the targets h [B, N·d] (JepaStepConfig::standardize_targets), each
 // token's each dimension over the batch: whatever a token's embedding holds for every sample (its
 // position) is removed, and what is left is what differs between samples.
+namespace detail {
+// Columns j0 .. j0 + n of x [M, D]: their means and biased variances, in double (two passes over
+// the rows in order, so the same on any thread count).
+template <class T>
+void column_moments(const T* x, std::size_t M, std::size_t D, std::size_t j0, std::size_t n, double* mean, double* var) {
+  std::fill(mean, mean + n, 0.0);
+  std::fill(var, var + n, 0.0);
+  for (std::size_t m = 0; m < M; ++m)
+    for (std::size_t j = 0; j < n; ++j) mean[j] += static_cast<double>(x[m * D + j0 + j]);
+  for (std::size_t j = 0; j < n; ++j) mean[j] /= static_cast<double>(M);
+  for (std::size_t m = 0; m < M; ++m)
+    for (std::size_t j = 0; j < n; ++j) {
+      const double v = static_cast<double>(x[m * D + j0 + j]) - mean[j];
+      var[j] += v * v;
+    }
+  for (std::size_t j = 0; j < n; ++j) var[j] /= static_cast<double>(M);
+}
+// x[m, j0 + j] ← (x[m, j0 + j] − mean[j]) · scale[j] for the M rows of x [M, D], in double (a large
+// shared offset minus its mean keeps its digits).
+template <class T>
+void scale_columns(T* x, std::size_t M, std::size_t D, std::size_t j0, std::size_t n, const double* mean,
+                   const double* scale) {
+  for (std::size_t m = 0; m < M; ++m)
+    for (std::size_t j = 0; j < n; ++j)
+      x[m * D + j0 + j] = static_cast<T>((static_cast<double>(x[m * D + j0 + j]) - mean[j]) * scale[j]);
+}
+}  // namespace detail
+
 template <class T>
 void standardize_columns(T* x, std::size_t M, std::size_t D, double eps = target_norm_eps) {
   constexpr std::size_t chunk = 512;
@@ -55,19 +83,10 @@ void standardize_columns(T* x, std::size_t M, std::size_t D, double eps = target
   TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
   for (std::ptrdiff_t c = 0; c < chunks; ++c) {
     const std::size_t j0 = static_cast<std::size_t>(c) * chunk, n = std::min(chunk, D - j0);
-    double mean[chunk] = {}, inv_std[chunk] = {};
-    for (std::size_t m = 0; m < M; ++m)
-      for (std::size_t j = 0; j < n; ++j) mean[j] += static_cast<double>(x[m * D + j0 + j]);
-    for (std::size_t j = 0; j < n; ++j) mean[j] /= static_cast<double>(M);
-    for (std::size_t m = 0; m < M; ++m)
-      for (std::size_t j = 0; j < n; ++j) {
-        const double v = static_cast<double>(x[m * D + j0 + j]) - mean[j];
-        inv_std[j] += v * v;  // the sum of squares, then 1/std
-      }
-    for (std::size_t j = 0; j < n; ++j) inv_std[j] = 1.0 / std::sqrt(inv_std[j] / static_cast<double>(M) + eps);
-    for (std::size_t m = 0; m < M; ++m)
-      for (std::size_t j = 0; j < n; ++j)
-        x[m * D + j0 + j] = static_cast<T>((static_cast<double>(x[m * D + j0 + j]) - mean[j]) * inv_std[j]);
+    double mean[chunk], inv_std[chunk];
+    detail::column_moments(x, M, D, j0, n, mean, inv_std);  // the variance, then 1/std
+    for (std::size_t j = 0; j < n; ++j) inv_std[j] = 1.0 / std::sqrt(inv_std[j] + eps);
+    detail::scale_columns(x, M, D, j0, n, mean, inv_std);
   }
 }
 
