@@ -44,10 +44,6 @@ void normalize_rows(T* x, std::size_t M, int d, double eps = target_norm_eps) {
   }
 }
 
-// x[:, j] ← (x[:, j] − mean) / sqrt(var + eps) for x [M, D], each column over its M rows (biased
-// variance), in place. For the targets h [B, N·d] (JepaStepConfig::standardize_targets), each
-// token's each dimension over the batch: whatever a token's embedding holds for every sample (its
-// position) is removed, and what is left is what differs between samples.
 namespace detail {
 // Columns j0 .. j0 + n of x [M, D]: their means and biased variances, in double (two passes over
 // the rows in order, so the same on any thread count).
@@ -76,6 +72,10 @@ void scale_columns(T* x, std::size_t M, std::size_t D, std::size_t j0, std::size
 }
 }  // namespace detail
 
+// x[:, j] ← (x[:, j] − mean) / sqrt(var + eps) for x [M, D], each column over its M rows (biased
+// variance), in place. For the targets h [B, N·d] (JepaStepConfig::standardize_targets), each
+// token's each dimension over the batch: whatever a token's embedding holds for every sample (its
+// position) is removed, and what is left is what differs between samples.
 template <class T>
 void standardize_columns(T* x, std::size_t M, std::size_t D, double eps = target_norm_eps) {
   constexpr std::size_t chunk = 512;
