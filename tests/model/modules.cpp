@@ -423,6 +423,34 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
+  TEST_CASE("TaxelPooling (model/taxel_pooling.hpp) alone: gradients of inputs and parameters - inference equals the cached forward") {
+    const int M = 3, N = 4, d = 6;
+    ParamSet<double> ps;
+    const TaxelPooling tp = TaxelPooling::add(ps, "pool.", d, PoolingConfig{PoolingKind::taxel, N, 2}, 1e-6);
+    ps.allocate();
+    test::randomize(ps, 16);
+    Rng rng(17);
+    auto x = test::normal_vector(std::size_t(M) * N * d, rng);
+    auto w = test::normal_vector(std::size_t(M) * d, rng);
+    std::vector<double> p(w.size()), q(w.size());
+    Workspace<double> ws;
+    auto loss = [&] {
+      tp.forward(ps, x.data(), M, N, q.data(), static_cast<TaxelPoolCache<double>*>(nullptr), ws);
+      return test::dot(w.data(), q.data(), q.size());
+    };
+    TaxelPoolCache<double> cache;
+    ps.zero_grad();
+    tp.forward(ps, x.data(), M, N, p.data(), &cache, ws);
+    loss();
+    CHECK(p == q);
+    std::vector<double> dx(x.size(), 0.0);
+    tp.backward(ps, w.data(), dx.data(), M, cache, ws);
+    CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
+    test::check_param_gradients(ps, loss);
+    CHECK(parse_pooling("attentive") == PoolingKind::attentive);
+    CHECK(std::string(to_string(PoolingKind::taxel)) == "taxel");
+  }
+
   TEST_CASE("AttentiveProbe with the taxel pooling: gradients of inputs and parameters - its own errors") {
     const int B = 3, L = 5, d = 8, k = 2;
     ParamSet<double> ps;
