@@ -115,6 +115,25 @@ void BM_AttentionForwardBackward(benchmark::State& state) {
   });
 }
 
+// Batch 8 of one sample: the forward+backward of sample 0, 8 times per iteration (one thread).
+// Beside BM_AttentionForwardBackward at batch 8 it separates the arithmetic from the memory: the
+// same work on one sample's 2.3 MB of activations, which stay near the core, against 8 samples'
+// 18 MB (bench/profile.sh).
+void BM_AttentionForwardBackwardOneSample(benchmark::State& state) {
+  Batch b(1, static_cast<int>(state.range(0)));
+  const int repeats = static_cast<int>(state.range(1));
+  for (auto _ : state) {
+    for (int i = 0; i < repeats; ++i) {
+      b.forward(0);
+      b.backward(0);
+    }
+    benchmark::ClobberMemory();
+  }
+  const double flops = 3.5 * forward_flops(b) * repeats;  // one thread
+  state.counters["GFLOP/s"] = benchmark::Counter(flops / 1e9, benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["peak"] = benchmark::Counter(flops / peak_flops_per_core, benchmark::Counter::kIsIterationInvariantRate);
+}
+
 // Baseline: what PyTorch's manual attention does (and what the I-JEPA code runs), with Eigen on one
 // sample: per head S = Q K^T / sqrt(Dh) materialized [L, L], row softmax (Eigen's vectorized exp),
 // out = S V. O(L^2) memory.
@@ -187,5 +206,11 @@ BENCHMARK(BM_AttentionForward)->Apply(batch1);
 BENCHMARK(BM_AttentionForwardBackward)->Apply(batch1);
 BENCHMARK(BM_AttentionForward)->Apply(batch8);
 BENCHMARK(BM_AttentionForwardBackward)->Apply(batch8);
+BENCHMARK(BM_AttentionForwardBackwardOneSample)
+    ->ArgNames({"L", "repeats"})
+    ->Args({368, 8})
+    ->Args({528, 8})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 }  // namespace

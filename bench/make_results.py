@@ -406,12 +406,17 @@ print("| goal | measured | |")
 print("|---|---|---|")
 for name, value, ok in goals22:
     print(f"| {name} | {value} | {ok} |")
+print("\nWhere the fp32 goals of 85 % of the peak are not met, the section \"Where the fp32 time goes\" "
+      "(bench/profile.sh) shows where the rest of the time is: the products against the packing, epilogues and "
+      "element-wise work around them.")
 print("\nAttention memory is O(L·d) by construction: the forward and backward run over query and key "
       "tiles with an online softmax and keep only the per-row log-sum-exp, never an L×L matrix "
       "(include/tjepa/model/kernels/attention.hpp).")
-# The data-parallel section is bench/dist.sh's (it needs mpirun); keep it from the current file.
+# The profile section is bench/profile.sh's (it needs perf) and the data-parallel one
+# bench/dist.sh's (it needs mpirun); keep them from the current file.
 _previous = pathlib.Path(__file__).with_name("RESULTS.md")
 if _previous.exists():
-    _m = re.search(r"<!-- dist:begin -->.*?<!-- dist:end -->", _previous.read_text(), flags=re.S)
-    if _m:
-        print("\n" + _m.group(0))
+    for _name in ("profile", "dist"):
+        _m = re.search(rf"<!-- {_name}:begin -->.*?<!-- {_name}:end -->", _previous.read_text(), flags=re.S)
+        if _m:
+            print("\n" + _m.group(0))

@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Where the fp32 time goes: sampling profiles (`perf record -e cpu-clock`, one thread pinned to
+# core 0) of the benchmarks below issue 22's fp32 goal of 85 % of the FMA peak, grouped into
+# products, packing, epilogues and element-wise work, and the products' own rates implied by the
+# FLOPs they do. Writes the section between the "profile" markers of bench/RESULTS.md
+# (bench/make_results.py keeps it when compare.sh rewrites the file).
+#   bench/profile.sh
+# Run it on a quiet machine (about 4 minutes after the builds).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source tools/deps.sh
+tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" linux-perf
+# Two builds of the benchmarks: the release preset's (what compare.sh times), and the same with
+# TJEPA_PROFILE_SYMBOLS, which keeps attention's micro-kernels out of line so that the profile
+# can tell its products from its softmax (inlined, their samples carry the caller's name).
+cmake --preset release -DTJEPA_BUILD_BENCHMARKS=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=ON >/dev/null
+cmake --build --preset release --target tjepa_bench -j "$(nproc)"
+cmake -S . -B build/profile-bin -G Ninja -DCMAKE_BUILD_TYPE=Release -DTJEPA_NATIVE=ON -DTJEPA_BUILD_BENCHMARKS=ON \
+  -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=OFF -DCMAKE_CXX_FLAGS=-DTJEPA_PROFILE_SYMBOLS >/dev/null
+cmake --build build/profile-bin --target tjepa_bench -j "$(nproc)"
+
+release=build/release/bench/tjepa_bench
+bench=build/profile-bin/bench/tjepa_bench
+out=build/profile
+mkdir -p "$out"
+one() { OMP_NUM_THREADS=1 OMP_PROC_BIND=false taskset -c 0 "$@"; }
+
+timed='BM_FmaPeak|BM_EncoderForward(Frozen)?/368/|BM_EncoderForwardBackward/368/8/0/|BM_AttentionForwardBackward(OneSample)?/L:368/'
+for b in release profile; do
+  echo "timings, $b build" >&2
+  exe=$bench
+  [ "$b" = release ] && exe=$release
+  one "$exe" --benchmark_filter="$timed" --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
+    --benchmark_format=json >"$out/timings_$b.json"
+done
+
+# name, benchmark filter, seconds of sampling
+profiles=(
+  "encoder_frozen|BM_EncoderForwardFrozen/368/1/|5"
+  "encoder_per_call|BM_EncoderForward/368/1/|5"
+  "attention_b1|BM_AttentionForwardBackward/L:368/batch:1\$|5"
+  "attention_b8|BM_AttentionForwardBackward/L:368/batch:8/|5"
+  "encoder_train|BM_EncoderForwardBackward/368/8/0/|10"
+)
+for p in "${profiles[@]}"; do
+  IFS='|' read -r name filter seconds <<<"$p"
+  echo "profile $name" >&2
+  one perf record -q -e cpu-clock -F 4999 -o "$out/$name.data" "$bench" --benchmark_filter="$filter" \
+    --benchmark_min_time="$seconds" >/dev/null 2>&1
+  perf report -i "$out/$name.data" --no-children --sort symbol --stdio --percent-limit 0 2>/dev/null >"$out/$name.txt"
+done
+
+/usr/bin/python3 bench/profile_report.py "$out" >"$out/section.md"
+/usr/bin/python3 - "$out/section.md" bench/RESULTS.md <<'PY'
+import pathlib, re, sys
+section = pathlib.Path(sys.argv[1]).read_text().strip()
+results = pathlib.Path(sys.argv[2])
+text = results.read_text()
+pattern = re.compile(r"<!-- profile:begin -->.*?<!-- profile:end -->", flags=re.S)
+if pattern.search(text):
+    text = pattern.sub(lambda _: section, text)
+else:  # before the data-parallel section, or at the end
+    at = text.find("<!-- dist:begin -->")
+    text = text.rstrip() + "\n\n" + section + "\n" if at < 0 else text[:at] + section + "\n" + text[at:]
+tmp = results.with_suffix(".md.tmp")
+tmp.write_text(text)
+tmp.replace(results)
+PY
+echo "wrote the profile section of bench/RESULTS.md" >&2
