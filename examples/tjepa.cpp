@@ -156,6 +156,9 @@ int main(int argc, char** argv) {
   eval->add_option("--sequence-epochs", ev.eval.heads.sequence.max_epochs, "sequence head's epoch limit")->capture_default_str();
   eval->add_option("--sequence-patience", ev.eval.heads.sequence.patience, "sequence head's patience (epochs)")->capture_default_str();
   eval->add_option("--end-to-end-epochs", ev.eval.heads.end_to_end_max_epochs, "end-to-end epoch limit")->capture_default_str();
+  eval->add_option("--end-to-end-patience", ev.eval.heads.end_to_end_patience,
+                   "end-to-end patience (epochs; at most the probes' and the sequence head's own)")
+      ->capture_default_str();
   std::string eval_config;
   eval->add_option("--config", eval_config, "JSON pre-training configuration (TrainConfig keys); flags override it");
   run_override<int>(eval, "--steps", "steps", eval_overrides, "pre-training steps");
