@@ -357,20 +357,23 @@ TEST_SUITE("nn") {
     row[4] = 1.0f + 0x1p-8f;
     row[5] = -std::numeric_limits<float>::infinity();
     alignas(64) std::uint32_t packed[40] = {};
-    detail::bgemm::pack_a(packed, 1, 77, row.data(), 77, 1);
+    detail::bgemm::pack_a(packed, 1, 77, row.data(), 77);
     for (int q = 0; q < 39; ++q)
       CHECK(packed[q] == detail::bgemm::pair(row[std::size_t(2 * q)], 2 * q + 1 < 77 ? row[std::size_t(2 * q + 1)] : 0.0f));
-    // Column-major A ([kc/2][MR] pairs), and B's panels in both orders, against the scalar packing.
+    // Column-major A ([kc/2][ld] pairs, 16 rows per conversion: 37 rows are two whole conversions
+    // and a partial one, zero up to ld), and B's panels in both orders, against the scalar packing.
     using detail::sgemm::Order;
     namespace bg = detail::bgemm;
     const int depth = 37, cols = 83;  // odd depth, a partial second panel
     const std::vector<float> m = random_vector<float>(std::size_t(depth) * cols, rng);
-    alignas(64) std::uint32_t acol[19 * bg::MR] = {};
-    bg::pack_a(acol, 5, depth, m.data(), 1, cols);  // a(i, k) = m[k·cols + i], rows 0..4
+    AlignedVector<std::uint32_t> acol(19 * bg::CH, 7u);
+    bg::pack_a_cols(acol.data(), bg::CH, 37, depth, m.data(), cols);  // a(i, k) = m[k·cols + i], rows 0..36
     for (int q = 0; q < 19; ++q)
-      for (int i = 0; i < 5; ++i)
-        CHECK(acol[q * bg::MR + i] == bg::pair(m[std::size_t(2 * q) * cols + i],
-                                               2 * q + 1 < depth ? m[std::size_t(2 * q + 1) * cols + i] : 0.0f));
+      for (int i = 0; i < bg::CH; ++i)
+        CHECK(acol[std::size_t(q * bg::CH + i)] ==
+              (i < 37 ? bg::pair(m[std::size_t(2 * q) * cols + i],
+                                 2 * q + 1 < depth ? m[std::size_t(2 * q + 1) * cols + i] : 0.0f)
+                      : 0u));
     for (const Order order : {Order::row_major, Order::col_major}) {
       const std::ptrdiff_t ldb = order == Order::row_major ? cols : depth;
       AlignedVector<std::uint32_t> fast(bg::packed_size(cols, depth), 7u), ref(fast.size(), 9u);
@@ -386,15 +389,16 @@ TEST_SUITE("nn") {
   TEST_CASE("the bf16 GEMM and its epilogues match a reference on bf16-rounded operands (awkward sizes)") {
     // Products of bf16-rounded operands are exact in fp32; only the order of the fp32 sums
     // differs from the reference's double sum, so |C - ref| stays within a few ulp of Σ|a·b|.
-    // Depths past one KC block and odd, partial panels, short row blocks, thread splits, all
-    // transpositions. Without AVX512-BF16 the same calls are the float GEMM, bit for bit.
+    // Depths past one KC block (the forward's K = 1025; the weight gradient's, M = 1100) and odd,
+    // partial panels, short row blocks, column-major A in chunks of CH rows (N = 192, 1025), thread
+    // splits, all transpositions. Without AVX512-BF16 the same calls are the float GEMM, bit for bit.
     using detail::sgemm::Order;
     namespace bg = detail::bgemm;
     CHECK(bg::resolve(Precision::bf16, false) == Precision::fp32);
     CHECK(bg::resolve(Precision::bf16, true) == Precision::bf16);
     CHECK(bg::resolve(Precision::fp32, true) == Precision::fp32);
     Rng rng(41);
-    for (const GemmOperands& o : gemm_cases({{1, 1, 1}, {7, 3, 17}, {13, 67, 131}, {301, 192, 70}, {97, 1025, 64}, {5, 19, 200}}, rng)) {
+    for (const GemmOperands& o : gemm_cases({{1, 1, 1}, {7, 3, 17}, {13, 67, 131}, {301, 192, 70}, {97, 1025, 64}, {5, 19, 200}, {1100, 50, 70}}, rng)) {
       const int M = o.M, K = o.K, N = o.N;
       INFO("M ", M, ", K ", K, ", N ", N);
       const auto &x = o.x, &W = o.W, &b = o.b, &g = o.g, &r = o.r;

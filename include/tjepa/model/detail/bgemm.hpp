@@ -6,8 +6,10 @@
 // Operands are rounded to bfloat16 (round to nearest even, denormals to zero: what
 // vcvtneps2bf16 does) and their products summed in fp32. B is packed into panels of NR columns
 // whose entries are pairs of consecutive depths, [depth/2][NR] 32-bit words (low half: the even
-// depth); A is converted per MR-row × KC-depth block into [MR][KC/2] pairs, then each pair is
-// broadcast against the panel: acc[i][j] += a(i, 2p)·b(2p, j) + a(i, 2p+1)·b(2p+1, j).
+// depth); A is converted into pairs too (row-major A per MR-row × KC-depth block, [MR][KC/2];
+// column-major A, the weight gradients' dYᵀ, per CH rows × KC-depth block, [KC/2][CH], 16 rows
+// per conversion), then each pair is broadcast against the panel:
+// acc[i][j] += a(i, 2p)·b(2p, j) + a(i, 2p+1)·b(2p+1, j).
 // Blocking, threading and the epilogue are sgemm's (sgemm.hpp).
 //
 // Where the translation unit is compiled without AVX512-BF16 (`native` is false), the bf16
@@ -69,6 +71,10 @@ inline constexpr int MR = 6;
 inline constexpr int NV = 4;
 inline constexpr int NR = NV * L;
 inline constexpr int KC = 1024;  // depths per block (even): 128 KiB of a panel, A's 6 rows 12 KiB
+// Rows of column-major A converted at a time: whole row blocks (MR) and whole conversions (16),
+// their depth block 96 KiB.
+inline constexpr int CH = 48;
+static_assert(CH % MR == 0 && CH % L == 0);
 
 inline int depth_pairs(int depth) { return (depth + 1) / 2; }
 inline std::size_t packed_size(int cols, int depth) {
@@ -171,31 +177,37 @@ inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, O
   for (; j < NR; ++j) column(j, p0, p1);
 }
 
-// A's rows [0, R) × depths [0, kc) as bf16 pairs for the micro-kernel, a(i, k) = a[i·ars + k·acs]:
-// row-major A (acs = 1) → dst [R][kc/2] (32 depths of a row per conversion); column-major A →
-// dst [kc/2][MR] (two depths × R rows per conversion). Zero high halves after an odd kc.
-inline void pack_a(std::uint32_t* dst, int R, int kc, const float* a, std::ptrdiff_t ars, std::ptrdiff_t acs) {
+// Row-major A's rows [0, R) × depths [0, kc) as bf16 pairs for the micro-kernel, a(i, k) =
+// a[i·ars + k] → dst [R][kc/2] (32 depths of a row per conversion). Zero high halves after an odd kc.
+inline void pack_a(std::uint32_t* dst, int R, int kc, const float* a, std::ptrdiff_t ars) {
   const int kc2 = depth_pairs(kc);
-  if (acs == 1) {
-    for (int i = 0; i < R; ++i)
-      for (int k = 0; k < kc; k += 2 * L)
-        _mm512_mask_storeu_epi32(dst + i * kc2 + k / 2, first_lanes((std::min(2 * L, kc - k) + 1) / 2),
-                                 row_pairs(a + i * ars + k, std::min(2 * L, kc - k)));
-    return;
-  }
-  for (int q = 0; q < kc2; ++q) {
+  for (int i = 0; i < R; ++i)
+    for (int k = 0; k < kc; k += 2 * L)
+      _mm512_mask_storeu_epi32(dst + i * kc2 + k / 2, first_lanes((std::min(2 * L, kc - k) + 1) / 2),
+                               row_pairs(a + i * ars + k, std::min(2 * L, kc - k)));
+}
+
+// Column-major A's rows [0, R) × depths [0, kc), a(i, k) = a[k·acs + i], as bf16 pairs along
+// depth → dst [kc/2][ld] (ld ≥ R, a multiple of 16; dst 64-byte aligned): two depths × 16 rows
+// per conversion, zero past R and in the high halves after an odd kc. Converted for CH rows at
+// once: per 6-row block, as row-major A is, a conversion would fill 6 of its 16 lanes.
+inline void pack_a_cols(std::uint32_t* dst, std::ptrdiff_t ld, int R, int kc, const float* a, std::ptrdiff_t acs) {
+  for (int q = 0; q < depth_pairs(kc); ++q) {
     const float* lo = a + std::ptrdiff_t(2 * q) * acs;
-    _mm512_mask_storeu_epi32(dst + q * MR, first_lanes(R), pairs16(lo, 2 * q + 1 < kc ? lo + acs : nullptr, R));
+    const float* hi = 2 * q + 1 < kc ? lo + acs : nullptr;
+    for (int i = 0; i < R; i += L)
+      _mm512_store_si512(dst + q * ld + i, pairs16(lo + i, hi ? hi + i : nullptr, std::min(L, R - i)));
   }
 }
 
 // 32 bf16 as the 16 pairs vdpbf16ps reads (a no-op: the same 512 bits).
 inline __m512bh as_bf16(__m512i v) { return std::bit_cast<__m512bh>(v); }
 
-// acc[R][NV·16] = Σ over kc2 depth pairs of A's packed pairs (QMajor: [kc2][MR], else [R][kc2])
+// acc[R][NV·16] = Σ over kc2 depth pairs of A's packed pairs (QMajor: [kc2][ald], else [R][ald])
 // against b [kc2][NR].
 template <int R, bool QMajor>
-[[gnu::noinline]] void depth_loop(int kc2, const std::uint32_t* a, const std::uint32_t* b, float* acc_out) {
+[[gnu::noinline]] void depth_loop(int kc2, const std::uint32_t* a, std::ptrdiff_t ald, const std::uint32_t* b,
+                                  float* acc_out) {
   __m512 acc[R][NV];
 #pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
@@ -207,7 +219,7 @@ template <int R, bool QMajor>
     for (int j = 0; j < NV; ++j) bv[j] = _mm512_load_si512(b + std::ptrdiff_t(q) * NR + j * L);
 #pragma GCC unroll 8
     for (int i = 0; i < R; ++i) {
-      const __m512i ai = _mm512_set1_epi32(int(QMajor ? a[q * MR + i] : a[i * kc2 + q]));
+      const __m512i ai = _mm512_set1_epi32(int(QMajor ? a[q * ald + i] : a[i * ald + q]));
 #pragma GCC unroll 4
       for (int j = 0; j < NV; ++j) acc[i][j] = _mm512_dpbf16_ps(acc[i][j], as_bf16(ai), as_bf16(bv[j]));
     }
@@ -219,16 +231,16 @@ template <int R, bool QMajor>
 }
 
 template <int R, bool QMajor>
-void micro_kernel(int kc2, const std::uint32_t* a, const std::uint32_t* b, float* c, std::ptrdiff_t ldc, int cols,
-                  const float* c_in, const float* bias, float* g, const float* gg) {
+void micro_kernel(int kc2, const std::uint32_t* a, std::ptrdiff_t ald, const std::uint32_t* b, float* c,
+                  std::ptrdiff_t ldc, int cols, const float* c_in, const float* bias, float* g, const float* gg) {
   sgemm::prefetch_tile<R, NV>(c, ldc, c_in, gg);
   alignas(64) float tile[R * NR];
-  depth_loop<R, QMajor>(kc2, a, b, tile);
+  depth_loop<R, QMajor>(kc2, a, ald, b, tile);
   sgemm::finish_tile<R, NV>(tile, c, ldc, cols, c_in, bias, g, gg);
 }
 
-using Kernel = void (*)(int, const std::uint32_t*, const std::uint32_t*, float*, std::ptrdiff_t, int, const float*,
-                        const float*, float*, const float*);
+using Kernel = void (*)(int, const std::uint32_t*, std::ptrdiff_t, const std::uint32_t*, float*, std::ptrdiff_t, int,
+                        const float*, const float*, float*, const float*);
 template <bool QMajor, int... R>
 constexpr auto kernel_table(std::integer_sequence<int, R...>) {
   return std::array<Kernel, sizeof...(R)>{&micro_kernel<R + 1, QMajor>...};
@@ -240,21 +252,30 @@ inline constexpr std::array<std::array<Kernel, MR>, 2> kernels = {
 // Rows [r0, r1) of C from the packed B.
 inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
                          const std::uint32_t* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
-  const std::ptrdiff_t ars = a_order == Order::row_major ? lda : 1, acs = a_order == Order::row_major ? 1 : lda;
+  const bool col_major = a_order == Order::col_major;
   const int panels = (cols + NR - 1) / NR, depth2 = depth_pairs(depth);
   alignas(64) std::uint32_t apack[MR * KC / 2];
+  // Column-major A: CH rows of a depth block at a time, [KC/2][CH] (per thread, grown once).
+  thread_local AlignedVector<std::uint32_t> acols;
+  std::uint32_t* const abuf = col_major ? grow(acols, std::size_t(CH) * (KC / 2)) : apack;
   for (int k0 = 0; k0 < depth; k0 += KC) {
     const int kc = std::min(KC, depth - k0), kc2 = depth_pairs(kc);
     const bool first = k0 == 0, last = k0 + kc == depth;
     const float* c_in = !first || e.accumulate ? C : e.residual;
     for (int i0 = r0; i0 < r1; i0 += MR) {
       const int R = std::min(MR, r1 - i0);
-      pack_a(apack, R, kc, A + i0 * ars + k0 * acs, ars, acs);
-      const Kernel kern = kernels[a_order == Order::col_major][std::size_t(R - 1)];
+      const int c0 = r0 + (i0 - r0) / CH * CH;  // the chunk of rows holding this block
+      if (!col_major)
+        pack_a(apack, R, kc, A + i0 * lda + k0, lda);
+      else if (i0 == c0)
+        pack_a_cols(abuf, CH, std::min(CH, r1 - c0), kc, A + c0 + std::ptrdiff_t(k0) * lda, lda);
+      const std::uint32_t* a = col_major ? abuf + (i0 - c0) : apack;
+      const std::ptrdiff_t ald = col_major ? CH : kc2;
+      const Kernel kern = kernels[col_major][std::size_t(R - 1)];
       for (int p = 0; p < panels; ++p) {
         const int n0 = p * NR;
         const std::uint32_t* b = packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR;
-        kern(kc2, apack, b, C + i0 * ldc + n0, ldc, std::min(NR, cols - n0), c_in ? c_in + i0 * ldc + n0 : nullptr,
+        kern(kc2, a, ald, b, C + i0 * ldc + n0, ldc, std::min(NR, cols - n0), c_in ? c_in + i0 * ldc + n0 : nullptr,
              first && e.bias ? e.bias + n0 : nullptr, last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
              last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr);
       }
