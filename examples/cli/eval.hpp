@@ -21,7 +21,9 @@ struct EvalOptions {
 };
 
 // The demo: one pre-training seed, one head per task, rows constant / ridge / random / end to
-// end / Tactile-JEPA, sized for about 10 minutes on 2 cores.
+// end / Tactile-JEPA, sized for about 10 minutes on 2 cores: the end-to-end heads stop after 3
+// epochs (patience 2), which the row's name says; with the protocol's limits they take about 40
+// minutes.
 inline EvalOptions demo_eval_options(std::uint64_t seed) {
   EvalOptions o;
   GraspEvalConfig& c = o.eval;
@@ -30,6 +32,8 @@ inline EvalOptions demo_eval_options(std::uint64_t seed) {
   c.head_seeds = 1;
   c.mae = false;
   c.ablation = false;
+  c.heads.end_to_end_max_epochs = 3;
+  c.heads.end_to_end_patience = 2;
   o.out = "runs/demo";
   o.command = "tjepa demo";
   o.force = true;

@@ -567,6 +567,14 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK(o.eval.heads.sequence.max_epochs == GraspHeadConfig{}.sequence.max_epochs);
   CHECK(o.eval.heads.sequence.patience == GraspHeadConfig{}.sequence.patience);
   CHECK(o.eval.heads.sequence_pooling.kind == PoolingKind::taxel);
+  // End to end: the protocol trains it with the heads' limits; the demo caps it at 3 epochs (its
+  // budget) and the row's name says so.
+  CHECK(GraspHeadConfig{}.end_to_end_max_epochs == GraspHeadConfig{}.probe.max_epochs);
+  CHECK(GraspHeadConfig{}.end_to_end_patience == GraspHeadConfig{}.probe.patience);
+  CHECK(end_to_end_name(GraspHeadConfig{}) == "end to end");
+  CHECK(o.eval.heads.end_to_end_max_epochs == 3);
+  CHECK(o.eval.heads.end_to_end_patience == 2);
+  CHECK(end_to_end_name(o.eval.heads) == "end to end (at most 3 epochs)");
   o.out = (t.path / "demo").string();
   o.eval.train.update(tiny_run("allegro"), "test");
   o.eval.train.drift_time_constant = 200;
@@ -576,13 +584,14 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   o.eval.tasks.sequence_length = 3;
   o.eval.tasks.max_object_windows = o.eval.tasks.max_force_windows = 30;
   o.eval.tasks.max_pose_sequences = 8;
-  o.eval.heads.probe.max_epochs = o.eval.heads.sequence.max_epochs = o.eval.heads.end_to_end_max_epochs = 1;
+  o.eval.heads.probe.max_epochs = o.eval.heads.sequence.max_epochs = 2;
+  o.eval.heads.end_to_end_max_epochs = 1;
   o.eval.heads.probe_heads = 1;
   o.quiet = true;
   std::ostringstream out;
   REQUIRE(run_eval(o, out) == 0);
   const std::string s = out.str();
-  for (const char* row : {"| constant |", "| ridge (pad sums + taxel means) |", "| random init, frozen |", "| end to end |",
+  for (const char* row : {"| constant |", "| ridge (pad sums + taxel means) |", "| random init, frozen |", "| end to end (at most 1 epoch) |",
                           "| Tactile-JEPA, frozen |"})
     CHECK(s.find(row) != std::string::npos);
   CHECK(s.find("MAE") == std::string::npos);

@@ -339,7 +339,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
         frozen_row(res.main, res.linear, "random init, frozen", "random init", s, model->target, model->tokenizer,
                    model->encoder);
       if (c.end_to_end)
-        row(res.main, "end to end")
+        row(res.main, end_to_end_name(hc))
             .runs.push_back(score_end_to_end(model->context, model->tokenizer, model->encoder, *d.train, tr, *d.test, te,
                                              hc, seeds_of(s), stage("end to end")));
     }
