@@ -23,6 +23,7 @@ release=build/release/bench/tjepa_bench
 bench=build/profile-bin/bench/tjepa_bench
 out=build/profile
 mkdir -p "$out"
+git rev-parse --short HEAD >"$out/commit.txt"
 one() { OMP_NUM_THREADS=1 OMP_PROC_BIND=false taskset -c 0 "$@"; }
 
 timed='BM_FmaPeak|BM_EncoderForward(Frozen)?/368/|BM_EncoderForwardBackward/368/8/0/|BM_AttentionForwardBackward(OneSample)?/L:368/'
@@ -46,7 +47,7 @@ for p in "${profiles[@]}"; do
   IFS='|' read -r name filter seconds <<<"$p"
   echo "profile $name" >&2
   one perf record -q -e cpu-clock -F 4999 -o "$out/$name.data" "$bench" --benchmark_filter="$filter" \
-    --benchmark_min_time="$seconds" >/dev/null 2>&1
+    --benchmark_min_time="$seconds" >"$out/$name.log" 2>&1 || { cat "$out/$name.log" >&2; exit 1; }
   perf report -i "$out/$name.data" --no-children --sort symbol --stdio --percent-limit 0 2>/dev/null >"$out/$name.txt"
 done
 

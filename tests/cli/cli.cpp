@@ -574,7 +574,10 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK(end_to_end_name(GraspHeadConfig{}) == "end to end");
   CHECK(o.eval.heads.end_to_end_max_epochs == 3);
   CHECK(o.eval.heads.end_to_end_patience == 2);
-  CHECK(end_to_end_name(o.eval.heads) == "end to end (at most 3 epochs)");
+  CHECK(end_to_end_name(o.eval.heads) == "end to end (at most 3 epochs, patience 2)");
+  GraspHeadConfig impatient;
+  impatient.end_to_end_patience = 2;  // the heads' epochs, a shorter patience: named too
+  CHECK(end_to_end_name(impatient) == "end to end (at most 100 epochs, patience 2)");
   o.out = (t.path / "demo").string();
   o.eval.train.update(tiny_run("allegro"), "test");
   o.eval.train.drift_time_constant = 200;
@@ -591,7 +594,7 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   std::ostringstream out;
   REQUIRE(run_eval(o, out) == 0);
   const std::string s = out.str();
-  for (const char* row : {"| constant |", "| ridge (pad sums + taxel means) |", "| random init, frozen |", "| end to end (at most 1 epoch) |",
+  for (const char* row : {"| constant |", "| ridge (pad sums + taxel means) |", "| random init, frozen |", "| end to end (at most 1 epoch, patience 2) |",
                           "| Tactile-JEPA, frozen |"})
     CHECK(s.find(row) != std::string::npos);
   CHECK(s.find("MAE") == std::string::npos);

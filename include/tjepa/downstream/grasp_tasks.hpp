@@ -262,12 +262,15 @@ struct GraspHeadConfig {
   PoolingConfig sequence_pooling{.kind = PoolingKind::taxel};
 };
 
-// The end-to-end row's name: "end to end", and its epoch cap when that is below the heads' own.
+// The end-to-end row's name: "end to end", and its limits when either is below the heads' own
+// (the epoch cap, the patience).
 inline std::string end_to_end_name(const GraspHeadConfig& c) {
-  const int heads = std::max(c.probe.max_epochs, c.sequence.max_epochs);
-  if (c.end_to_end_max_epochs >= heads) return "end to end";
+  const int epochs = std::max(c.probe.max_epochs, c.sequence.max_epochs);
+  const int patience = std::max(c.probe.patience, c.sequence.patience);
+  if (c.end_to_end_max_epochs >= epochs && c.end_to_end_patience >= patience) return "end to end";
   const int n = c.end_to_end_max_epochs;
-  return "end to end (at most " + std::to_string(n) + (n == 1 ? " epoch)" : " epochs)");
+  return "end to end (at most " + std::to_string(n) + (n == 1 ? " epoch" : " epochs") + ", patience " +
+         std::to_string(c.end_to_end_patience) + ")";
 }
 
 // What a score run reports as it goes: (task, what) lines.
