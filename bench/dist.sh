@@ -73,15 +73,5 @@ if (1, 1) in med:
           "four A100s).")
 print("<!-- dist:end -->")
 PY
-python3 - "$out/section.md" <<'PY'
-import pathlib, re, sys
-section = pathlib.Path(sys.argv[1]).read_text().strip() + "\n"
-p = pathlib.Path("bench/RESULTS.md")
-text = p.read_text() if p.exists() else "# Benchmark results\n"
-if "<!-- dist:begin -->" in text:
-    text = re.sub(r"<!-- dist:begin -->.*?<!-- dist:end -->\n?", lambda m: section, text, flags=re.S)
-else:
-    text = text.rstrip("\n") + "\n\n" + section
-p.write_text(text)
-PY
+python3 bench/put_section.py dist "$out/section.md"
 echo "wrote the data-parallel section of bench/RESULTS.md" >&2

@@ -355,12 +355,6 @@ if latency_note:
 goals22 = []
 
 
-def _previous_results_has(section):
-    """Whether the current bench/RESULTS.md has the section between its markers (kept below)."""
-    path = pathlib.Path(__file__).with_name("RESULTS.md")
-    return path.exists() and f"<!-- {section}:begin -->" in path.read_text()
-
-
 def goal22(name, value, ok):
     goals22.append((name, value, "met" if ok else "not measured" if value.startswith("?") else "**not met**"))
 
@@ -412,20 +406,18 @@ print("| goal | measured | |")
 print("|---|---|---|")
 for name, value, ok in goals22:
     print(f"| {name} | {value} | {ok} |")
-_unmet85 = any("85%" in name and ok != "met" for name, _, ok in goals22)
-_profiled = _previous_results_has("profile")
-if _unmet85 and _profiled:
+# The profile section is bench/profile.sh's (it needs perf) and the data-parallel one
+# bench/dist.sh's (it needs mpirun): kept from the current file, below.
+_previous = pathlib.Path(__file__).with_name("RESULTS.md")
+_previous_text = _previous.read_text() if _previous.exists() else ""
+_kept = [m.group(0) for m in (re.search(rf"<!-- {n}:begin -->.*?<!-- {n}:end -->", _previous_text, flags=re.S)
+                              for n in ("profile", "dist")) if m]
+if any("85%" in name and ok != "met" for name, _, ok in goals22) and "<!-- profile:begin -->" in _previous_text:
     print("\nWhere the fp32 goals of 85 % of the peak are not met, the section \"Where the fp32 time goes\" "
           "(bench/profile.sh) shows where the rest of the time is: the products against the packing, epilogues "
           "and element-wise work around them.")
 print("\nAttention memory is O(L·d) by construction: the forward and backward run over query and key "
       "tiles with an online softmax and keep only the per-row log-sum-exp, never an L×L matrix "
       "(include/tjepa/model/kernels/attention.hpp).")
-# The profile section is bench/profile.sh's (it needs perf) and the data-parallel one
-# bench/dist.sh's (it needs mpirun); keep them from the current file.
-_previous = pathlib.Path(__file__).with_name("RESULTS.md")
-if _previous.exists():
-    for _name in ("profile", "dist"):
-        _m = re.search(rf"<!-- {_name}:begin -->.*?<!-- {_name}:end -->", _previous.read_text(), flags=re.S)
-        if _m:
-            print("\n" + _m.group(0))
+for _section in _kept:
+    print("\n" + _section)

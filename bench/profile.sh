@@ -52,19 +52,5 @@ for p in "${profiles[@]}"; do
 done
 
 /usr/bin/python3 bench/profile_report.py "$out" >"$out/section.md"
-/usr/bin/python3 - "$out/section.md" bench/RESULTS.md <<'PY'
-import pathlib, re, sys
-section = pathlib.Path(sys.argv[1]).read_text().strip()
-results = pathlib.Path(sys.argv[2])
-text = results.read_text()
-pattern = re.compile(r"<!-- profile:begin -->.*?<!-- profile:end -->", flags=re.S)
-if pattern.search(text):
-    text = pattern.sub(lambda _: section, text)
-else:  # before the data-parallel section, or at the end
-    at = text.find("<!-- dist:begin -->")
-    text = text.rstrip() + "\n\n" + section + "\n" if at < 0 else text[:at] + section + "\n" + text[at:]
-tmp = results.with_suffix(".md.tmp")
-tmp.write_text(text)
-tmp.replace(results)
-PY
+/usr/bin/python3 bench/put_section.py profile "$out/section.md"
 echo "wrote the profile section of bench/RESULTS.md" >&2

@@ -594,8 +594,8 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   std::ostringstream out;
   REQUIRE(run_eval(o, out) == 0);
   const std::string s = out.str();
-  for (const char* row : {"| constant |", "| ridge (pad sums + taxel means) |", "| random init, frozen |", "| end to end (at most 1 epoch, patience 2) |",
-                          "| Tactile-JEPA, frozen |"})
+  for (const char* row : {"| constant |", "| ridge (pad sums + taxel means) |", "| random init, frozen |",
+                          "| end to end (at most 1 epoch, patience 2) |", "| Tactile-JEPA, frozen |"})
     CHECK(s.find(row) != std::string::npos);
   CHECK(s.find("MAE") == std::string::npos);
   const auto j = nlohmann::json::parse(read_text(t.path / "demo" / "results.json"));

@@ -391,7 +391,8 @@ TEST_SUITE("nn") {
     // differs from the reference's double sum, so |C - ref| stays within a few ulp of Σ|a·b|.
     // Depths past one KC block (the forward's K = 1025; the weight gradient's, M = 1100) and odd,
     // partial panels, short row blocks, column-major A (the weight gradient's, N rows) in chunks of
-    // CH = 48 rows, whole and partial (N = 131, 200), thread splits, all transpositions. Without AVX512-BF16 the same calls are the float GEMM, bit for bit.
+    // CH = 48 rows, whole and partial (N = 131, 200), thread splits, all transpositions. Without
+    // AVX512-BF16 the same calls are the float GEMM, bit for bit.
     using detail::sgemm::Order;
     namespace bg = detail::bgemm;
     CHECK(bg::resolve(Precision::bf16, false) == Precision::fp32);

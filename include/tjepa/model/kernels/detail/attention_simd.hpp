@@ -201,8 +201,8 @@ template <class T, int MR_, int NV_, Store S, class D = FloatDot<T>>
 inline
 #endif
 void micro_kernel(int K, const typename D::Elem* __restrict A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
-                         const typename D::Elem* __restrict B, std::ptrdiff_t ldb, T* __restrict C,
-                         std::ptrdiff_t ldc, const T* __restrict alpha) {
+                  const typename D::Elem* __restrict B, std::ptrdiff_t ldb, T* __restrict C, std::ptrdiff_t ldc,
+                  const T* __restrict alpha) {
   constexpr int w = W<T>;
   Vec<T> acc[MR_][NV_];
 #pragma GCC unroll 8
