@@ -14,39 +14,12 @@
 
 #include "cli/commands.hpp"
 #include "cli/eval.hpp"
+#include "cli/parse.hpp"
 
 #ifdef TJEPA_WITH_MPI
 #include <tjepa/dist/mpi.hpp>
 #endif
 
-namespace {
-
-// --<flag> VALUE sets key in the JSON of TrainConfig overrides.
-template <class T>
-void run_override(CLI::App* app, const std::string& flag, const std::string& key, nlohmann::json& j,
-                  const std::string& help) {
-  app->add_option_function<T>(flag, [&j, key](const T& v) { j[key] = v; }, help);
-}
-
-void add_run_overrides(CLI::App* app, nlohmann::json& j) {
-  run_override<std::string>(app, "--layout", "layout", j, "built-in layout (allegro, grid, two-part) or layout CSV");
-  run_override<int>(app, "--tau", "tau", j, "frames per window");
-  run_override<int>(app, "--dim", "dim", j, "encoder width d");
-  run_override<int>(app, "--depth", "depth", j, "encoder blocks");
-  run_override<int>(app, "--heads", "heads", j, "attention heads");
-  run_override<int>(app, "--predictor-depth", "predictor_depth", j, "predictor blocks");
-  run_override<int>(app, "--steps", "steps", j, "optimizer steps");
-  run_override<int>(app, "--batch", "batch", j, "windows per step");
-  run_override<int>(app, "--warmup", "warmup_steps", j, "learning-rate warm-up steps");
-  run_override<double>(app, "--lr", "lr", j, "peak learning rate");
-  run_override<double>(app, "--drop-path", "drop_path", j, "stochastic depth rate");
-  run_override<std::string>(app, "--precision", "precision", j, "arithmetic of the products: fp32 or bf16 (AVX512-BF16)");
-  run_override<double>(app, "--ema-start", "ema_start", j, "initial EMA momentum of the target encoder");
-  run_override<double>(app, "--tokenizer-bias", "tokenizer_bias_std", j, "std of the tokenizer's initial bias (reference: 0)");
-  run_override<std::uint64_t>(app, "--seed", "seed", j, "random seed (init, masks, data order, simulation)");
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   using namespace tjepa::cli;
@@ -138,62 +111,8 @@ int main(int argc, char** argv) {
   run_override<int>(demo, "--warmup", "warmup_steps", demo_overrides, "pre-training warm-up steps");
   demo->add_flag("--quiet", demo_quiet, "no progress lines");
 
-  EvalOptions ev;
-  nlohmann::json eval_overrides = nlohmann::json::object();
-  auto* eval = app.add_subcommand(
-      "eval", "The downstream protocol on the simulated grasping hand: seeds x heads, baselines, MAE, mask ablation");
-  eval->add_option("--data-seed", ev.eval.data_seed, "seed of the simulated session")->capture_default_str();
-  eval->add_option("--seeds", ev.eval.seeds, "pre-training seeds")->capture_default_str();
-  eval->add_option("--head-seeds", ev.eval.head_seeds, "heads per task and pre-training seed")->capture_default_str();
-  eval->add_option("--pretrain-frames", ev.eval.pretrain_frames, "unlabelled frames")->capture_default_str();
-  eval->add_option("--train-frames", ev.eval.train_frames, "labelled training frames")->capture_default_str();
-  eval->add_option("--test-frames", ev.eval.test_frames, "labelled held-out frames")->capture_default_str();
-  eval->add_option("--max-object-windows", ev.eval.tasks.max_object_windows, "object samples per split (0: all)");
-  eval->add_option("--max-force-windows", ev.eval.tasks.max_force_windows, "force samples per split (0: all)");
-  eval->add_option("--max-pose-sequences", ev.eval.tasks.max_pose_sequences, "pose sequences per split (0: all)");
-  eval->add_option("--head-epochs", ev.eval.heads.probe.max_epochs, "object and force probes' epoch limit (early stopping)")->capture_default_str();
-  eval->add_option("--head-patience", ev.eval.heads.probe.patience, "object and force probes' patience (epochs)")->capture_default_str();
-  eval->add_option("--sequence-epochs", ev.eval.heads.sequence.max_epochs, "sequence head's epoch limit")->capture_default_str();
-  eval->add_option("--sequence-patience", ev.eval.heads.sequence.patience, "sequence head's patience (epochs)")->capture_default_str();
-  eval->add_option("--end-to-end-epochs", ev.eval.heads.end_to_end_max_epochs, "end-to-end epoch limit")->capture_default_str();
-  eval->add_option("--end-to-end-patience", ev.eval.heads.end_to_end_patience,
-                   "end-to-end patience (epochs; at most the probes' and the sequence head's own)")
-      ->capture_default_str();
-  std::string eval_config;
-  eval->add_option("--config", eval_config, "JSON pre-training configuration (TrainConfig keys); flags override it");
-  run_override<int>(eval, "--steps", "steps", eval_overrides, "pre-training steps");
-  run_override<int>(eval, "--warmup", "warmup_steps", eval_overrides, "pre-training warm-up steps");
-  run_override<int>(eval, "--batch", "batch", eval_overrides, "pre-training batch");
-  run_override<int>(eval, "--dim", "dim", eval_overrides, "encoder width d");
-  run_override<int>(eval, "--depth", "depth", eval_overrides, "encoder blocks");
-  run_override<std::string>(eval, "--precision", "precision", eval_overrides,
-                            "arithmetic of the pre-training products: fp32 or bf16 (AVX512-BF16)");
-  eval->add_flag("--no-mae", [&ev](std::int64_t) { ev.eval.mae = false; }, "skip the MAE row");
-  eval->add_flag("--no-ablation", [&ev](std::int64_t) { ev.eval.ablation = false; }, "skip the mask ablation");
-  eval->add_flag("--no-end-to-end", [&ev](std::int64_t) { ev.eval.end_to_end = false; }, "skip the end-to-end row");
-  eval->add_flag("--no-random", [&ev](std::int64_t) { ev.eval.random = false; }, "skip the random-init row");
-  eval->add_flag("--no-jepa", [&ev](std::int64_t) { ev.eval.jepa = false; },
-                 "skip the Tactile-JEPA row (with --no-ablation)");
-  eval->add_flag("--no-linear", [&ev](std::int64_t) { ev.eval.linear_readout = false; },
-                 "skip the linear read-out table (ridge on each frozen encoder's pad-mean embeddings and token components)");
-  eval->add_flag("--standardize-features", ev.eval.heads.standardize_features,
-                 "the frozen rows' heads read the embeddings standardized per channel (statistics of the training windows)");
-  eval->add_option_function<std::string>(
-          "--probe-pooling", [&ev](const std::string& v) { ev.eval.heads.probe_pooling.kind = tjepa::parse_pooling(v); },
-          "the object and force probes' pooling of a window: attentive (the paper's, default) or taxel (per-taxel read-out)")
-      ->check(CLI::IsMember({"attentive", "taxel"}));
-  eval->add_option_function<std::string>(
-          "--sequence-pooling", [&ev](const std::string& v) { ev.eval.heads.sequence_pooling.kind = tjepa::parse_pooling(v); },
-          "the sequence head's pooling of each window: taxel (default) or attentive (the paper's; learns no pose here)")
-      ->check(CLI::IsMember({"attentive", "taxel"}));
-  eval->add_option_function<int>(
-          "--pooling-components",
-          [&ev](int k) { ev.eval.heads.probe_pooling.components = ev.eval.heads.sequence_pooling.components = k; },
-          "values per taxel of the taxel pooling (default 3)")
-      ->check(CLI::PositiveNumber);
-  eval->add_option("--out", ev.out, "output directory")->capture_default_str();
-  eval->add_flag("--force", ev.force, "overwrite --out");
-  eval->add_flag("--quiet", ev.quiet, "no progress lines");
+  EvalCommand ev;
+  auto* eval = add_eval_command(app, ev);
 
   try {
     app.parse(argc, argv);
@@ -222,13 +141,7 @@ int main(int argc, char** argv) {
     if (*pretrain) return run_pretrain(po, std::cout);
     if (*probe) return run_probe(pb, std::cout);
     if (*embed) return run_embed(eo, std::cout);
-    if (*eval) {
-      if (!eval_config.empty()) ev.eval.train.update_from_file(eval_config);
-      ev.eval.train.update(eval_overrides, "command line");
-      ev.command = "tjepa";
-      for (int i = 1; i < argc; ++i) ev.command += std::string(" ") + argv[i];
-      return run_eval(ev, std::cout);
-    }
+    if (*eval) return run_eval(ev.resolve(argc, argv), std::cout);
     if (*demo) {
       EvalOptions dm = demo_eval_options(demo_seed);
       dm.out = demo_out;

@@ -107,4 +107,5 @@
 #include "tjepa/downstream/welch.hpp"
 #include "tjepa/downstream/grasp_tasks.hpp"
 #include "tjepa/downstream/eval_table.hpp"
+#include "tjepa/downstream/pretrain_cache.hpp"
 #include "tjepa/downstream/grasp_eval.hpp"

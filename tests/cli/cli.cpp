@@ -7,7 +7,10 @@
 
 #include "../../examples/cli/commands.hpp"
 #include "../../examples/cli/eval.hpp"
+#include "../../examples/cli/parse.hpp"
 #include <tjepa/sensors/skin_from_coordinates.hpp>
+
+#include "../support/temp_dir.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -24,19 +27,7 @@ using namespace tjepa::cli;
 
 namespace {
 
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    static int counter = 0;
-    path = fs::temp_directory_path() / ("tjepa_cli_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
+using tjepa_test::TempDir;
 
 std::string read_text(const fs::path& p) {
   std::ifstream in(p);
@@ -610,6 +601,49 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   o.force = false;
   CHECK_THROWS_AS(run_eval(o, out), FileError);
   CHECK(count_files(t.path / "demo") == 3);
+}
+
+TEST_CASE("tjepa eval's command line: flags land in the options and the pre-training overrides") {
+  CLI::App app;
+  EvalCommand ev;
+  CLI::App* eval = add_eval_command(app, ev);
+  const char* argv[] = {"tjepa", "eval", "--seeds", "4", "5", "--head-seeds", "2", "--end-to-end-epochs", "30",
+                        "--end-to-end-patience", "7", "--pretrain-cache", "cache/dir", "--steps", "11",
+                        "--precision", "bf16", "--no-mae", "--no-ablation", "--sequence-pooling", "attentive",
+                        "--out", "runs/x", "--force"};
+  const int argc = static_cast<int>(std::size(argv));
+  app.parse(argc, argv);
+  REQUIRE(eval->parsed());
+  const EvalOptions o = ev.resolve(argc, argv);
+  CHECK(o.eval.seeds == std::vector<std::uint64_t>{4, 5});
+  CHECK(o.eval.head_seeds == 2);
+  CHECK(o.eval.heads.end_to_end_max_epochs == 30);
+  CHECK(o.eval.heads.end_to_end_patience == 7);
+  CHECK(o.eval.pretrain_cache == "cache/dir");
+  CHECK(o.eval.train.steps == 11);
+  CHECK(o.eval.train.precision == "bf16");
+  CHECK_FALSE(o.eval.mae);
+  CHECK_FALSE(o.eval.ablation);
+  CHECK(o.eval.end_to_end);
+  CHECK(o.eval.heads.sequence_pooling.kind == PoolingKind::attentive);
+  CHECK(o.out == "runs/x");
+  CHECK(o.force);
+  CHECK(o.command.starts_with("tjepa eval --seeds 4 5 "));
+  CHECK(o.command.ends_with(" --out runs/x --force"));
+  // Nothing given: the protocol's defaults.
+  CLI::App app2;
+  EvalCommand plain;
+  add_eval_command(app2, plain);
+  const char* none[] = {"tjepa", "eval"};
+  app2.parse(2, none);
+  const EvalOptions d = plain.resolve(2, none);
+  CHECK(d.eval.to_json() == GraspEvalConfig{}.to_json());
+  CHECK(d.eval.pretrain_cache.empty());
+  const char* bad[] = {"tjepa", "eval", "--sequence-pooling", "mean"};
+  CLI::App app3;
+  EvalCommand b;
+  add_eval_command(app3, b);
+  CHECK_THROWS_AS(app3.parse(4, bad), CLI::ValidationError);
 }
 
 }  // TEST_SUITE

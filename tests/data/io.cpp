@@ -4,6 +4,8 @@
 
 #include <tjepa/tjepa.hpp>
 
+#include "../support/temp_dir.hpp"
+
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -22,22 +24,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// A fresh temporary directory per test case, removed at the end.
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    static int counter = 0;
-    path = fs::temp_directory_path() /
-           ("tjepa_data_io_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-  fs::path operator/(const std::string& name) const { return path / name; }
-};
+using tjepa_test::TempDir;
 
 void write_bytes(const fs::path& p, const std::string& bytes) {
   std::ofstream out(p, std::ios::binary);

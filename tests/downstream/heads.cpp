@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "../model/gradcheck.hpp"
+#include "../support/temp_dir.hpp"
 
 using namespace tjepa;
 
@@ -919,7 +920,10 @@ TEST_CASE("EvalTable: head means per seed then mean ± sd over seeds and the bes
   CHECK(svg.find("</svg>") != std::string::npos);
 }
 
-TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same table twice") {
+namespace {
+
+// The protocol at toy size: seconds, not hours.
+GraspEvalConfig toy_grasp_eval_config() {
   GraspEvalConfig c;
   c.seeds = {0, 1};
   c.head_seeds = 1;
@@ -942,6 +946,13 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   c.heads.probe.max_epochs = 2;
   c.heads.sequence.max_epochs = 2;
   c.heads.end_to_end_max_epochs = 1;
+  return c;
+}
+
+}  // namespace
+
+TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same table twice") {
+  GraspEvalConfig c = toy_grasp_eval_config();
   int lines = 0;
   const GraspEvalResult r = run_grasp_eval(c, [&](const std::string&) { ++lines; });
   CHECK(lines > 10);
@@ -1019,6 +1030,80 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK_NOTHROW(c.validate());
   c.readout_components = c.train.dim + 1;
   CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("readout_components"), ConfigError);
+}
+
+TEST_CASE("run_grasp_eval with a pre-training cache: the same tables and pre-training read back and bad files named") {
+  GraspEvalConfig c = toy_grasp_eval_config();
+  c.seeds = {0};
+  c.random = c.end_to_end = false;  // no pre-training in these rows
+  const GraspEvalResult plain = run_grasp_eval(c);
+  const tjepa_test::TempDir dir("pretrain_cache");
+  c.pretrain_cache = (dir / "cache").string();
+  auto files = [&] {
+    std::vector<std::filesystem::path> f;
+    for (const auto& e : std::filesystem::directory_iterator(dir / "cache")) f.push_back(e.path());
+    std::sort(f.begin(), f.end());
+    return f;
+  };
+  auto same_tables = [&](const GraspEvalResult& r) {
+    CHECK(r.main.to_json() == plain.main.to_json());
+    CHECK(r.ablation.to_json() == plain.ablation.to_json());
+    CHECK(r.linear.to_json() == plain.linear.to_json());
+    CHECK(r.ablation_linear.to_json() == plain.ablation_linear.to_json());
+  };
+  const GraspEvalResult first = run_grasp_eval(c);  // pre-trains and writes
+  same_tables(first);
+  const auto written = files();
+  REQUIRE(written.size() == 6);  // Tactile-JEPA, MAE and the 4 mask variants at seed 0
+  CHECK(written[0].filename().string().starts_with("2l-2g-local-context-seed0-"));
+  CHECK(written[5].filename().string().starts_with("tactile-jepa-seed0-"));
+  for (const auto& p : first.info["pretraining"]) CHECK_FALSE(p.contains("cached"));
+  CHECK(first.info["pretrain_cache"] == c.pretrain_cache);
+  CHECK(c.to_json().dump().find("cache") == std::string::npos);  // not a setting of the results
+
+  std::vector<std::string> lines;
+  const GraspEvalResult second = run_grasp_eval(c, [&](const std::string& l) { lines.push_back(l); });
+  same_tables(second);
+  CHECK(files() == written);
+  REQUIRE(second.info["pretraining"].size() == 6);
+  for (std::size_t i = 0; i < 6; ++i) {
+    const auto& p = second.info["pretraining"][i];
+    CHECK(p.contains("cached"));
+    CHECK(p["last_loss"] == first.info["pretraining"][i]["last_loss"]);
+    CHECK(p["row"] == first.info["pretraining"][i]["row"]);
+  }
+  CHECK(std::count_if(lines.begin(), lines.end(), [](const std::string& l) {
+          return l.find("pre-trained encoder read from") != std::string::npos;
+        }) == 6);
+
+  // Another pre-training config is another key: pre-trained again, beside the old files.
+  GraspEvalConfig other = c;
+  other.train.steps = 3;
+  other.mae = other.ablation = false;
+  const GraspEvalResult third = run_grasp_eval(other);
+  CHECK_FALSE(third.info["pretraining"][0].contains("cached"));
+  CHECK(files().size() == 7);
+
+  // A truncated file, and a file under another key's name: errors that name the file.
+  const std::filesystem::path jepa = written[5], four_l = written[3];
+  REQUIRE(four_l.filename().string().starts_with("4l-seed0-"));
+  const auto size = std::filesystem::file_size(jepa);
+  std::filesystem::copy_file(jepa, dir / "jepa.bak");
+  std::filesystem::resize_file(jepa, size / 2);
+  CHECK_THROWS_WITH_AS(run_grasp_eval(c), doctest::Contains(jepa.filename().string().c_str()), FileError);
+  std::filesystem::copy_file(four_l, jepa, std::filesystem::copy_options::overwrite_existing);
+  CHECK_THROWS_WITH_AS(run_grasp_eval(c), doctest::Contains("key is not the one asked for"), FileError);
+  std::filesystem::copy_file(dir / "jepa.bak", jepa, std::filesystem::copy_options::overwrite_existing);
+  same_tables(run_grasp_eval(c));
+
+  // The fingerprint sees the data: another data seed, another fingerprint.
+  const GraspEvalData d0 = simulate_grasp_eval_data(c);
+  GraspEvalConfig c1 = c;
+  c1.data_seed = 1;
+  const GraspEvalData d1 = simulate_grasp_eval_data(c1);
+  CHECK(window_source_fingerprint(*d0.pretrain) == window_source_fingerprint(*d0.pretrain));
+  CHECK(window_source_fingerprint(*d0.pretrain) != window_source_fingerprint(*d1.pretrain));
+  CHECK(window_source_fingerprint(*d0.pretrain) != window_source_fingerprint(*d0.train));
 }
 
 }  // TEST_SUITE

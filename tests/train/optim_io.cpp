@@ -3,6 +3,8 @@
 #include <doctest/doctest.h>
 
 #include <tjepa/tjepa.hpp>
+
+#include "../support/temp_dir.hpp"
 // The modules this file tests (the umbrella above holds them all; named here so each is traceable).
 #include <tjepa/core/prefixed_params.hpp>
 #include <tjepa/optim/adamw.hpp>
@@ -44,18 +46,7 @@ void fill_grads(tjepa::ParamSet<T>& ps, std::uint64_t seed, double scale = 1.0) 
     for (auto& g : ps.grad_span(ps.id(i))) g = static_cast<T>(scale * rng.normal());
 }
 
-// A fresh directory per test case, removed at the end.
-struct TempDir {
-  fs::path path;
-  explicit TempDir(const std::string& name) : path(fs::temp_directory_path() / ("tjepa_train_" + name)) {
-    fs::remove_all(path);
-    fs::create_directories(path);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
+using tjepa_test::TempDir;
 
 std::vector<std::byte> read_bytes(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

@@ -35,6 +35,7 @@
 #include "tjepa/data/drift_tracker.hpp"
 #include "tjepa/data/preprocessor.hpp"
 #include "tjepa/data/window_source.hpp"
+#include "tjepa/downstream/pretrain_cache.hpp"
 #include "tjepa/downstream/eval_table.hpp"
 #include "tjepa/downstream/grasp_tasks.hpp"
 #include "tjepa/graph/skin.hpp"
@@ -75,6 +76,10 @@ struct GraspEvalConfig {
   bool ridge = true, random = true, end_to_end = true, mae = true, jepa = true, ablation = true;
   bool linear_readout = true;  // the linear read-out table of the frozen main rows
   int readout_components = 3;  // k of its token components (as many numbers per taxel as its 3 axes)
+  // Directory of pre-trained encoders kept between runs (downstream/pretrain_cache.hpp; empty:
+  // none): a row and seed found there is read instead of pre-trained, with the same weights. It
+  // changes no result, so to_json leaves it out.
+  std::string pretrain_cache;
 
   void validate() const {
     require<ConfigError>(!seeds.empty() && head_seeds > 0, "GraspEvalConfig: ", seeds.size(), " seeds, ", head_seeds,
@@ -268,11 +273,34 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
   auto stage = [&](const std::string& what) {
     return [&, what](const std::string& s) { say("  " + what + ": " + s); };
   };
-  // Pre-trains a Tactile-JEPA model with collator masks; logs its loss curve's ends and time.
+  PretrainCache cache;
+  if (!c.pretrain_cache.empty()) {
+    const auto t = clock::now();
+    cache = PretrainCache(c.pretrain_cache, {{"data_seed", c.data_seed},
+                                           {"frames", c.to_json()["frames"]},
+                                           {"pretrain_windows", d.pretrain->size()},
+                                           {"fingerprint", window_source_fingerprint(*d.pretrain)}});
+    res.info["pretrain_cache"] = c.pretrain_cache;
+    say("pre-training cache " + c.pretrain_cache + " (data fingerprint in " + std::to_string(seconds(t)) + " s)");
+  }
+  // The pre-trained encoder of row `name` at seed s read from the cache into params, its record
+  // logged; false when the cache does not hold it.
+  auto from_cache = [&](const std::string& name, std::uint64_t s, const nlohmann::json& key, ParamSet<float>& params) {
+    std::optional<nlohmann::json> log_entry = cache.load(key, params);
+    if (!log_entry) return false;
+    (*log_entry)["cached"] = cache.path(key).string();
+    res.info["pretraining"].push_back(*log_entry);
+    say("  " + name + " seed " + std::to_string(s) + ": pre-trained encoder read from " + cache.path(key).string());
+    return true;
+  };
+  // Pre-trains a Tactile-JEPA model with collator masks (or reads its target encoder from the
+  // cache); logs its loss curve's ends and time.
   auto pretrain_jepa = [&](const std::string& name, std::uint64_t s, const MaskVariant* v) {
     TrainConfig cfg = c.train;
     cfg.seed = s;
     auto model = make_jepa_model<float>(cfg, graph, axes, s);
+    const nlohmann::json key = cache.key(name, s, {{"train", cfg.to_json()}});
+    if (from_cache(name, s, key, model->target)) return model;
     std::optional<GridPlacement> grid;
     if (v && v->ijepa_blocks) grid = GridPlacement::from_layout(d.skin.layout, layouts::allegro::kPhalanxPitch);
     MaskCollator collator(graph, v ? v->masks : cfg.masks(), grid);
@@ -288,10 +316,15 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
             std::to_string(st.target_sample_std));
     };
     trainer.run();
-    res.info["pretraining"].push_back({{"row", name}, {"seed", s}, {"first_loss", first.loss}, {"last_loss", last.loss},
-                                       {"first_target_sample_std", first.target_sample_std},
-                                       {"last_target_sample_std", last.target_sample_std},
-                                       {"seconds", seconds(t)}});
+    const nlohmann::json log_entry = {{"row", name},
+                                      {"seed", s},
+                                      {"first_loss", first.loss},
+                                      {"last_loss", last.loss},
+                                      {"first_target_sample_std", first.target_sample_std},
+                                      {"last_target_sample_std", last.target_sample_std},
+                                      {"seconds", seconds(t)}};
+    res.info["pretraining"].push_back(log_entry);
+    cache.save(key, model->target, log_entry);
     return model;
   };
 
@@ -349,14 +382,19 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       MaeModel<float> mae(mae_config(cfg, graph.num_nodes(), axes, c.mae_mask_ratio), s);
       if (cfg.position_eigenvectors > 0)  // as make_jepa_model: both start from the same encoder
         mae.set_positions(graph_positions(graph, cfg.dim, cfg.position_eigenvectors, cfg.position_scale, s));
-      const auto t = clock::now();
-      const auto log = pretrain_mae(mae, *d.pretrain, cfg, [&](const MaeStepStats& st) {
-        if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
-          say("  MAE seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
-              std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss));
-      });
-      res.info["pretraining"].push_back({{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss},
-                                         {"last_loss", log.back().loss}, {"seconds", seconds(t)}});
+      const nlohmann::json key = cache.key("MAE", s, {{"train", cfg.to_json()}, {"mae_mask_ratio", c.mae_mask_ratio}});
+      if (!from_cache("MAE", s, key, mae.context)) {
+        const auto t = clock::now();
+        const auto log = pretrain_mae(mae, *d.pretrain, cfg, [&](const MaeStepStats& st) {
+          if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
+            say("  MAE seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
+                std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss));
+        });
+        const nlohmann::json log_entry = {{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss},
+                                          {"last_loss", log.back().loss}, {"seconds", seconds(t)}};
+        res.info["pretraining"].push_back(log_entry);
+        cache.save(key, mae.context, log_entry);
+      }
       frozen_row(res.main, res.linear, "MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
     }
     if (c.jepa) {
