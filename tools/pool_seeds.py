@@ -1,0 +1,129 @@
+#!/usr/bin/env python3
+"""Pools one table of several `tjepa eval` runs (results.json) over their pre-training seeds.
+
+    tools/pool_seeds.py TABLE RESULTS.json [RESULTS.json ...] [--rows NAME ...]
+
+TABLE is main, ablation, linear or ablation_linear. Rows are matched by name; each run's seeds
+come from its config ("seeds"), and a seed found in two runs of the same row is an error. For each
+primary metric: the heads' mean per seed, then mean ± sample sd over seeds, the rank of each row,
+and the one-sided Welch test of the best row against the second (as downstream/welch.hpp: the
+best's mean is better). Writes markdown on stdout. Pool only runs whose heads were trained alike:
+the script cannot tell (it prints each run's command).
+"""
+import argparse
+import json
+import math
+import sys
+
+
+def incomplete_beta(a, b, x):
+    """Regularized incomplete beta I_x(a, b) (continued fraction, Numerical Recipes)."""
+    if x <= 0:
+        return 0.0
+    if x >= 1:
+        return 1.0
+
+    def cf(a, b, x):
+        tiny = 1e-300
+        qab, qap, qam = a + b, a + 1, a - 1
+        c, d = 1.0, 1 - qab * x / qap
+        d = 1 / (d if abs(d) > tiny else tiny)
+        h = d
+        for m in range(1, 300):
+            m2 = 2 * m
+            for aa in (m * (b - m) * x / ((qam + m2) * (a + m2)), -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))):
+                d = 1 + aa * d
+                d = 1 / (d if abs(d) > tiny else tiny)
+                c = 1 + aa / c
+                c = c if abs(c) > tiny else tiny
+                h *= d * c
+            if abs(d * c - 1) < 3e-16:
+                break
+        return h
+
+    front = math.exp(math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log(1 - x))
+    return front * cf(a, b, x) / a if x < (a + 1) / (a + b + 2) else 1 - front * cf(b, a, 1 - x) / b
+
+
+def welch_less(a, b):
+    """One-sided Welch test of mean(a) < mean(b): (t, df, p)."""
+    na, nb = len(a), len(b)
+    ma, mb = sum(a) / na, sum(b) / nb
+    va = sum((x - ma) ** 2 for x in a) / (na - 1) / na
+    vb = sum((x - mb) ** 2 for x in b) / (nb - 1) / nb
+    if va + vb == 0:
+        return (0.0 if ma == mb else math.copysign(math.inf, ma - mb)), na + nb - 2, 0.5 if ma == mb else float(ma > mb)
+    t = (ma - mb) / math.sqrt(va + vb)
+    df = (va + vb) ** 2 / (va * va / (na - 1) + vb * vb / (nb - 1))
+    tail = 0.5 * incomplete_beta(df / 2, 0.5, df / (df + t * t))  # P(T > |t|)
+    return t, df, (tail if t < 0 else 1 - tail)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("table", choices=["main", "ablation", "linear", "ablation_linear"])
+    ap.add_argument("results", nargs="+")
+    ap.add_argument("--rows", nargs="*", help="only these rows, in this order")
+    args = ap.parse_args()
+
+    metrics, rows, order = None, {}, []
+    for path in args.results:
+        with open(path) as f:
+            run = json.load(f)
+        table = run.get(args.table)
+        if table is None:
+            sys.exit(f"{path}: no table '{args.table}'")
+        metrics = metrics or [m for m in table["metrics"] if m["primary"]]
+        print(f"- {path}: `{run.get('command', '?')}`")
+        seeds = run["config"]["seeds"]
+        for row in table["rows"]:
+            if len(row["runs"]) != len(seeds):
+                sys.exit(f"{path}: row '{row['name']}' has {len(row['runs'])} runs for {len(seeds)} seeds")
+            mine = rows.setdefault(row["name"], {})
+            if row["name"] not in order:
+                order.append(row["name"])
+            for seed, heads in zip(seeds, row["runs"]):
+                if seed in mine:
+                    sys.exit(f"{path}: row '{row['name']}' seed {seed} is in an earlier file too")
+                mine[seed] = {m["key"]: sum(h[m["key"]] for h in heads) / len(heads) for m in metrics}
+    names = args.rows or order
+    for n in names:
+        if n not in rows:
+            sys.exit(f"no row '{n}' (rows: {', '.join(order)})")
+
+    def values(name, key):
+        return [rows[name][s][key] for s in sorted(rows[name])]
+
+    def mean(v):
+        return sum(v) / len(v)
+
+    print()
+    print("| row | seeds | " + " | ".join(f"{m['name']} ({m['unit']}) {'↑' if m['higher_is_better'] else '↓'}" for m in metrics) + " |")
+    print("|---|---|" + "---|" * len(metrics))
+    ranks = {}
+    for m in metrics:
+        sign = -1 if m["higher_is_better"] else 1
+        ranked = sorted(names, key=lambda n: sign * mean(values(n, m["key"])))
+        ranks[m["key"]] = {n: i + 1 for i, n in enumerate(ranked)}
+    for n in names:
+        cells = []
+        for m in metrics:
+            v = values(n, m["key"])
+            sd = f" ± {math.sqrt(sum((x - mean(v)) ** 2 for x in v) / (len(v) - 1)):.3g}" if len(v) > 1 else ""
+            cells.append(f"{mean(v):.4g}{sd} ({ranks[m['key']][n]})")
+        print(f"| {n} | {','.join(str(s) for s in sorted(rows[n]))} | " + " | ".join(cells) + " |")
+    print()
+    for m in metrics:
+        best, second = sorted(names, key=lambda n: ranks[m["key"]][n])[:2]
+        a, b = values(best, m["key"]), values(second, m["key"])
+        if len(a) < 2 or len(b) < 2:
+            print(f"- {m['name']}: best {best}, second {second}; not tested (fewer than 2 seeds)")
+            continue
+        if m["higher_is_better"]:
+            a, b = [-x for x in a], [-x for x in b]
+        t, df, p = welch_less(a, b)
+        print(f"- {m['name']}: best {best}, second {second}; one-sided Welch t = {abs(t):.2f}, df {df:.1f}, p = {p:.3g}")
+
+
+if __name__ == "__main__":
+    main()
