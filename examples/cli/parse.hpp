@@ -39,6 +39,11 @@ inline void add_run_overrides(CLI::App* app, nlohmann::json& j) {
 // What `tjepa eval` parses: the options, a JSON pre-training config (--config) and the flags that
 // override its keys.
 struct EvalCommand {
+  EvalCommand() = default;
+  // add_eval_command's callbacks hold references into this object: it stays where it is.
+  EvalCommand(const EvalCommand&) = delete;
+  EvalCommand& operator=(const EvalCommand&) = delete;
+
   EvalOptions options;
   std::string config;
   nlohmann::json overrides = nlohmann::json::object();

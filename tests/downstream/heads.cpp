@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <numbers>
 #include <tuple>
 #include <type_traits>
@@ -1055,8 +1056,15 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the same tables and pre-tra
   same_tables(first);
   const auto written = files();
   REQUIRE(written.size() == 6);  // Tactile-JEPA, MAE and the 4 mask variants at seed 0
-  CHECK(written[0].filename().string().starts_with("2l-2g-local-context-seed0-"));
-  CHECK(written[5].filename().string().starts_with("tactile-jepa-seed0-"));
+  auto written_as = [&](const std::string& prefix) {
+    const auto it = std::find_if(written.begin(), written.end(),
+                                 [&](const auto& p) { return p.filename().string().starts_with(prefix); });
+    REQUIRE(it != written.end());
+    return *it;
+  };
+  for (const char* prefix : {"tactile-jepa-seed0-", "mae-seed0-", "4l-seed0-", "4g-seed0-", "4-i-jepa-blocks-seed0-",
+                             "2l-2g-local-context-seed0-"})
+    CHECK(written_as(prefix).extension() == ".safetensors");
   for (const auto& p : first.info["pretraining"]) CHECK_FALSE(p.contains("cached"));
   CHECK(first.info["pretrain_cache"] == c.pretrain_cache);
   CHECK(c.to_json().dump().find("cache") == std::string::npos);  // not a setting of the results
@@ -1085,8 +1093,7 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the same tables and pre-tra
   CHECK(files().size() == 7);
 
   // A truncated file, and a file under another key's name: errors that name the file.
-  const std::filesystem::path jepa = written[5], four_l = written[3];
-  REQUIRE(four_l.filename().string().starts_with("4l-seed0-"));
+  const std::filesystem::path jepa = written_as("tactile-jepa-seed0-"), four_l = written_as("4l-seed0-");
   const auto size = std::filesystem::file_size(jepa);
   std::filesystem::copy_file(jepa, dir / "jepa.bak");
   std::filesystem::resize_file(jepa, size / 2);
@@ -1101,9 +1108,67 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the same tables and pre-tra
   GraspEvalConfig c1 = c;
   c1.data_seed = 1;
   const GraspEvalData d1 = simulate_grasp_eval_data(c1);
-  CHECK(window_source_fingerprint(*d0.pretrain) == window_source_fingerprint(*d0.pretrain));
-  CHECK(window_source_fingerprint(*d0.pretrain) != window_source_fingerprint(*d1.pretrain));
-  CHECK(window_source_fingerprint(*d0.pretrain) != window_source_fingerprint(*d0.train));
+  CHECK(fingerprint(*d0.pretrain) == fingerprint(*simulate_grasp_eval_data(c).pretrain));
+  CHECK(fingerprint(*d0.pretrain) != fingerprint(*d1.pretrain));
+  CHECK(fingerprint(*d0.pretrain) != fingerprint(*d0.train));
+}
+
+TEST_CASE("PretrainCache: round trip and keys and errors that leave the parameters as they were") {
+  const tjepa_test::TempDir dir("pretrain_cache_unit");
+  auto params = [](float value) {
+    ParamSet<float> p;
+    p.add("pos_embed", {1, 4, 3});
+    p.add("blocks.0.norm1.weight", {3});
+    p.allocate();
+    for (float& v : p.values()) v = value;
+    return p;
+  };
+  const PretrainCache off;
+  ParamSet<float> a = params(1.5f);
+  CHECK_FALSE(off.load(off.key("Tactile-JEPA", 0, {}), a));
+  off.save(off.key("Tactile-JEPA", 0, {}), a, {{"row", "x"}});  // nothing written
+  const PretrainCache cache(dir / "c", {{"fingerprint", 7}});
+  CHECK(std::filesystem::is_directory(dir / "c"));
+  const nlohmann::json key = cache.key("Tactile-JEPA", 3, {{"train", {{"steps", 10}}}});
+  CHECK(key["seed"] == 3);
+  CHECK(key["data"]["fingerprint"] == 7);
+  CHECK(key["build"]["compiler"] == __VERSION__);
+  CHECK(key["threads"] == max_threads());
+  CHECK(cache.path(key).filename().string().starts_with("tactile-jepa-seed3-"));
+  CHECK(cache.path(key) != cache.path(cache.key("Tactile-JEPA", 3, {{"train", {{"steps", 11}}}})));
+  ParamSet<float> b = params(0.0f);
+  CHECK_FALSE(cache.load(key, b));  // not written yet
+  cache.save(key, a, {{"row", "Tactile-JEPA"}, {"last_loss", 0.25}});
+  const auto entry = cache.load(key, b);
+  REQUIRE(entry);
+  CHECK((*entry)["last_loss"] == 0.25);
+  for (std::size_t i = 0; i < a.count(); ++i)  // (values() spans the padding between tensors too)
+    CHECK(std::ranges::equal(a.value_span(a.id(i)), b.value_span(b.id(i))));
+
+  // Another key's file under this key's name; a file without the log entry; a truncated file;
+  // other shapes: each a FileError naming the file, the parameters untouched.
+  const nlohmann::json other = cache.key("MAE", 3, {});
+  std::filesystem::copy_file(cache.path(key), cache.path(other));
+  ParamSet<float> c = params(-2.0f);
+  CHECK_THROWS_WITH_AS(cache.load(other, c), doctest::Contains("key is not the one asked for"), FileError);
+  CheckpointState bare;
+  bare.config = other;
+  save_checkpoint<float>(cache.path(other), {PrefixedParams<float>{"encoder.", &a}}, nullptr, bare);
+  CHECK_THROWS_WITH_AS(cache.load(other, c), doctest::Contains("no 'pretraining'"), FileError);
+  std::filesystem::resize_file(cache.path(other), std::filesystem::file_size(cache.path(other)) - 9);
+  CHECK_THROWS_WITH_AS(cache.load(other, c), doctest::Contains(cache.path(other).filename().string().c_str()),
+                       FileError);
+  ParamSet<float> wider;
+  wider.add("pos_embed", {1, 5, 3});
+  wider.add("blocks.0.norm1.weight", {3});
+  wider.allocate();
+  CHECK_THROWS_AS(cache.load(key, wider), FileError);
+  for (std::size_t i = 0; i < c.count(); ++i)
+    for (float v : c.value_span(c.id(i))) CHECK(v == -2.0f);
+
+  // A directory that cannot be one.
+  std::ofstream(dir / "plain_file") << "x";
+  CHECK_THROWS_WITH_AS(PretrainCache(dir / "plain_file", {}), doctest::Contains("plain_file"), FileError);
 }
 
 }  // TEST_SUITE

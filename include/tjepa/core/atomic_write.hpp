@@ -31,6 +31,7 @@
 #include <unistd.h>
 
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/hash.hpp"
 
 namespace tjepa {
 
@@ -87,16 +88,6 @@ class FdStreambuf : public std::streambuf {
   int error_ = 0;
   std::array<char, 1 << 16> buf_{};
 };
-
-// 64-bit FNV-1a, as 16 hex digits: short stand-ins for long names in temporary file names.
-inline std::string short_hash(std::string_view s) {
-  std::uint64_t h = 1469598103934665603ull;
-  for (const char c : s) h = (h ^ static_cast<unsigned char>(c)) * 1099511628211ull;
-  static constexpr char hex[] = "0123456789abcdef";
-  std::string out(16, '0');
-  for (int i = 15; i >= 0; --i, h >>= 4) out[static_cast<std::size_t>(i)] = hex[h & 15];
-  return out;
-}
 
 // `.<name>.tjepa-tmp.<host>.`; a name over 64 bytes is cut to 40 plus a hash, the host is
 // hashed, so the temporary name stays within NAME_MAX whenever the target's name does.

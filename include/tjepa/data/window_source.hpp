@@ -18,6 +18,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/hash.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/data/labels.hpp"
 #include "tjepa/data/preprocessor.hpp"
@@ -207,6 +208,18 @@ void windows_to_tokens(const WindowBatch& batch, AlignedVector<T>& out) {
     for (int f = 0; f < tau; ++f)
       for (int a = 0; a < m; ++a) dst[static_cast<std::size_t>(a) * tau + f] = static_cast<T>(src[f * m + a]);
   }
+}
+
+// What a window source's windows are made of: every recording's values and the preprocessor's
+// statistics (FNV-1a, core/hash.hpp). Equal sources give equal fingerprints; the pre-training
+// cache (downstream/pretrain_cache.hpp) keys its entries by it.
+inline std::uint64_t fingerprint(const WindowSource& source) {
+  std::uint64_t h = fingerprint_seed;
+  for (const Recording& r : source.recordings()) h = fingerprint(r.values(), h);
+  if (const auto& p = source.preprocessor())
+    for (const std::vector<float>* v : {&p->baseline(), &p->mean(), &p->std()})
+      h = fingerprint(std::span<const float>(*v), h);
+  return h;
 }
 
 }  // namespace tjepa

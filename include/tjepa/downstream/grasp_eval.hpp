@@ -35,9 +35,9 @@
 #include "tjepa/data/drift_tracker.hpp"
 #include "tjepa/data/preprocessor.hpp"
 #include "tjepa/data/window_source.hpp"
-#include "tjepa/downstream/pretrain_cache.hpp"
 #include "tjepa/downstream/eval_table.hpp"
 #include "tjepa/downstream/grasp_tasks.hpp"
+#include "tjepa/downstream/pretrain_cache.hpp"
 #include "tjepa/graph/skin.hpp"
 #include "tjepa/sensors/allegro_xela.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"
@@ -275,23 +275,31 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
   };
   PretrainCache cache;
   if (!c.pretrain_cache.empty()) {
+    // The pre-training windows come from the baseline and the unlabelled recording (drift
+    // tracking and the preprocessor are fitted on those two): the labelled ones are not in the key.
     const auto t = clock::now();
     cache = PretrainCache(c.pretrain_cache, {{"data_seed", c.data_seed},
-                                           {"frames", c.to_json()["frames"]},
-                                           {"pretrain_windows", d.pretrain->size()},
-                                           {"fingerprint", window_source_fingerprint(*d.pretrain)}});
+                                             {"baseline_frames", c.baseline_frames},
+                                             {"pretrain_frames", c.pretrain_frames},
+                                             {"pretrain_windows", d.pretrain->size()},
+                                             {"fingerprint", fingerprint(*d.pretrain)}});
     res.info["pretrain_cache"] = c.pretrain_cache;
     say("pre-training cache " + c.pretrain_cache + " (data fingerprint in " + std::to_string(seconds(t)) + " s)");
   }
-  // The pre-trained encoder of row `name` at seed s read from the cache into params, its record
-  // logged; false when the cache does not hold it.
+  // The pre-trained encoder of row `name` at seed s read from the cache into params and its log
+  // entry recorded; false when the cache does not hold it.
   auto from_cache = [&](const std::string& name, std::uint64_t s, const nlohmann::json& key, ParamSet<float>& params) {
-    std::optional<nlohmann::json> log_entry = cache.load(key, params);
-    if (!log_entry) return false;
-    (*log_entry)["cached"] = cache.path(key).string();
-    res.info["pretraining"].push_back(*log_entry);
+    std::optional<nlohmann::json> entry = cache.load(key, params);
+    if (!entry) return false;
+    (*entry)["cached"] = cache.path(key).string();
+    res.info["pretraining"].push_back(*entry);
     say("  " + name + " seed " + std::to_string(s) + ": pre-trained encoder read from " + cache.path(key).string());
     return true;
+  };
+  // A finished pre-training: its log entry recorded, its encoder written to the cache.
+  auto pretrained = [&](const nlohmann::json& key, ParamSet<float>& params, const nlohmann::json& entry) {
+    res.info["pretraining"].push_back(entry);
+    cache.save(key, params, entry);
   };
   // Pre-trains a Tactile-JEPA model with collator masks (or reads its target encoder from the
   // cache); logs its loss curve's ends and time.
@@ -316,15 +324,10 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
             std::to_string(st.target_sample_std));
     };
     trainer.run();
-    const nlohmann::json log_entry = {{"row", name},
-                                      {"seed", s},
-                                      {"first_loss", first.loss},
-                                      {"last_loss", last.loss},
-                                      {"first_target_sample_std", first.target_sample_std},
-                                      {"last_target_sample_std", last.target_sample_std},
-                                      {"seconds", seconds(t)}};
-    res.info["pretraining"].push_back(log_entry);
-    cache.save(key, model->target, log_entry);
+    pretrained(key, model->target,
+               {{"row", name}, {"seed", s}, {"first_loss", first.loss}, {"last_loss", last.loss},
+                {"first_target_sample_std", first.target_sample_std},
+                {"last_target_sample_std", last.target_sample_std}, {"seconds", seconds(t)}});
     return model;
   };
 
@@ -390,10 +393,9 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
             say("  MAE seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
                 std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss));
         });
-        const nlohmann::json log_entry = {{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss},
-                                          {"last_loss", log.back().loss}, {"seconds", seconds(t)}};
-        res.info["pretraining"].push_back(log_entry);
-        cache.save(key, mae.context, log_entry);
+        pretrained(key, mae.context,
+                   {{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss}, {"last_loss", log.back().loss},
+                    {"seconds", seconds(t)}});
       }
       frozen_row(res.main, res.linear, "MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
     }

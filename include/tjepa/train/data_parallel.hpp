@@ -17,6 +17,7 @@
 #include <span>
 
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/hash.hpp"  // fingerprint: the Trainer checks that ranks agree
 
 namespace tjepa {
 
@@ -47,15 +48,5 @@ struct DataParallel {
     return {at(rank), at(rank + 1) - at(rank)};
   }
 };
-
-// FNV-1a over the bytes of values, continuing from h (start: fingerprint_seed): a cheap
-// fingerprint of parameters.
-inline constexpr std::uint64_t fingerprint_seed = 1469598103934665603ull;
-template <class T>
-std::uint64_t fingerprint(std::span<const T> values, std::uint64_t h = fingerprint_seed) {
-  const auto bytes = std::as_bytes(values);
-  for (std::byte b : bytes) h = (h ^ static_cast<std::uint64_t>(b)) * 1099511628211ull;
-  return h;
-}
 
 }  // namespace tjepa
