@@ -296,4 +296,22 @@ TEST_SUITE("core") {
     CHECK((got == a || got == b));
     CHECK(dir.names() == std::vector<std::string>{"shared"});
   }
+
+  TEST_CASE("hash: FNV-1a's published values and continuation and hex digits") {
+    using tjepa::fingerprint;
+    auto of = [](std::string_view t) { return fingerprint(std::span<const char>(t.data(), t.size())); };
+    // The FNV-1a 64-bit test vectors (Fowler, Noll, Vo).
+    CHECK(of("") == 0xcbf29ce484222325ull);
+    CHECK(of("") == tjepa::fingerprint_seed);
+    CHECK(of("a") == 0xaf63dc4c8601ec8cull);
+    CHECK(of("foobar") == 0x85944171f73967e8ull);
+    // Continuing from a value equals hashing the concatenation; floats hash by their bytes.
+    CHECK(fingerprint(std::span<const char>("bar", 3), of("foo")) == of("foobar"));
+    const float f[2] = {1.0f, -0.0f};
+    const float g[2] = {1.0f, 0.0f};
+    CHECK(fingerprint(std::span<const float>(f)) != fingerprint(std::span<const float>(g)));
+    CHECK(tjepa::hex_digits(0xaf63dc4c8601ec8cull) == "af63dc4c8601ec8c");
+    CHECK(tjepa::hex_digits(0) == "0000000000000000");
+    CHECK(tjepa::short_hash("a") == "af63dc4c8601ec8c");
+  }
 }

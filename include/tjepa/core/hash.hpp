@@ -9,7 +9,7 @@
 
 namespace tjepa {
 
-inline constexpr std::uint64_t fingerprint_seed = 1469598103934665603ull;
+inline constexpr std::uint64_t fingerprint_seed = 14695981039346656037ull;
 
 // FNV-1a over the bytes of values, continuing from h (start: fingerprint_seed).
 template <class T>
