@@ -13,6 +13,9 @@
 //                           (POOL=taxel K=3: the taxel pooling; QUICK=1: the protocol's limits at head
 //                           seeds 0, 1, then patience 20 / 100 epochs at seed 0)
 //   heads ENCODER           the three heads of the protocol, head seeds 0, 1 (CENTER=1: center_token_embeddings first)
+//   object ENCODER [SEED]   the object probe's learning curves at the protocol's limits, head seeds SEED*1000 + 0..2
+//                           (as tjepa eval's); STD=1: on standardize_channels'd embeddings; LR=x: another peak lr
+// ENCODER may be a --pretrain-cache file of tjepa eval (its parameters are under "encoder.").
 #include <tjepa/tjepa.hpp>
 #include <cstdio>
 #include <iostream>
@@ -64,7 +67,11 @@ int main(int argc, char** argv) {
     save_checkpoint<float>(argv[2], {{"target.", &model->target}}, nullptr, CheckpointState{});
     return 0;
   }
-  if (std::string(argv[2]) != "random") load_checkpoint<float>(argv[2], {{"target.", &model->target}}, nullptr);
+  if (std::string(argv[2]) != "random") {
+    const std::string file = argv[2];
+    const bool cached = file.find(".safetensors") != std::string::npos && file.find("-seed") != std::string::npos;
+    load_checkpoint<float>(file, {{cached ? "encoder." : "target.", &model->target}}, nullptr);
+  }
   const int N = model->encoder.num_tokens(), dd = model->encoder.dim();
   AlignedVector<float> etr = embed_windows(model->target, model->tokenizer, model->encoder, *d.train, tr.windows);
   AlignedVector<float> ete = embed_windows(model->target, model->tokenizer, model->encoder, *d.test, te.windows);
@@ -72,6 +79,11 @@ int main(int argc, char** argv) {
     std::span<float> o(ete.data(), ete.size());
     center_token_embeddings<float>(std::span<float>(etr.data(), etr.size()), std::span<const std::span<float>>(&o, 1), N, dd);
     std::printf("centered\n");
+  }
+  if (std::getenv("STD")) {
+    std::span<float> o(ete.data(), ete.size());
+    standardize_channels<float>(std::span<float>(etr.data(), etr.size()), std::span<const std::span<float>>(&o, 1), dd);
+    std::printf("standardized\n");
   }
   FrozenFeatures<float> ftr(std::move(etr), N, dd);
   FrozenFeatures<float> fte(std::move(ete), N, dd);
@@ -112,6 +124,29 @@ int main(int argc, char** argv) {
       };
       GraspScores sc = score_ridge_on(features, tr, te, 0);
       std::printf("pca k=%d: object %.1f force %.3f pose x %.3f y %.3f th %.2f\n", k, sc[kObjectAccuracy], sc[kForceRmse], sc[kPoseX], sc[kPoseY], sc[kPoseTheta]);
+      fflush(stdout);
+    }
+    return 0;
+  }
+  if (mode == "object") {
+    GraspHeadConfig hc;
+    HeadTrainConfig h = hc.probe;
+    if (const char* lr = std::getenv("LR")) h.lr = std::atof(lr);
+    for (std::uint64_t i = 0; i < 3; ++i) {
+      h.seed = s * 1000 + i;
+      RowFeatures rtr(ftr, tr.object_rows), rte(fte, te.object_rows);
+      ProbeHead<float> head(dd, hc.probe_heads, 0, tr.object.classes, h.seed ^ 0x6f626a656374ull, 0,
+                            PoolingConfig{.tokens = N});
+      const HeadTrainResult r = train_head(head, rtr, tr.object, h);
+      const std::vector<float> y = predict_head(head, rte, rte.size());
+      std::vector<int> cls(static_cast<std::size_t>(rte.size()));
+      for (std::size_t q = 0; q < cls.size(); ++q) cls[q] = argmax(y.data() + q * head.outputs(), head.outputs());
+      GraspScores sc{};
+      score_object(sc, cls, te);
+      std::printf("head seed %lu: top-1 %.1f %%, epochs %d, best %d | train/validation:", (unsigned long)h.seed,
+                  sc[kObjectAccuracy], r.epochs(), r.best_epoch);
+      for (int e = 0; e < r.epochs(); e += 3) std::printf(" %.2f/%.2f", r.train_loss[e], r.validation_loss[e]);
+      std::printf("\n");
       fflush(stdout);
     }
     return 0;

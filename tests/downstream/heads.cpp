@@ -1166,6 +1166,16 @@ TEST_CASE("PretrainCache: round trip and keys and errors that leave the paramete
   for (std::size_t i = 0; i < c.count(); ++i)
     for (float v : c.value_span(c.id(i))) CHECK(v == -2.0f);
 
+  // The mask ablation's variants: each its own masks in the key, so that a variant changed under
+  // its old name does not read the old encoder.
+  const std::vector<MaskVariant> variants = grasp_mask_ablation(TrainConfig{});
+  for (std::size_t i = 0; i < variants.size(); ++i)
+    for (std::size_t j = i + 1; j < variants.size(); ++j) CHECK(to_json(variants[i]) != to_json(variants[j]));
+  MaskVariant changed = variants.front();
+  changed.masks.num_local += 1;
+  CHECK(cache.path(cache.key("4L", 0, {{"masks", to_json(changed)}})) !=
+        cache.path(cache.key("4L", 0, {{"masks", to_json(variants.front())}})));
+
   // A directory that cannot be one.
   std::ofstream(dir / "plain_file") << "x";
   CHECK_THROWS_WITH_AS(PretrainCache(dir / "plain_file", {}), doctest::Contains("plain_file"), FileError);

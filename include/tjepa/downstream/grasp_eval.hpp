@@ -196,6 +196,33 @@ struct MaskVariant {
   bool ijepa_blocks = false;  // draws on the layout's grid placement
 };
 
+// What a variant changes in the masks, for the pre-training cache's key (the row name alone would
+// let a changed variant read an encoder pre-trained with other masks).
+inline nlohmann::json to_json(const MaskVariant& v) {
+  const MaskConfig& m = v.masks;
+  auto range = [](const RatioRange& r) { return nlohmann::json::array({r.lo, r.hi}); };
+  return {{"context_ratio", range(m.context_ratio)},
+          {"target_ratio", range(m.target_ratio)},
+          {"num_local", m.num_local},
+          {"num_global", m.num_global},
+          {"num_local_per_part", m.num_local_per_part},
+          {"num_global_per_part", m.num_global_per_part},
+          {"part_targets", static_cast<int>(m.part_targets)},
+          {"global_sampling", static_cast<int>(m.global_sampling)},
+          {"context_sampling", static_cast<int>(m.context_sampling)},
+          {"scheme", static_cast<int>(m.scheme)},
+          {"blocks",
+           {{"target_scale", range(m.blocks.target_scale)},
+            {"target_aspect", range(m.blocks.target_aspect)},
+            {"context_scale", range(m.blocks.context_scale)},
+            {"context_aspect", range(m.blocks.context_aspect)},
+            {"num_targets", m.blocks.num_targets}}},
+          {"min_context_tokens", m.min_context_tokens},
+          {"min_context_ratio", m.min_context_ratio},
+          {"max_tries", m.max_tries},
+          {"ijepa_blocks", v.ijepa_blocks}};
+}
+
 inline std::vector<MaskVariant> grasp_mask_ablation(const TrainConfig& c) {
   const MaskConfig base = c.masks();
   std::vector<MaskVariant> v;
@@ -307,7 +334,9 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
     TrainConfig cfg = c.train;
     cfg.seed = s;
     auto model = make_jepa_model<float>(cfg, graph, axes, s);
-    const nlohmann::json key = cache.key(name, s, {{"train", cfg.to_json()}});
+    nlohmann::json what{{"train", cfg.to_json()}};
+    if (v) what["masks"] = to_json(*v);
+    const nlohmann::json key = cache.key(name, s, what);
     if (from_cache(name, s, key, model->target)) return model;
     std::optional<GridPlacement> grid;
     if (v && v->ijepa_blocks) grid = GridPlacement::from_layout(d.skin.layout, layouts::allegro::kPhalanxPitch);
