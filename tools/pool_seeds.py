@@ -4,7 +4,8 @@
     tools/pool_seeds.py TABLE RESULTS.json [RESULTS.json ...] [--rows NAME ...]
 
 TABLE is main, ablation, linear or ablation_linear. Rows are matched by name; each run's seeds
-come from its config ("seeds"), and a seed found in two runs of the same row is an error. For each
+come from its config ("seeds"; a run stopped early holds its first seeds, and the script says so),
+and a seed found in two runs of the same row is an error. For each
 primary metric: the heads' mean per seed, then mean ± sample sd over seeds, the rank of each row,
 and the one-sided Welch test of the best row against the second (as downstream/welch.hpp: the
 best's mean is better). Writes markdown on stdout. Pool only runs whose heads were trained alike:
@@ -77,8 +78,15 @@ def main():
         print(f"- {path}: `{run.get('command', '?')}`")
         seeds = run["config"]["seeds"]
         for row in table["rows"]:
-            if len(row["runs"]) != len(seeds):
+            if args.rows and row["name"] not in args.rows:
+                continue
+            if len(row["runs"]) > len(seeds):
                 sys.exit(f"{path}: row '{row['name']}' has {len(row['runs'])} runs for {len(seeds)} seeds")
+            if len(row["runs"]) < len(seeds):
+                # tjepa eval runs the seeds in order and writes results.json after each: a stopped
+                # run holds its first seeds.
+                print(f"  - row '{row['name']}': {len(row['runs'])} of {len(seeds)} seeds (a stopped run): "
+                      f"seeds {', '.join(str(x) for x in seeds[:len(row['runs'])])}")
             mine = rows.setdefault(row["name"], {})
             if row["name"] not in order:
                 order.append(row["name"])
