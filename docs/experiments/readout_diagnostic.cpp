@@ -14,7 +14,9 @@
 //                           seeds 0, 1, then patience 20 / 100 epochs at seed 0)
 //   heads ENCODER           the three heads of the protocol, head seeds 0, 1 (CENTER=1: center_token_embeddings first)
 //   object ENCODER [SEED]   the object probe's learning curves at the protocol's limits, head seeds SEED*1000 + 0..2
-//                           (as tjepa eval's); STD=1: on standardize_channels'd embeddings; LR=x: another peak lr
+//                           (as tjepa eval's); STD=1: on standardize_channels'd embeddings; LR=x: another peak lr;
+//                           SPLIT=k: each head with the validation split and data order of head (i + k) mod 3;
+//                           ERR=1: early stopping on the validation top-1 error (HeadTrainConfig::stop_on_error)
 // ENCODER may be a --pretrain-cache file of tjepa eval (its parameters are under "encoder.").
 #include <tjepa/tjepa.hpp>
 #include <cstdio>
@@ -132,10 +134,14 @@ int main(int argc, char** argv) {
     GraspHeadConfig hc;
     HeadTrainConfig h = hc.probe;
     if (const char* lr = std::getenv("LR")) h.lr = std::atof(lr);
+    if (std::getenv("ERR")) h.stop_on_error = true;
+    // SPLIT=k: head i keeps its initialization but takes the validation split and data order of
+    // head (i + k) mod 3.
+    const std::uint64_t split = std::getenv("SPLIT") ? std::stoull(std::getenv("SPLIT")) : 0;
     for (std::uint64_t i = 0; i < 3; ++i) {
-      h.seed = s * 1000 + i;
+      h.seed = s * 1000 + (i + split) % 3;
       RowFeatures rtr(ftr, tr.object_rows), rte(fte, te.object_rows);
-      ProbeHead<float> head(dd, hc.probe_heads, 0, tr.object.classes, h.seed ^ 0x6f626a656374ull, 0,
+      ProbeHead<float> head(dd, hc.probe_heads, 0, tr.object.classes, (s * 1000 + i) ^ 0x6f626a656374ull, 0,
                             PoolingConfig{.tokens = N});
       const HeadTrainResult r = train_head(head, rtr, tr.object, h);
       const std::vector<float> y = predict_head(head, rte, rte.size());
@@ -143,7 +149,8 @@ int main(int argc, char** argv) {
       for (std::size_t q = 0; q < cls.size(); ++q) cls[q] = argmax(y.data() + q * head.outputs(), head.outputs());
       GraspScores sc{};
       score_object(sc, cls, te);
-      std::printf("head seed %lu: top-1 %.1f %%, epochs %d, best %d | train/validation:", (unsigned long)h.seed,
+      std::printf("head seed %lu (split and order %lu): top-1 %.1f %%, epochs %d, best %d | train/validation:",
+                  (unsigned long)(s * 1000 + i), (unsigned long)h.seed,
                   sc[kObjectAccuracy], r.epochs(), r.best_epoch);
       for (int e = 0; e < r.epochs(); e += 3) std::printf(" %.2f/%.2f", r.train_loss[e], r.validation_loss[e]);
       std::printf("\n");

@@ -75,6 +75,8 @@ inline CLI::App* add_eval_command(CLI::App& app, EvalCommand& ev) {
   eval->add_option("--max-pose-sequences", e.tasks.max_pose_sequences, "pose sequences per split (0: all)");
   eval->add_option("--head-epochs", e.heads.probe.max_epochs, "object and force probes' epoch limit (early stopping)")->capture_default_str();
   eval->add_option("--head-patience", e.heads.probe.patience, "object and force probes' patience (epochs)")->capture_default_str();
+  eval->add_flag("--stop-on-error", e.heads.probe.stop_on_error,
+                 "object probe: early stopping on the validation top-1 error instead of the loss");
   eval->add_option("--sequence-epochs", e.heads.sequence.max_epochs, "sequence head's epoch limit")->capture_default_str();
   eval->add_option("--sequence-patience", e.heads.sequence.patience, "sequence head's patience (epochs)")->capture_default_str();
   eval->add_option("--end-to-end-epochs", e.heads.end_to_end_max_epochs, "end-to-end epoch limit")->capture_default_str();

@@ -610,7 +610,7 @@ TEST_CASE("tjepa eval's command line: flags land in the options and the pre-trai
   const char* argv[] = {"tjepa", "eval", "--seeds", "4", "5", "--head-seeds", "2", "--end-to-end-epochs", "30",
                         "--end-to-end-patience", "7", "--pretrain-cache", "cache/dir", "--steps", "11",
                         "--precision", "bf16", "--no-mae", "--no-ablation", "--sequence-pooling", "attentive",
-                        "--out", "runs/x", "--force"};
+                        "--stop-on-error", "--out", "runs/x", "--force"};
   const int argc = static_cast<int>(std::size(argv));
   app.parse(argc, argv);
   REQUIRE(eval->parsed());
@@ -626,6 +626,8 @@ TEST_CASE("tjepa eval's command line: flags land in the options and the pre-trai
   CHECK_FALSE(o.eval.ablation);
   CHECK(o.eval.end_to_end);
   CHECK(o.eval.heads.sequence_pooling.kind == PoolingKind::attentive);
+  CHECK(o.eval.heads.probe.stop_on_error);
+  CHECK_FALSE(o.eval.heads.sequence.stop_on_error);
   CHECK(o.out == "runs/x");
   CHECK(o.force);
   CHECK(o.command.starts_with("tjepa eval --seeds 4 5 "));
@@ -639,6 +641,7 @@ TEST_CASE("tjepa eval's command line: flags land in the options and the pre-trai
   const EvalOptions d = plain.resolve(2, none);
   CHECK(d.eval.to_json() == GraspEvalConfig{}.to_json());
   CHECK(d.eval.pretrain_cache.empty());
+  CHECK_FALSE(d.eval.heads.probe.stop_on_error);
   const char* bad[] = {"tjepa", "eval", "--sequence-pooling", "mean"};
   CLI::App app3;
   EvalCommand b;

@@ -454,6 +454,44 @@ TEST_CASE("train_head: learns regression and classes with early stopping and res
   CHECK_THROWS_AS(train_head(hr, f, reg, cfg), ConfigError);
 }
 
+TEST_CASE("train_head with stop_on_error: the validation top-1 error decides and the loss breaks ties") {
+  const int S = 160, L = 2, d = 12;
+  const auto [x, targets] = encoded_samples(S, L, d, 4);
+  FrozenFeatures<float> f(x, L, d);
+  const HeadTargets cls{0, 4, {}, targets.label, {}}, reg{2, 0, targets.value, {}, {}};
+  HeadTrainConfig cfg = train_config(12, 4, 16, 3e-3);
+  cfg.stop_on_error = true;
+  ProbeHead<float> head(d, 3, 0, 4, 1);
+  const HeadTrainResult r = train_head(head, f, cls, cfg);
+  REQUIRE(r.epochs() >= 2);
+  const ValidationSplit split = split_for_validation(S, cfg.validation_fraction, cfg.seed);
+  const auto n = static_cast<double>(split.validation.size());
+  // Each epoch's criterion: k wrong of n, plus a tie-break below one sample's worth.
+  std::vector<int> wrong;
+  for (double v : r.validation_loss) {
+    const int k = static_cast<int>(std::floor(v * n));
+    CHECK(v - k / n >= 0.0);
+    CHECK(v - k / n < 1.0 / (n + 1.0));
+    wrong.push_back(k);
+  }
+  CHECK(wrong[static_cast<std::size_t>(r.best_epoch)] == *std::ranges::min_element(wrong));
+  CHECK(wrong.front() > wrong[static_cast<std::size_t>(r.best_epoch)]);  // it learns
+  // The restored head: its errors on the validation samples are the best epoch's.
+  const std::vector<float> y = head_outputs(head, f, split.validation);
+  int k = 0;
+  for (std::size_t b = 0; b < split.validation.size(); ++b)
+    k += argmax(y.data() + b * 4, 4) != cls.label[static_cast<std::size_t>(split.validation[b])];
+  CHECK(k == wrong[static_cast<std::size_t>(r.best_epoch)]);
+  CHECK(head_validation(head, f, cls, split.validation, cfg) == doctest::Approx(r.best_validation).epsilon(1e-6));
+  // Without it, the criterion is the loss; a regression head ignores the flag.
+  HeadTrainConfig by_loss = cfg;
+  by_loss.stop_on_error = false;
+  CHECK(head_validation(head, f, cls, split.validation, by_loss) ==
+        doctest::Approx(head_objective(head, f, cls, split.validation, cfg.class_weight)).epsilon(1e-12));
+  ProbeHead<float> r1(d, 3, 2, 0, 2), r2(d, 3, 2, 0, 2);
+  CHECK(train_head(r1, f, reg, cfg).validation_loss == train_head(r2, f, reg, by_loss).validation_loss);
+}
+
 TEST_CASE("split_for_validation: random samples or contiguous blocks with gaps - disjoint and seeded") {
   const ValidationSplit r = split_for_validation(100, 0.2, 3);
   CHECK(r.validation.size() == 20u);

@@ -43,6 +43,10 @@ struct HeadTrainConfig {
   double weight_decay = 0.05;
   double class_weight = 1.0;         // weight of the cross-entropy against the regression MSE
   double clip_grad_norm = 10.0;
+  // Heads with classes: stop on the validation top-1 error (the loss breaking ties) instead of the
+  // validation loss. The cross-entropy of a few held-out episodes can rise while their accuracy
+  // still improves (confident mistakes on an atypical episode). Regression heads ignore it.
+  bool stop_on_error = false;
   std::uint64_t seed = 0;            // head init, split and data order
 
   void validate() const {
@@ -65,7 +69,7 @@ struct HeadTrainConfig {
 // The learning curve of one early-stopped training.
 struct HeadTrainResult {
   std::vector<double> train_loss;       // [epochs run] mean training loss per epoch
-  std::vector<double> validation_loss;  // [epochs run] validation loss after each epoch
+  std::vector<double> validation_loss;  // [epochs run] validation loss (the stopping criterion) after each epoch
   int best_epoch = -1;                  // 0-based epoch whose parameters were restored
   double best_validation = std::numeric_limits<double>::infinity();
   int epochs() const { return static_cast<int>(validation_loss.size()); }

@@ -120,6 +120,7 @@ struct GraspEvalConfig {
                        {"max_force_windows", tasks.max_force_windows}, {"max_pose_sequences", tasks.max_pose_sequences}}},
             {"heads", {{"probe_heads", heads.probe_heads}, {"max_epochs", heads.probe.max_epochs},
                        {"patience", heads.probe.patience}, {"probe_batch", heads.probe.batch}, {"lr", heads.probe.lr},
+                       {"object_stop_on_error", heads.probe.stop_on_error},
                        {"sequence_patience", heads.sequence.patience},
                        {"sequence_validation_blocks", heads.sequence.validation_blocks},
                        {"sequence_validation_gap", heads.sequence.validation_gap},

@@ -154,13 +154,11 @@ std::vector<T> head_outputs(const ProbeHead<T>& head, Features& features, std::s
   return y;
 }
 
-// The training loss (regression MSE on standardized targets + class_weight · cross-entropy) of
-// the head on samples ids.
-template <class T, class Features>
-double head_objective(const ProbeHead<T>& head, Features& features, const HeadTargets& targets,
-                      std::span<const std::int64_t> ids, double class_weight, int batch = 64) {
-  require<DataError>(!ids.empty(), "head_objective: no samples");
-  const std::vector<T> y = head_outputs(head, features, ids, batch);
+namespace detail {
+// The training loss of outputs y [ids, R + C] (head_outputs) against the targets of ids.
+template <class T>
+double head_objective_of(const ProbeHead<T>& head, const std::vector<T>& y, const HeadTargets& targets,
+                         std::span<const std::int64_t> ids, double class_weight) {
   const int R = head.regression, B = static_cast<int>(ids.size());
   std::vector<double> z(ids.size() * static_cast<std::size_t>(R));
   std::vector<int> lab(head.classes > 0 ? ids.size() : 0);
@@ -169,9 +167,39 @@ double head_objective(const ProbeHead<T>& head, Features& features, const HeadTa
     for (int a = 0; a < R; ++a) z[b * R + a] = head.scaler.standardize(targets.value[s * R + a], a);
     if (head.classes > 0) lab[b] = targets.label[s];
   }
-  const auto [f, ce] = detail::head_loss(y.data(), static_cast<std::size_t>(head.outputs()), z.data(), lab.data(), B, R,
-                                         head.classes, class_weight, static_cast<T*>(nullptr));
+  const auto [f, ce] = head_loss(y.data(), static_cast<std::size_t>(head.outputs()), z.data(), lab.data(), B, R,
+                                 head.classes, class_weight, static_cast<T*>(nullptr));
   return f + class_weight * ce;
+}
+}  // namespace detail
+
+// The training loss (regression MSE on standardized targets + class_weight · cross-entropy) of
+// the head on samples ids.
+template <class T, class Features>
+double head_objective(const ProbeHead<T>& head, Features& features, const HeadTargets& targets,
+                      std::span<const std::int64_t> ids, double class_weight, int batch = 64) {
+  require<DataError>(!ids.empty(), "head_objective: no samples");
+  return detail::head_objective_of(head, head_outputs(head, features, ids, batch), targets, ids, class_weight);
+}
+
+// What early stopping minimizes on the validation samples ids: the training loss, or, with
+// cfg.stop_on_error and a head with classes, the top-1 error rate e with the loss o breaking ties,
+// e + o / (1 + o) / (n + 1) for n samples: the tie-break stays below one sample's worth of error,
+// so a lower error always wins.
+template <class T, class Features>
+double head_validation(const ProbeHead<T>& head, Features& features, const HeadTargets& targets,
+                       std::span<const std::int64_t> ids, const HeadTrainConfig& cfg, int batch = 64) {
+  require<DataError>(!ids.empty(), "head_validation: no samples");
+  const std::vector<T> y = head_outputs(head, features, ids, batch);
+  const double o = detail::head_objective_of(head, y, targets, ids, cfg.class_weight);
+  if (!cfg.stop_on_error || head.classes == 0) return o;
+  const auto out = static_cast<std::size_t>(head.outputs());
+  std::size_t wrong = 0;
+  for (std::size_t b = 0; b < ids.size(); ++b)
+    wrong += argmax(y.data() + b * out + head.regression, head.classes) !=
+             targets.label[static_cast<std::size_t>(ids[b])];
+  const double n = static_cast<double>(ids.size());
+  return static_cast<double>(wrong) / n + (std::isfinite(o) ? o / (1.0 + o) : 1.0) / (n + 1.0);
 }
 
 // Trains head (and the features' encoder, if trainable) on samples 0..S−1 of targets with early
@@ -223,7 +251,7 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
     if (dxp) features.backward(dxp);
     return f + cfg.class_weight * ce;
   };
-  auto validate = [&] { return head_objective(head, features, targets, split.validation, cfg.class_weight); };
+  auto validate = [&] { return head_validation(head, features, targets, split.validation, cfg); };
   return train_with_early_stopping<T>(parts, split.fit, cfg, step, validate);
 }
 
