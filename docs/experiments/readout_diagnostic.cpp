@@ -16,7 +16,8 @@
 //   object ENCODER [SEED]   the object probe's learning curves at the protocol's limits, head seeds SEED*1000 + 0..2
 //                           (as tjepa eval's); STD=1: on standardize_channels'd embeddings; LR=x: another peak lr;
 //                           SPLIT=k: each head with the validation split and data order of head (i + k) mod 3;
-//                           ERR=1: early stopping on the validation top-1 error (HeadTrainConfig::stop_on_error)
+//                           ERR=1: early stopping on the validation top-1 error (HeadTrainConfig::stop_on_error);
+//                           PATIENCE=n, VFRAC=x: the patience and the validation share
 // ENCODER may be a --pretrain-cache file of tjepa eval (its parameters are under "encoder.").
 #include <tjepa/tjepa.hpp>
 #include <cstdio>
@@ -135,6 +136,8 @@ int main(int argc, char** argv) {
     HeadTrainConfig h = hc.probe;
     if (const char* lr = std::getenv("LR")) h.lr = std::atof(lr);
     if (std::getenv("ERR")) h.stop_on_error = true;
+    if (const char* v = std::getenv("PATIENCE")) h.patience = std::atoi(v);
+    if (const char* v = std::getenv("VFRAC")) h.validation_fraction = std::atof(v);
     // SPLIT=k: head i keeps its initialization but takes the validation split and data order of
     // head (i + k) mod 3.
     const std::uint64_t split = std::getenv("SPLIT") ? std::stoull(std::getenv("SPLIT")) : 0;
