@@ -18,6 +18,7 @@
 //                           SPLIT=k: each head with the validation split and data order of head (i + k) mod 3;
 //                           ERR=1: early stopping on the validation top-1 error (HeadTrainConfig::stop_on_error);
 //                           PATIENCE=n, VFRAC=x: the patience and the validation share
+// TRAIN_FRAMES=n (any mode): a longer or shorter labelled training recording
 // ENCODER may be a --pretrain-cache file of tjepa eval (its parameters are under "encoder.").
 #include <tjepa/tjepa.hpp>
 #include <cstdio>
@@ -29,6 +30,7 @@ int main(int argc, char** argv) {
   GraspEvalConfig c;
   c.train.precision = "bf16";
   c.train.steps = 3000;
+  if (const char* v = std::getenv("TRAIN_FRAMES")) c.train_frames = std::atoi(v);  // labelled training frames
   auto t0 = std::chrono::steady_clock::now();
   const GraspEvalData d = simulate_grasp_eval_data(c);
   const GraspTasks &tr = d.train_tasks, &te = d.test_tasks;
