@@ -64,9 +64,11 @@ struct GraspEvalConfig {
   std::uint64_t data_seed = 0;
   std::vector<std::uint64_t> seeds{0, 1, 2};  // pre-training seeds
   int head_seeds = 3;                         // heads per task and pre-training seed
-  // Frames of each recording (100 Hz; an episode is about 5 s): the unlabelled one is twice as long
-  // as the labelled training one, which holds about 12 episodes per object; the test one as many.
-  int baseline_frames = 300, pretrain_frames = 200000, train_frames = 100000, test_frames = 100000;
+  // Frames of each recording (100 Hz; an episode is about 5 s): 200 000 unlabelled (about 380
+  // episodes); 300 000 labelled for training, about 36 episodes per object, so that which episodes
+  // a head validates on does not decide what it learns (the tasks still take at most 1500 windows
+  // or 300 sequences, spread over the recording); 100 000 held out, about 12 episodes per object.
+  int baseline_frames = 300, pretrain_frames = 200000, train_frames = 300000, test_frames = 100000;
   GraspSimConfig sim;
   TrainConfig train = grasp_pretrain_config();  // Tactile-JEPA (and MAE's budget: steps, batch, schedule)
   double mae_mask_ratio = 0.75;

@@ -240,15 +240,15 @@ struct GraspHeadConfig {
   // episode overlap, so a split of windows or sequences puts near-copies on both sides and early
   // stopping follows the fit; contiguous blocks hold a few of the 16 objects only.
   // The heads' validation loss sits on a plateau for 10-20 epochs before it falls (the pooling has
-  // to become selective first): patience 20 waits it out, and the heads usually stop on their own
-  // before 100 epochs.
-  HeadTrainConfig probe{.max_epochs = 100, .patience = 20, .batch = 64, .lr = 1e-3};
+  // to become selective first): patience 20 waits it out. On the longer labelled recording the
+  // probes keep improving near 100 epochs, so their limit is 200 (they usually stop on their own).
+  HeadTrainConfig probe{.max_epochs = 200, .patience = 20, .batch = 64, .lr = 1e-3};
   HeadTrainConfig sequence{.max_epochs = 100, .patience = 20, .batch = 16, .lr = 1e-3};
   // End to end (the encoder trains with the head): the heads' limits, capped by these (every step
   // runs the encoder forward and backward: about 40 min per head seed for the three tasks on 2
   // cores at the grasp protocol's size). A cap below the heads' own is named in the row
   // (end_to_end_name): a few epochs end on the heads' plateau, before they learn.
-  int end_to_end_max_epochs = 100, end_to_end_patience = 20;
+  int end_to_end_max_epochs = 200, end_to_end_patience = 20;
   double end_to_end_drop_path = 0.0;
   // Frozen rows, if set: the heads read the embeddings standardized per channel
   // (standardize_channels, statistics of the training windows). Off by default, as the paper's
