@@ -568,7 +568,7 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK(end_to_end_name(o.eval.heads) == "end to end (at most 3 epochs, patience 2)");
   GraspHeadConfig impatient;
   impatient.end_to_end_patience = 2;  // the heads' epochs, a shorter patience: named too
-  CHECK(end_to_end_name(impatient) == "end to end (at most 100 epochs, patience 2)");
+  CHECK(end_to_end_name(impatient) == "end to end (at most 200 epochs, patience 2)");
   o.out = (t.path / "demo").string();
   o.eval.train.update(tiny_run("allegro"), "test");
   o.eval.train.drift_time_constant = 200;
