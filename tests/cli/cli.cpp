@@ -16,6 +16,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <regex>
 #include <sstream>
 #include <string>
 
@@ -581,10 +582,14 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   o.eval.heads.probe.max_epochs = o.eval.heads.sequence.max_epochs = 2;
   o.eval.heads.end_to_end_max_epochs = 1;
   o.eval.heads.probe_heads = 1;
-  o.quiet = true;
   std::ostringstream out;
   REQUIRE(run_eval(o, out) == 0);
   const std::string s = out.str();
+  // A progress line per head says where it stopped: best epoch and epochs run, within the limits.
+  for (const char* line : {R"(\] +Tactile-JEPA, frozen: object top-1 [0-9.]+ % \(best epoch [12] of [12]\))",
+                           R"(\] +random init, frozen: force RMSE [0-9.]+ N \(best epoch [12] of [12]\))",
+                           R"(\] +end to end: pose x/y/θ RMSE .* deg \(best epoch 1 of 1\))"})
+    CHECK_MESSAGE(std::regex_search(s, std::regex(line)), line);
   for (const char* row : {"| constant |", "| ridge (pad sums + taxel means) |", "| random init, frozen |",
                           "| end to end (at most 1 epoch, patience 2) |", "| Tactile-JEPA, frozen |"})
     CHECK(s.find(row) != std::string::npos);

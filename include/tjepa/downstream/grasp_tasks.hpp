@@ -283,6 +283,10 @@ template <class T, class MakeFeatures>
 GraspScores score_heads(MakeFeatures&& features_for, const GraspTasks& tr, const GraspTasks& te,
                         const GraspHeadConfig& c, bool end_to_end, std::uint64_t seed, const GraspProgress& progress = {}) {
   GraspScores s{};
+  // How far a head trained: whether it stopped on its own or at the epoch limit shows here.
+  auto epochs_note = [](const HeadTrainResult& r) {
+    return " (best epoch " + std::to_string(r.best_epoch + 1) + " of " + std::to_string(r.epochs()) + ")";
+  };
   auto limits = [&](HeadTrainConfig h) {
     h.seed = seed;
     if (end_to_end) {
@@ -300,22 +304,22 @@ GraspScores score_heads(MakeFeatures&& features_for, const GraspTasks& tr, const
     RowFeatures ftr(*train, tr.object_rows), fte(*test, te.object_rows);
     ProbeHead<T> head(train->dim(), c.probe_heads, 0, tr.object.classes, seed ^ 0x6f626a656374ull, 0,  // "object"
                       pooling(c.probe_pooling, train->tokens()));
-    train_head(head, ftr, tr.object, limits(c.probe));
+    const HeadTrainResult fit = train_head(head, ftr, tr.object, limits(c.probe));
     const std::vector<T> y = predict_head(head, fte, fte.size());
     std::vector<int> cls(static_cast<std::size_t>(fte.size()));
     for (std::size_t i = 0; i < cls.size(); ++i) cls[i] = argmax(y.data() + i * head.outputs(), head.outputs());
     score_object(s, cls, te);
-    if (progress) progress("object top-1 " + std::to_string(s[kObjectAccuracy]) + " %");
+    if (progress) progress("object top-1 " + std::to_string(s[kObjectAccuracy]) + " %" + epochs_note(fit));
   }
   {
     auto [train, test] = features_for(1);
     RowFeatures ftr(*train, tr.force_rows), fte(*test, te.force_rows);
     ProbeHead<T> head(train->dim(), c.probe_heads, 3, 0, seed ^ 0x666f726365ull, 0,  // "force"
                       pooling(c.probe_pooling, train->tokens()));
-    train_head(head, ftr, tr.force, limits(c.probe));
+    const HeadTrainResult fit = train_head(head, ftr, tr.force, limits(c.probe));
     const std::vector<T> y = predict_head(head, fte, fte.size());
     score_force(s, y.data(), 3, te);
-    if (progress) progress("force RMSE " + std::to_string(s[kForceRmse]) + " N");
+    if (progress) progress("force RMSE " + std::to_string(s[kForceRmse]) + " N" + epochs_note(fit));
   }
   {
     auto [train, test] = features_for(2);
@@ -326,11 +330,11 @@ GraspScores score_heads(MakeFeatures&& features_for, const GraspTasks& tr, const
     hc.outputs = 3;
     hc.pooling = pooling(c.sequence_pooling, train->tokens());
     SequenceModel<T> model(hc, seed ^ 0x706f7365ull);  // "pose"
-    train_sequence_head(model, *train, tr.pose, limits(c.sequence));
+    const HeadTrainResult fit = train_sequence_head(model, *train, tr.pose, limits(c.sequence));
     const std::vector<T> y = predict_sequence_head(model, *test, te.pose);
     score_pose(s, y.data(), 3, te);
     if (progress) progress("pose x/y/θ RMSE " + std::to_string(s[kPoseX]) + " / " + std::to_string(s[kPoseY]) + " cm / " +
-                           std::to_string(s[kPoseTheta]) + " deg");
+                           std::to_string(s[kPoseTheta]) + " deg" + epochs_note(fit));
   }
   return s;
 }
