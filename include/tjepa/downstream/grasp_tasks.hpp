@@ -240,8 +240,8 @@ struct GraspHeadConfig {
   // episode overlap, so a split of windows or sequences puts near-copies on both sides and early
   // stopping follows the fit; contiguous blocks hold a few of the 16 objects only.
   // The heads' validation loss sits on a plateau for 10-20 epochs before it falls (the pooling has
-  // to become selective first): patience 20 waits it out. On the longer labelled recording the
-  // probes keep improving near 100 epochs, so their limit is 200 (they usually stop on their own).
+  // to become selective first): patience 20 waits it out, and the probes' limit of 200 epochs
+  // leaves room for a slow fall after it (docs/evaluation.md, fifteenth session).
   HeadTrainConfig probe{.max_epochs = 200, .patience = 20, .batch = 64, .lr = 1e-3};
   HeadTrainConfig sequence{.max_epochs = 100, .patience = 20, .batch = 16, .lr = 1e-3};
   // End to end (the encoder trains with the head): the heads' limits, capped by these (every step

@@ -193,13 +193,12 @@ double head_validation(const ProbeHead<T>& head, Features& features, const HeadT
   const std::vector<T> y = head_outputs(head, features, ids, batch);
   const double o = detail::head_objective_of(head, y, targets, ids, cfg.class_weight);
   if (!cfg.stop_on_error || head.classes == 0) return o;
-  const auto out = static_cast<std::size_t>(head.outputs());
-  std::size_t wrong = 0;
-  for (std::size_t b = 0; b < ids.size(); ++b)
-    wrong += argmax(y.data() + b * out + head.regression, head.classes) !=
-             targets.label[static_cast<std::size_t>(ids[b])];
+  std::vector<int> lab(ids.size());
+  for (std::size_t b = 0; b < ids.size(); ++b) lab[b] = targets.label[static_cast<std::size_t>(ids[b])];
   const double n = static_cast<double>(ids.size());
-  return static_cast<double>(wrong) / n + (std::isfinite(o) ? o / (1.0 + o) : 1.0) / (n + 1.0);
+  const double wrong = n - std::round(n * accuracy(y.data() + head.regression, static_cast<std::size_t>(head.outputs()),
+                                                   lab.data(), static_cast<int>(ids.size()), head.classes));
+  return wrong / n + (std::isfinite(o) ? o / (1.0 + o) : 1.0) / (n + 1.0);
 }
 
 // Trains head (and the features' encoder, if trainable) on samples 0..S−1 of targets with early
