@@ -207,7 +207,9 @@ int main(int argc, char** argv) {
       const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y = predict(m, pooled(fte, te.force_rows, pad));
       GraspScores sc{};
       score_force(sc, y.data(), 3, te);
-      std::printf("force ridge on %s: RMSE %.3f N\n", pad >= 0 ? "label pad mean" : "all pad means", sc[kForceRmse]);
+      std::printf("force ridge on %s: RMSE %.3f N (shear u %.3f, shear v %.3f, normal %.3f)\n",
+                  pad >= 0 ? "label pad mean" : "all pad means", sc[kForceRmse], sc[kForceRmseU], sc[kForceRmseV],
+                  sc[kForceRmseN]);
     }
     {
       const RidgeModel m = fit_ridge_classifier(pooled(ftr, tr.object_rows, -1), tr.object.label, tr.object.classes, lambdas, 0.2, 0, tr.object.groups);
