@@ -62,12 +62,13 @@ std::pair<int, int> head_stop(const std::string& log, const std::string& head_ta
     const auto at = line.find_first_not_of(' ', stamp + 1);
     if (at == std::string::npos || line.compare(at, head_task.size(), head_task) != 0) continue;
     const auto value = at + head_task.size();
-    const auto tail = line.rfind(" " + unit + " (best epoch ");
+    const std::string marker = " " + unit + " (best epoch ";
+    const auto tail = line.rfind(marker);
     if (tail == std::string::npos || tail <= value || !std::isdigit(static_cast<unsigned char>(line[value])))
       return {0, 0};
     int best = 0, epochs = 0;
     char close = 0;
-    std::istringstream t(line.substr(tail + unit.size() + 14));
+    std::istringstream t(line.substr(tail + marker.size()));
     std::string of;
     if (!(t >> best >> of >> epochs >> close) || of != "of" || close != ')' || t.peek() != EOF) return {0, 0};
     return {best, epochs};
