@@ -8,6 +8,8 @@
 //   pretrain FILE [SEED]    Tactile-JEPA, 3000 bf16 steps, grasp_pretrain_config(); saves the target encoder
 //   rawpose x               ridge on raw window features: pad sums, taxel means, both
 //   diag ENCODER            ridge on pad-mean embeddings (label pad only, all pads) for each task
+//   context                 ridge from raw window features to the label pad's force: the label pad's own,
+//                           every other pad's, all (how much of its shear the rest of the hand predicts)
 //   pcapose ENCODER         ridge on per-token residuals projected on k = 1, 3, 8 principal directions
 //   seq ENCODER             the sequence head's learning curves (patience 5, 20; lr 3e-4), head seeds 0, 1
 //                           (POOL=taxel K=3: the taxel pooling; QUICK=1: the protocol's limits at head
@@ -36,18 +38,21 @@ int main(int argc, char** argv) {
   const GraspTasks &tr = d.train_tasks, &te = d.test_tasks;
   const int axes = d.pretrain->axes();
   const TaxelGraph& graph = d.skin.graph;
+  // The ridge baseline's features (pad sums, then taxel means) of the task rows asked for.
+  auto raw_features = [&](bool test, std::span<const std::int64_t> rows) {
+    const GraspTasks& t = test ? te : tr;
+    std::vector<std::int64_t> ids;
+    for (std::int64_t r : rows) ids.push_back(t.windows[static_cast<std::size_t>(r)]);
+    WindowBatch wb;
+    (test ? *d.test : *d.train).gather(ids, wb);
+    return window_features(wb, d.skin.layout.group, d.skin.layout.num_groups());
+  };
   if (mode == "rawpose") {
-    const auto& group = d.skin.layout.group;
     const int G = d.skin.layout.num_groups();
     for (int which = 0; which < 3; ++which) {
       auto features = [&](bool test, std::span<const std::int64_t> rows) {
-        const GraspTasks& t = test ? te : tr;
-        std::vector<std::int64_t> ids;
-        for (std::int64_t r : rows) ids.push_back(t.windows[static_cast<std::size_t>(r)]);
-        WindowBatch wb;
-        (test ? *d.test : *d.train).gather(ids, wb);
-        Eigen::MatrixXd f = window_features(wb, group, G);
-        const int m = wb.axes;
+        Eigen::MatrixXd f = raw_features(test, rows);
+        const int m = axes;
         if (which == 0) return Eigen::MatrixXd(f.leftCols(G * m));
         if (which == 1) return Eigen::MatrixXd(f.rightCols(f.cols() - G * m));
         return f;
@@ -55,6 +60,44 @@ int main(int argc, char** argv) {
       GraspScores sc = score_ridge_on(features, tr, te, 0);
       std::printf("%s: object %.1f force %.3f pose x %.3f y %.3f th %.2f\n", which == 0 ? "pad sums" : which == 1 ? "taxel means" : "both",
                   sc[kObjectAccuracy], sc[kForceRmse], sc[kPoseX], sc[kPoseY], sc[kPoseTheta]);
+    }
+    return 0;
+  }
+  if (mode == "context") {
+    // How much of the label pad's force the raw windows predict linearly: ridge on the label pad's
+    // own features (its pad sums and taxel means), on every other pad's, and on all of them.
+    const auto& group = d.skin.layout.group;
+    const int G = d.skin.layout.num_groups(), N = static_cast<int>(group.size()), m = axes;
+    const int own = c.tasks.label_pad;
+    auto targets = [](const std::vector<float>& v) {
+      Eigen::MatrixXd y(static_cast<Eigen::Index>(v.size() / 3), 3);
+      for (Eigen::Index i = 0; i < y.rows(); ++i)
+        for (int a = 0; a < 3; ++a) y(i, a) = v[static_cast<std::size_t>(i) * 3 + a];
+      return y;
+    };
+    for (int which = 0; which < 3; ++which) {  // 0: own pad, 1: other pads, 2: all
+      std::vector<Eigen::Index> cols;
+      auto keep = [&](int pad) { return which == 2 || (which == 0) == (pad == own); };
+      for (int g = 0; g < G; ++g)
+        if (keep(g))
+          for (int a = 0; a < m; ++a) cols.push_back(Eigen::Index(g) * m + a);
+      for (int n = 0; n < N; ++n)
+        if (keep(group[n]))
+          for (int a = 0; a < m; ++a) cols.push_back(Eigen::Index(G) * m + Eigen::Index(n) * m + a);
+      auto features = [&](bool test, std::span<const std::int64_t> rows) {
+        const Eigen::MatrixXd f = raw_features(test, rows);
+        Eigen::MatrixXd out(f.rows(), Eigen::Index(cols.size()));
+        for (std::size_t j = 0; j < cols.size(); ++j) out.col(Eigen::Index(j)) = f.col(cols[j]);
+        return out;
+      };
+      static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
+      const RidgeModel rm = fit_ridge(features(false, tr.force_rows), targets(tr.force.value), lambdas, 0.2, 0, tr.force.groups);
+      const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y = predict(rm, features(true, te.force_rows));
+      GraspScores sc{};
+      score_force(sc, y.data(), 3, te);
+      std::printf("force ridge on raw %s (%zu features): RMSE %.3f N (shear u %.3f, shear v %.3f, normal %.3f)\n",
+                  which == 0 ? "label pad" : which == 1 ? "other pads" : "all pads", cols.size(), sc[kForceRmse],
+                  sc[kForceRmseU], sc[kForceRmseV], sc[kForceRmseN]);
     }
     return 0;
   }

@@ -363,7 +363,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
     return model;
   };
 
-  if (true) {
+  {  // the baselines without an encoder
     const auto t = clock::now();
     row(res.main, "constant").runs.assign(c.seeds.size(), {score_constant(tr, te)});
     say("constant: done");
