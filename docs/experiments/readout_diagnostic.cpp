@@ -69,12 +69,6 @@ int main(int argc, char** argv) {
     const auto& group = d.skin.layout.group;
     const int G = d.skin.layout.num_groups(), N = static_cast<int>(group.size()), m = axes;
     const int own = c.tasks.label_pad;
-    auto targets = [](const std::vector<float>& v) {
-      Eigen::MatrixXd y(static_cast<Eigen::Index>(v.size() / 3), 3);
-      for (Eigen::Index i = 0; i < y.rows(); ++i)
-        for (int a = 0; a < 3; ++a) y(i, a) = v[static_cast<std::size_t>(i) * 3 + a];
-      return y;
-    };
     for (int which = 0; which < 3; ++which) {  // 0: own pad, 1: other pads, 2: all
       std::vector<Eigen::Index> cols;
       auto keep = [&](int pad) { return which == 2 || (which == 0) == (pad == own); };
@@ -90,11 +84,7 @@ int main(int argc, char** argv) {
         for (std::size_t j = 0; j < cols.size(); ++j) out.col(Eigen::Index(j)) = f.col(cols[j]);
         return out;
       };
-      static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
-      const RidgeModel rm = fit_ridge(features(false, tr.force_rows), targets(tr.force.value), lambdas, 0.2, 0, tr.force.groups);
-      const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> y = predict(rm, features(true, te.force_rows));
-      GraspScores sc{};
-      score_force(sc, y.data(), 3, te);
+      const GraspScores sc = score_ridge_on(features, tr, te, 0);  // the force task's fit is the one read here
       std::printf("force ridge on raw %s (%zu features): RMSE %.3f N (shear u %.3f, shear v %.3f, normal %.3f)\n",
                   which == 0 ? "label pad" : which == 1 ? "other pads" : "all pads", cols.size(), sc[kForceRmse],
                   sc[kForceRmseU], sc[kForceRmseV], sc[kForceRmseN]);
