@@ -10,7 +10,7 @@
 #include "../../examples/cli/parse.hpp"
 #include <tjepa/sensors/skin_from_coordinates.hpp>
 
-#include "../support/temp_dir.hpp"
+#include "../support/files.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -27,14 +27,8 @@ using namespace tjepa::cli;
 
 namespace {
 
+using tjepa_test::read_file;
 using tjepa_test::TempDir;
-
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 // Files under dir, recursively (to check that nothing, not even a temporary, is left).
 int count_files(const fs::path& dir) {
@@ -94,7 +88,7 @@ TEST_CASE("layout: summary of the built-in Allegro hand / as text and JSON / and
   CHECK(j["groups"] == 18);
   CHECK(j["parts"] == 1);
   CHECK(j["components"] == 1);
-  const std::string svg = read_text(o.svg);
+  const std::string svg = read_file(o.svg);
   CHECK(svg.starts_with("<svg"));
   CHECK(svg.find("</svg>") != std::string::npos);
   // Without --force an existing SVG is not overwritten, and the command says so.
@@ -183,10 +177,10 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
   REQUIRE(run_pretrain(po, out) == 0);
   const fs::path ck = t.path / "run" / "checkpoint.safetensors";
   REQUIRE(fs::exists(ck));
-  const std::string log = read_text(t.path / "run" / "log.csv");
+  const std::string log = read_file(t.path / "run" / "log.csv");
   CHECK(log.starts_with("step,loss,"));
   CHECK(std::count(log.begin(), log.end(), '\n') == 1 + 3);  // header + one row per step
-  CHECK(read_text(t.path / "run" / "loss.svg").starts_with("<svg"));
+  CHECK(read_file(t.path / "run" / "loss.svg").starts_with("<svg"));
   CHECK(count_files(t.path / "run") == 3);  // no temporaries left
 
   // The checkpoint restores the run's config, the model and the fitted preprocessing.
@@ -216,7 +210,7 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
     pb.quiet = true;
     std::ostringstream pout;
     REQUIRE(run_probe(pb, pout) == 0);
-    const auto j = nlohmann::json::parse(read_text(pb.out));
+    const auto j = nlohmann::json::parse(read_file(pb.out));
     REQUIRE(j["results"].size() == 2);
     for (const auto& r : j["results"]) {
       CHECK(r["indenter_accuracy"].get<double>() >= 0.0);
@@ -288,7 +282,7 @@ TEST_CASE("resume across programs: tjepa pretrain to a user Trainer and back giv
   po.quiet = true;
   auto losses = [](const fs::path& log) {  // the loss column of a log.csv, as written
     std::vector<std::string> v;
-    std::istringstream in(read_text(log));
+    std::istringstream in(read_file(log));
     std::string line;
     std::getline(in, line);
     while (std::getline(in, line)) v.push_back(line.substr(line.find(',') + 1, line.find(',', line.find(',') + 1) - line.find(',') - 1));
@@ -625,7 +619,7 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
                           "| end to end (at most 1 epoch, patience 2) |", "| Tactile-JEPA, frozen |"})
     CHECK(s.find(row) != std::string::npos);
   CHECK(s.find("MAE") == std::string::npos);
-  const auto j = nlohmann::json::parse(read_text(t.path / "demo" / "results.json"));
+  const auto j = nlohmann::json::parse(read_file(t.path / "demo" / "results.json"));
   CHECK(j["main"]["rows"].size() == 5);
   CHECK(s.find("Linear read-out") != std::string::npos);
   CHECK(j["linear"]["rows"].size() == 5);  // ridge; random init and Tactile-JEPA, each on pad means and token components

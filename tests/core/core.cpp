@@ -6,6 +6,8 @@
 #include <tjepa/core/detail/vendor.hpp>
 #include <tjepa/tjepa.hpp>
 
+#include "../support/files.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <csignal>
@@ -42,11 +44,6 @@ struct AtomicDir {
     return v;
   }
 };
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
 
 }  // namespace
 
@@ -173,7 +170,7 @@ TEST_SUITE("core") {
                                                          throw std::runtime_error("writer gave up");
                                                        }),
                          "writer gave up", std::runtime_error);
-    CHECK(slurp(p) == "old");
+    CHECK(tjepa_test::read_file(p) == "old");
     CHECK(dir.names() == std::vector<std::string>{"out.bin"});
     CHECK_THROWS_WITH_AS(tjepa::write_file_atomic(dir.path / "no_such_dir" / "x", "y"),
                          doctest::Contains("cannot create a temporary file"), tjepa::FileError);
@@ -213,7 +210,7 @@ TEST_SUITE("core") {
     int status = 0;
     REQUIRE(::waitpid(child, &status, 0) == child);
     CHECK(WIFSIGNALED(status));
-    CHECK(slurp(p) == "old");
+    CHECK(tjepa_test::read_file(p) == "old");
     const auto stale = tjepa::stale_temporaries(p);
     REQUIRE(stale.size() == 1);
     CHECK(fs::file_size(stale[0]) == (1u << 20));
@@ -222,7 +219,7 @@ TEST_SUITE("core") {
     tjepa::write_file_atomic(dir.path / "other", "o");
     CHECK(dir.names().size() == 3);
     tjepa::write_file_atomic(p, "new");
-    CHECK(slurp(p) == "new");
+    CHECK(tjepa_test::read_file(p) == "new");
     CHECK(dir.names() == std::vector<std::string>{"ckpt.safetensors", "other"});
     CHECK(tjepa::stale_temporaries(p).empty());
   }
@@ -235,9 +232,9 @@ TEST_SUITE("core") {
     const fs::path p = dir.path / "out";
     fs::create_symlink(victim, p);
     tjepa::write_file_atomic(p, "data");
-    CHECK(slurp(victim) == "precious");
+    CHECK(tjepa_test::read_file(victim) == "precious");
     CHECK_FALSE(fs::is_symlink(fs::symlink_status(p)));
-    CHECK(slurp(p) == "data");
+    CHECK(tjepa_test::read_file(p) == "data");
     // Symlinks planted at the old predictable temporary names and at stale-looking names are not
     // followed, and a planted link is not removed as a stale temporary.
     const fs::path q = dir.path / "q";
@@ -245,8 +242,8 @@ TEST_SUITE("core") {
     const std::string prefix = ".q.tjepa-tmp.";
     for (const auto& n : dir.names()) CHECK(n.find(prefix) == std::string::npos);
     tjepa::write_file_atomic(q, "q data");
-    CHECK(slurp(victim) == "precious");
-    CHECK(slurp(q) == "q data");
+    CHECK(tjepa_test::read_file(victim) == "precious");
+    CHECK(tjepa_test::read_file(q) == "q data");
   }
 
   TEST_CASE("write_file_atomic: a full disk throws a FileError naming the file and leaves no temporary") {
@@ -270,7 +267,7 @@ TEST_SUITE("core") {
     std::signal(SIGXFSZ, old_handler);
     CHECK(what.find("big.npy") != std::string::npos);
     CHECK(what.find("failed") != std::string::npos);
-    CHECK(slurp(p) == "old");
+    CHECK(tjepa_test::read_file(p) == "old");
     CHECK(dir.names() == std::vector<std::string>{"big.npy"});
   }
 
@@ -278,7 +275,7 @@ TEST_SUITE("core") {
     AtomicDir dir;
     const fs::path p = dir.path / std::string(250, 'n');
     tjepa::write_file_atomic(p, "long");
-    CHECK(slurp(p) == "long");
+    CHECK(tjepa_test::read_file(p) == "long");
     CHECK(dir.names() == std::vector<std::string>{std::string(250, 'n')});
   }
 
@@ -292,7 +289,7 @@ TEST_SUITE("core") {
     std::thread t1(run, std::cref(a)), t2(run, std::cref(b));
     t1.join();
     t2.join();
-    const std::string got = slurp(p);
+    const std::string got = tjepa_test::read_file(p);
     CHECK((got == a || got == b));
     CHECK(dir.names() == std::vector<std::string>{"shared"});
   }

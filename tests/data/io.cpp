@@ -4,7 +4,7 @@
 
 #include <tjepa/tjepa.hpp>
 
-#include "../support/temp_dir.hpp"
+#include "../support/files.hpp"
 
 #include <cmath>
 #include <cstdint>

@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "../model/gradcheck.hpp"
-#include "../support/temp_dir.hpp"
+#include "../support/files.hpp"
 
 using namespace tjepa;
 
@@ -990,7 +990,7 @@ GraspEvalConfig toy_grasp_eval_config() {
 
 }  // namespace
 
-TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same table twice") {
+TEST_CASE("run_grasp_eval at toy size: every row and the ablation - seed 1 alone gives the same seed-1 tables") {
   GraspEvalConfig c = toy_grasp_eval_config();
   int lines = 0;
   const GraspEvalResult r = run_grasp_eval(c, [&](const std::string&) { ++lines; });
@@ -1038,36 +1038,6 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
       }
     }
   }
-  {
-    // Standardized features for the frozen rows' heads, the taxel pooling for the probes and the
-    // attentive one for the sequence head (the defaults the other way round): the same encoders,
-    // so the same linear read-outs (they read the raw embeddings); the frozen rows' heads read
-    // other inputs.
-    GraspEvalConfig cs = c;
-    cs.seeds = {0};
-    cs.end_to_end = cs.mae = cs.ablation = false;
-    cs.heads.standardize_features = true;
-    cs.heads.probe_pooling.kind = PoolingKind::taxel;
-    cs.heads.sequence_pooling.kind = PoolingKind::attentive;
-    const GraspEvalResult s = run_grasp_eval(cs);
-    REQUIRE(s.main.rows.size() == 4);
-    REQUIRE(s.linear.rows.size() == 5);
-    CHECK(s.main.rows[2].name == "random init, frozen");
-    CHECK(s.main.rows[3].name == "Tactile-JEPA, frozen");
-    CHECK(s.linear.rows[3].name == "Tactile-JEPA: pad means");
-    for (std::size_t i : {1, 2}) CHECK(s.linear.rows[i].runs.front() == r.linear.rows[i].runs.front());  // random init
-    for (std::size_t i : {3, 4}) CHECK(s.linear.rows[i].runs.front() == r.linear.rows[i + 2].runs.front());  // Tactile-JEPA
-    CHECK(s.main.rows[2].runs.front() != r.main.rows[2].runs.front());
-    CHECK(s.main.rows[3].runs.front() != r.main.rows[5].runs.front());
-    for (const EvalRow& row : s.main.rows)
-      for (const GraspScores& sc : row.runs.front())
-        for (double v : sc) CHECK(std::isfinite(v));
-    CHECK(cs.to_json()["heads"]["standardize_features"] == true);
-    CHECK(cs.to_json()["heads"]["sequence_pooling"] == "attentive");
-    CHECK(cs.to_json()["heads"]["probe_pooling"] == "taxel");
-    CHECK(c.to_json()["heads"]["sequence_pooling"] == "taxel");
-    CHECK(c.to_json()["heads"]["probe_pooling"] == "attentive");
-  }
   c.tasks.label_pad = 5;
   CHECK_THROWS_AS(run_grasp_eval(c), ConfigError);
   c.tasks.label_pad = c.sim.label_pad;
@@ -1083,11 +1053,42 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation and the same t
   CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("readout_components"), ConfigError);
 }
 
-TEST_CASE("run_grasp_eval with a pre-training cache: the same tables and pre-training read back and bad files named") {
+TEST_CASE("run_grasp_eval at toy size: standardized features and the other poolings read the same encoders") {
+  // Standardized features for the frozen rows' heads, the taxel pooling for the probes and the
+  // attentive one for the sequence head (the defaults the other way round): the same encoders,
+  // so the same linear read-outs (they read the raw embeddings); the frozen rows' heads read
+  // other inputs.
+  GraspEvalConfig c = toy_grasp_eval_config();
+  c.seeds = {0};
+  c.end_to_end = c.mae = c.ablation = false;
+  const GraspEvalResult r = run_grasp_eval(c);
+  GraspEvalConfig cs = c;
+  cs.heads.standardize_features = true;
+  cs.heads.probe_pooling.kind = PoolingKind::taxel;
+  cs.heads.sequence_pooling.kind = PoolingKind::attentive;
+  const GraspEvalResult s = run_grasp_eval(cs);
+  REQUIRE(r.main.rows.size() == 4);
+  REQUIRE(s.main.rows.size() == 4);
+  REQUIRE(s.linear.rows.size() == 5);
+  CHECK(s.main.rows[2].name == "random init, frozen");
+  CHECK(s.main.rows[3].name == "Tactile-JEPA, frozen");
+  CHECK(s.linear.rows[3].name == "Tactile-JEPA: pad means");
+  CHECK(s.linear.to_json() == r.linear.to_json());
+  for (std::size_t i : {2, 3}) CHECK(s.main.rows[i].runs.front() != r.main.rows[i].runs.front());
+  for (const EvalRow& row : s.main.rows)
+    for (const GraspScores& sc : row.runs.front())
+      for (double v : sc) CHECK(std::isfinite(v));
+  CHECK(cs.to_json()["heads"]["standardize_features"] == true);
+  CHECK(cs.to_json()["heads"]["sequence_pooling"] == "attentive");
+  CHECK(cs.to_json()["heads"]["probe_pooling"] == "taxel");
+  CHECK(c.to_json()["heads"]["sequence_pooling"] == "taxel");
+  CHECK(c.to_json()["heads"]["probe_pooling"] == "attentive");
+}
+
+TEST_CASE("run_grasp_eval with a pre-training cache: the tables and pre-training read back and bad files named") {
   GraspEvalConfig c = toy_grasp_eval_config();
   c.seeds = {0};
   c.random = c.end_to_end = false;  // no pre-training in these rows
-  const GraspEvalResult plain = run_grasp_eval(c);
   const tjepa_test::TempDir dir("pretrain_cache");
   c.pretrain_cache = (dir / "cache").string();
   auto files = [&] {
@@ -1096,14 +1097,7 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the same tables and pre-tra
     std::sort(f.begin(), f.end());
     return f;
   };
-  auto same_tables = [&](const GraspEvalResult& r) {
-    CHECK(r.main.to_json() == plain.main.to_json());
-    CHECK(r.ablation.to_json() == plain.ablation.to_json());
-    CHECK(r.linear.to_json() == plain.linear.to_json());
-    CHECK(r.ablation_linear.to_json() == plain.ablation_linear.to_json());
-  };
   const GraspEvalResult first = run_grasp_eval(c);  // pre-trains and writes
-  same_tables(first);
   const auto written = files();
   REQUIRE(written.size() == 6);  // Tactile-JEPA, MAE and the 4 mask variants at seed 0
   auto written_as = [&](const std::string& prefix) {
@@ -1121,7 +1115,10 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the same tables and pre-tra
 
   std::vector<std::string> lines;
   const GraspEvalResult second = run_grasp_eval(c, [&](const std::string& l) { lines.push_back(l); });
-  same_tables(second);
+  CHECK(second.main.to_json() == first.main.to_json());
+  CHECK(second.ablation.to_json() == first.ablation.to_json());
+  CHECK(second.linear.to_json() == first.linear.to_json());
+  CHECK(second.ablation_linear.to_json() == first.ablation_linear.to_json());
   CHECK(files() == written);
   REQUIRE(second.info["pretraining"].size() == 6);
   for (std::size_t i = 0; i < 6; ++i) {
@@ -1159,10 +1156,10 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the same tables and pre-tra
   CHECK(restored.info["pretraining"][0].contains("cached"));
   REQUIRE(restored.main.rows.size() == 2);  // constant, Tactile-JEPA
   CHECK(restored.main.rows[1].name == "Tactile-JEPA, frozen");
-  const auto plain_jepa = std::find_if(plain.main.rows.begin(), plain.main.rows.end(),
+  const auto first_jepa = std::find_if(first.main.rows.begin(), first.main.rows.end(),
                                        [](const EvalRow& row) { return row.name == "Tactile-JEPA, frozen"; });
-  REQUIRE(plain_jepa != plain.main.rows.end());
-  CHECK(restored.main.rows[1].runs == plain_jepa->runs);
+  REQUIRE(first_jepa != first.main.rows.end());
+  CHECK(restored.main.rows[1].runs == first_jepa->runs);
 
   // The fingerprint sees the data: another data seed, another fingerprint.
   const GraspEvalData d0 = simulate_grasp_eval_data(c);

@@ -4,6 +4,8 @@
 // Named here as well, so each module this file tests is traceable.
 #include <tjepa/graph/spectral_positions.hpp>
 
+#include "../support/files.hpp"
+
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -21,14 +23,6 @@ std::size_t count(const std::string& s, const std::string& what) {
   std::size_t n = 0;
   for (auto p = s.find(what); p != std::string::npos; p = s.find(what, p + 1)) ++n;
   return n;
-}
-
-
-std::string slurp(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream os;
-  os << in.rdbuf();
-  return os.str();
 }
 
 }  // namespace
@@ -152,7 +146,7 @@ TEST_SUITE("graph") {
       std::filesystem::create_directories(doc.parent_path());
       tjepa::write_svg(doc, tjepa::layouts::allegro_xela(), o);
     }
-    CHECK(slurp(doc) == svg);
+    CHECK(tjepa_test::read_file(doc) == svg);
   }
 
   TEST_CASE("DECO-50 grouping: 264 tokens per hand - 528 for two - sizes 4 and 5 - lifted group graph") {

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "../support/files.hpp"
 #include "check_masks.hpp"
 
 using namespace masks_test;
@@ -56,11 +57,6 @@ void check_many(const tjepa::MaskCollator& col, int batches, int B, std::uint64_
   }
   CHECK(never_local == 0);
   CHECK(never_global == 0);
-}
-
-std::string file_text(const std::filesystem::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
 }
 
 }  // namespace
@@ -208,6 +204,6 @@ TEST_SUITE("masks") {
       std::filesystem::create_directories(doc.parent_path());
       tjepa::write_svg(doc, skin, o);
     }
-    CHECK(file_text(doc) == svg);
+    CHECK(tjepa_test::read_file(doc) == svg);
   }
 }

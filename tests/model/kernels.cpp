@@ -51,7 +51,7 @@ std::vector<GemmOperands> gemm_cases(std::initializer_list<std::array<int, 3>> s
 
 // max |a - b| / max(1, max |b|)
 template <class T>
-double max_rel_diff(const std::vector<T>& a, const std::vector<T>& b) {
+double max_scaled_diff(const std::vector<T>& a, const std::vector<T>& b) {
   double d = 0, s = 1;
   for (std::size_t i = 0; i < a.size(); ++i) {
     d = std::max(d, std::abs(double(a[i]) - double(b[i])));
@@ -98,53 +98,53 @@ TEST_SUITE("nn") {
       std::vector<T> y1(n), y2(n), m1(M), m2(M), r1(M), r2(M);
       kernels::ref::layer_norm_forward(y1.data(), m1.data(), r1.data(), x.data(), w.data(), b.data(), M, C, T(1e-6));
       kernels::layer_norm_forward(y2.data(), m2.data(), r2.data(), x.data(), w.data(), b.data(), M, C, T(1e-6));
-      CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
-      CHECK(max_rel_diff(r2, r1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(y2, y1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(r2, r1) < simd_tolerance<T>());
       std::vector<T> dx1(n, T(0.5)), dx2(n, T(0.5)), dw1(C, T(0)), dw2(C, T(0)), db1(C, T(0)), db2(C, T(0));
       kernels::ref::layer_norm_backward(dx1.data(), dw1.data(), db1.data(), g.data(), x.data(), w.data(), m1.data(), r1.data(), M, C);
       kernels::layer_norm_backward(dx2.data(), dw2.data(), db2.data(), g.data(), x.data(), w.data(), m1.data(), r1.data(), M, C);
-      CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
-      CHECK(max_rel_diff(dw2, dw1) < simd_tolerance<T>());
-      CHECK(max_rel_diff(db2, db1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(dx2, dx1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(dw2, dw1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(db2, db1) < simd_tolerance<T>());
       // GELU, and fc1's fused bias + GELU
       kernels::ref::gelu_forward(y1.data(), x.data(), n);
       kernels::gelu_forward(y2.data(), x.data(), n);
-      CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(y2, y1) < simd_tolerance<T>());
       std::fill(dx1.begin(), dx1.end(), T(0.5));
       std::fill(dx2.begin(), dx2.end(), T(0.5));
       kernels::ref::gelu_backward(dx1.data(), g.data(), x.data(), n);
       kernels::gelu_backward(dx2.data(), g.data(), x.data(), n);
-      CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(dx2, dx1) < simd_tolerance<T>());
       std::vector<T> pre = x, xb(n);
       for (int m = 0; m < M; ++m)
         for (int c = 0; c < C; ++c) xb[std::size_t(m) * C + c] = x[std::size_t(m) * C + c] + b[std::size_t(c)];
       kernels::bias_gelu_forward(y2.data(), pre.data(), b.data(), M, C);
       kernels::ref::gelu_forward(y1.data(), xb.data(), n);
-      CHECK(max_rel_diff(pre, xb) < simd_tolerance<T>());
-      CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(pre, xb) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(y2, y1) < simd_tolerance<T>());
       // Softmax
       kernels::ref::softmax_forward(y1.data(), x.data(), M, C);
       kernels::softmax_forward(y2.data(), x.data(), M, C);
-      CHECK(max_rel_diff(y2, y1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(y2, y1) < simd_tolerance<T>());
       std::fill(dx1.begin(), dx1.end(), T(0.5));
       std::fill(dx2.begin(), dx2.end(), T(0.5));
       kernels::ref::softmax_backward(dx1.data(), g.data(), y1.data(), M, C);
       kernels::softmax_backward(dx2.data(), g.data(), y1.data(), M, C);
-      CHECK(max_rel_diff(dx2, dx1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(dx2, dx1) < simd_tolerance<T>());
       // Linear: [M, C] → [M, C + 2]
       const int N = C + 2;
       auto W = random_vector<T>(std::size_t(N) * C, rng), bias = random_vector<T>(std::size_t(N), rng);
       std::vector<T> o1(std::size_t(M) * N), o2(o1.size());
       kernels::ref::linear_forward(o1.data(), x.data(), W.data(), bias.data(), M, C, N);
       kernels::linear_forward(o2.data(), x.data(), W.data(), bias.data(), M, C, N);
-      CHECK(max_rel_diff(o2, o1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(o2, o1) < simd_tolerance<T>());
       auto go = random_vector<T>(o1.size(), rng);
       std::vector<T> di1(n, T(0)), di2(n, T(0)), dW1(W.size(), T(0)), dW2(W.size(), T(0)), dB1(N, T(0)), dB2(N, T(0));
       kernels::ref::linear_backward(di1.data(), dW1.data(), dB1.data(), go.data(), x.data(), W.data(), M, C, N);
       kernels::linear_backward(di2.data(), dW2.data(), dB2.data(), go.data(), x.data(), W.data(), M, C, N);
-      CHECK(max_rel_diff(di2, di1) < simd_tolerance<T>());
-      CHECK(max_rel_diff(dW2, dW1) < simd_tolerance<T>());
-      CHECK(max_rel_diff(dB2, dB1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(di2, di1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(dW2, dW1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(dB2, dB1) < simd_tolerance<T>());
       // ... with fewer outputs than inputs (dWᵀ is computed and added transposed), onto nonzero
       // gradients, din overwritten (add_din = false) rather than added to
       const int Nf = std::max(1, C / 2);
@@ -153,8 +153,8 @@ TEST_SUITE("nn") {
       kernels::ref::linear_backward(dif1.data(), dWf1.data(), static_cast<T*>(nullptr), gf.data(), x.data(), Wf.data(), M, C, Nf);
       kernels::linear_backward(dif2.data(), dWf2.data(), static_cast<T*>(nullptr), gf.data(), x.data(), Wf.data(), M, C, Nf,
                       false);
-      CHECK(max_rel_diff(dWf2, dWf1) < simd_tolerance<T>());
-      CHECK(max_rel_diff(dif2, dif1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(dWf2, dWf1) < simd_tolerance<T>());
+      CHECK(max_scaled_diff(dif2, dif1) < simd_tolerance<T>());
       // Drop-path: samples are the M rows
       std::vector<T> scale(M);
       kernels::drop_path_sample(scale.data(), 1, M, 0.4, 5);
@@ -185,15 +185,15 @@ TEST_SUITE("nn") {
     std::vector<double> o1(std::size_t(M) * N), o2(o1.size(), 1.0), o3(o1.size(), 1.0);
     kernels::ref::linear_forward(o1.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
     kernels::linear_forward(o2.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
-    CHECK(max_rel_diff(o2, o1) < 1e-12);
+    CHECK(max_scaled_diff(o2, o1) < 1e-12);
     kernels::linear_forward_accumulate(o3.data(), x.data(), W.data(), static_cast<const double*>(nullptr), M, K, N);
     for (auto& v : o3) v -= 1.0;
-    CHECK(max_rel_diff(o3, o1) < 1e-12);
+    CHECK(max_scaled_diff(o3, o1) < 1e-12);
     std::vector<double> di1(x.size(), 0.0), di2(x.size(), 0.0), dW1(W.size(), 0.0), dW2(W.size(), 0.0);
     kernels::ref::linear_backward(di1.data(), dW1.data(), static_cast<double*>(nullptr), g.data(), x.data(), W.data(), M, K, N);
     kernels::linear_backward(di2.data(), dW2.data(), static_cast<double*>(nullptr), g.data(), x.data(), W.data(), M, K, N);
-    CHECK(max_rel_diff(di2, di1) < 1e-12);
-    CHECK(max_rel_diff(dW2, dW1) < 1e-12);
+    CHECK(max_scaled_diff(di2, di1) < 1e-12);
+    CHECK(max_scaled_diff(dW2, dW1) < 1e-12);
   }
 
   TEST_CASE("the packed float GEMM and its epilogues match a double reference on awkward sizes") {
@@ -225,36 +225,36 @@ TEST_SUITE("nn") {
       detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N,
                           {false, b.data(), nullptr});
       const auto yb = expect(y, [&](std::size_t i, double v) { return v + b[i % std::size_t(N)]; });
-      CHECK(max_rel_diff(c, yb) < 3e-5);
+      CHECK(max_scaled_diff(c, yb) < 3e-5);
       detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N,
                           {false, b.data(), h.data()});
       std::vector<float> hr(y.size());
       kernels::ref::gelu_forward(hr.data(), yb.data(), hr.size());
-      CHECK(max_rel_diff(c, yb) < 3e-5);
-      CHECK(max_rel_diff(h, hr) < 3e-5);
+      CHECK(max_scaled_diff(c, yb) < 3e-5);
+      CHECK(max_scaled_diff(h, hr) < 3e-5);
       detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N,
                           {false, b.data(), c.data()});
-      CHECK(max_rel_diff(c, hr) < 3e-5);
+      CHECK(max_scaled_diff(c, hr) < 3e-5);
       // C += x·Wᵀ (the residual add)
       c = c0;
       detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c.data(), N, {true});
-      CHECK(max_rel_diff(c, expect(y, [&](std::size_t i, double v) { return v + c0[i]; })) < 3e-5);
+      CHECK(max_scaled_diff(c, expect(y, [&](std::size_t i, double v) { return v + c0[i]; })) < 3e-5);
       // dx += g·W (B row-major), dW += gᵀ·x (A column-major), onto nonzero starting values
       std::vector<float> dx2(x.size(), 0.5f), dW2(W.size(), -0.25f);
       detail::sgemm::gemm(M, K, N, g.data(), N, Order::row_major, W.data(), K, Order::row_major, dx2.data(), K, {true});
       detail::sgemm::gemm(N, K, M, g.data(), N, Order::col_major, x.data(), K, Order::row_major, dW2.data(), K, {true});
-      CHECK(max_rel_diff(dx2, expect(dx, [](std::size_t, double v) { return v + 0.5; })) < 3e-5);
-      CHECK(max_rel_diff(dW2, expect(dW, [](std::size_t, double v) { return v - 0.25; })) < 3e-5);
+      CHECK(max_scaled_diff(dx2, expect(dx, [](std::size_t, double v) { return v + 0.5; })) < 3e-5);
+      CHECK(max_scaled_diff(dW2, expect(dW, [](std::size_t, double v) { return v - 0.25; })) < 3e-5);
       // dpre = (g·W) ⊙ gelu'(pre), overwritten: the MLP's backward through GELU (pre = x here)
       std::vector<float> dpre(x.size(), 7.0f);
       kernels::linear_backward_input_gelu(dpre.data(), g.data(), W.data(), x.data(), M, K, N);
-      CHECK(max_rel_diff(dpre, expect(dx, [&](std::size_t i, double v) { return v * detail::gelu_grad(double(x[i])); })) <
+      CHECK(max_scaled_diff(dpre, expect(dx, [&](std::size_t i, double v) { return v * detail::gelu_grad(double(x[i])); })) <
             3e-5);
       // C = r + x·Wᵀ + b from a separate residual r (the block's residual add without a copy)
       std::vector<float> cr(y.size(), -1.0f);
       detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, cr.data(), N,
                           {false, b.data(), nullptr, nullptr, c0.data()});
-      CHECK(max_rel_diff(cr, expect(y, [&](std::size_t i, double v) { return v + b[i % std::size_t(N)] + c0[i]; })) <
+      CHECK(max_scaled_diff(cr, expect(y, [&](std::size_t i, double v) { return v + b[i % std::size_t(N)] + c0[i]; })) <
             3e-5);
     }
   }
@@ -284,10 +284,10 @@ TEST_SUITE("nn") {
       std::vector<T> y(r.size(), T(7));
       kernels::mlp_forward_tiled(y.data(), static_cast<const T*>(nullptr), x.data(), w1.data(), b1.data(), w2.data(), b2.data(),
                         M, K, H, N, scratch);
-      CHECK(max_rel_diff(y, want) < 10 * simd_tolerance<T>());
+      CHECK(max_scaled_diff(y, want) < 10 * simd_tolerance<T>());
       for (std::size_t i = 0; i < want.size(); ++i) want[i] += r[i];
       kernels::mlp_forward_tiled(y.data(), r.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N, scratch);
-      CHECK(max_rel_diff(y, want) < 10 * simd_tolerance<T>());
+      CHECK(max_scaled_diff(y, want) < 10 * simd_tolerance<T>());
       // Each row goes through the same micro-kernels in the same order as untiled: float is
       // bit-identical, so inference and the cached training forward agree exactly.
       if constexpr (std::is_same_v<T, float>) CHECK(y == fast);
@@ -318,7 +318,7 @@ TEST_SUITE("nn") {
         std::vector<T> hb(h.size()), yb(r.size());
         kernels::linear_bias_gelu_forward(hb.data(), hb.data(), x.data(), w1.data(), b1.data(), M, K, H, bf16);
         kernels::linear_forward_residual(yb.data(), r.data(), hb.data(), w2.data(), b2.data(), M, H, N, bf16);
-        CHECK(max_rel_diff(yb, fast) < 2e-2);
+        CHECK(max_scaled_diff(yb, fast) < 2e-2);
         if (detail::bgemm::native) CHECK(yb != fast);
         kernels::mlp_forward_tiled(z.data(), r.data(), x.data(), w1.data(), b1.data(), w2.data(), b2.data(), M, K, H, N,
                                    scratch, bf16, bf16);
@@ -448,7 +448,7 @@ TEST_SUITE("nn") {
         CHECK(err(c1, want, mag) < tol);
         std::vector<float> hr(c1.size());
         kernels::ref::gelu_forward(hr.data(), c1.data(), hr.size());
-        CHECK(max_rel_diff(h, hr) < 1e-6);
+        CHECK(max_scaled_diff(h, hr) < 1e-6);
         // The weight packed once (gemm_packed) gives the per-call product bit for bit.
         AlignedVector<std::uint32_t> packed(bg::packed_size(N, K));
         bg::pack(packed.data(), W.data(), K, Order::col_major, K, N);

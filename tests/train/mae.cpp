@@ -29,7 +29,7 @@ namespace {
 
 // 12 tokens, d = 8, 2 heads, 1 encoder block, 1 decoder block; m·τ = 4 values per taxel.
 // mask_ratio 0.75: 3 visible and 9 masked tokens per sample.
-MaeConfig tiny_config() {
+MaeConfig tiny_mae_config() {
   MaeConfig c;
   c.in_dim = 4;
   c.axes = 2;
@@ -39,14 +39,14 @@ MaeConfig tiny_config() {
 }
 
 // Every parameter away from its degenerate init (LayerNorm 1/0, zero biases and mask token).
-MaeModel<double> random_model(const MaeConfig& c, std::uint64_t seed) {
+MaeModel<double> random_mae_model(const MaeConfig& c, std::uint64_t seed) {
   MaeModel<double> model(c, seed);
   test::randomize(model.context, seed + 1);
   test::randomize(model.decoder_params, seed + 2);
   return model;
 }
 
-std::vector<double> tiny_input(std::uint64_t seed, int B = 2, int N = 12, int W = 4) {
+std::vector<double> tiny_mae_input(std::uint64_t seed, int B = 2, int N = 12, int W = 4) {
   Rng rng(seed);
   return test::normal_vector(static_cast<std::size_t>(B) * N * W, rng);
 }
@@ -82,14 +82,14 @@ std::vector<float> blob_windows(int S, std::uint64_t seed) {
 TEST_SUITE("train") {
   TEST_CASE("MAE loss: analytic gradient of every encoder and decoder parameter = central differences") {
     const test::SingleThread one_thread;
-    MaeConfig c = tiny_config();
+    MaeConfig c = tiny_mae_config();
     SUBCASE("plain targets") {}
     SUBCASE("per-token normalized targets (norm_pix_loss)") { c.norm_targets = true; }
     SUBCASE("drop-path 0.5 in the encoder with a fixed noise seed") { c.drop_path = 0.5; }
     SUBCASE("a decoder of width 4 with 2 blocks") { c.decoder = PredictorConfig{8, 4, 2, 2, 2.0, false, 1e-6}; }
     SUBCASE("the decoder reads the encoder's position rows") { c.decoder_pos_from_encoder = true; }
-    auto model = random_model(c, 1);
-    const auto x = tiny_input(5);
+    auto model = random_mae_model(c, 1);
+    const auto x = tiny_mae_input(5);
     const MaskBatch masks = UniformMasking(12, c.mask_ratio).sample(2, 3, 0);
     MaeWorkspace<double> w;
     const std::uint64_t noise = 77;
@@ -112,8 +112,8 @@ TEST_SUITE("train") {
   }
 
   TEST_CASE("the MAE loss is the mean squared error over the masked tokens only") {
-    auto model = random_model(tiny_config(), 11);
-    auto x = tiny_input(12);
+    auto model = random_mae_model(tiny_mae_config(), 11);
+    auto x = tiny_mae_input(12);
     const MaskBatch masks = UniformMasking(12, 0.75).sample(2, 4, 1);
     MaeWorkspace<double> w;
     const double l = mae_forward(model, x.data(), 2, masks, w, 1);
@@ -157,8 +157,8 @@ TEST_SUITE("train") {
   }
 
   TEST_CASE("two MAE backward passes accumulate twice the gradient") {
-    auto model = random_model(tiny_config(), 21);
-    const auto x = tiny_input(22);
+    auto model = random_mae_model(tiny_mae_config(), 21);
+    const auto x = tiny_mae_input(22);
     const MaskBatch masks = UniformMasking(12, 0.75).sample(2, 5, 0);
     MaeWorkspace<double> w;
     model.context.zero_grad();
@@ -175,9 +175,9 @@ TEST_SUITE("train") {
   }
 
   TEST_CASE("MAE determinism: the same seeds give the same loss and gradients") {
-    MaeConfig c = tiny_config();
+    MaeConfig c = tiny_mae_config();
     c.drop_path = 0.5;
-    const auto x = tiny_input(31, 4);
+    const auto x = tiny_mae_input(31, 4);
     const UniformMasking masking(12, c.mask_ratio);
     auto run = [&](std::uint64_t model_seed, std::uint64_t mask_seed, std::uint64_t noise_seed) {
       MaeModel<double> model(c, model_seed);
@@ -260,7 +260,7 @@ TEST_SUITE("train") {
       CHECK(std::ranges::equal(mae.context.values(), jepa.context.values()));
       CHECK(mae.token_width() == jepa.token_width());
     };
-    MaeConfig c = tiny_config();
+    MaeConfig c = tiny_mae_config();
     c.tokenizer_bias_std = 1.0;
     SUBCASE("per-taxel tokens") { same_encoder(c); }
     SUBCASE("grouped tokens") {
@@ -270,9 +270,9 @@ TEST_SUITE("train") {
     }
     // The same checkpoint code reads either encoder: an MAE encoder export loads into JepaModel's
     // context, and the full names under "context_encoder." match.
-    MaeModel<float> mae(tiny_config(), 3);
+    MaeModel<float> mae(tiny_mae_config(), 3);
     JepaConfig jc;
-    static_cast<ContextEncoderConfig&>(jc) = tiny_config();
+    static_cast<ContextEncoderConfig&>(jc) = tiny_mae_config();
     jc.predictor = PredictorConfig{8, 8, 1, 2, 2.0, false, 1e-6};
     JepaModel<float> jepa(jc, 4);
     const auto path = std::filesystem::temp_directory_path() / "tjepa_train_mae_encoder.safetensors";
@@ -293,8 +293,8 @@ TEST_SUITE("train") {
   }
 
   TEST_CASE("MAE shape and config errors throw with a clear message") {
-    auto model = random_model(tiny_config(), 41);
-    const auto x = tiny_input(42);
+    auto model = random_mae_model(tiny_mae_config(), 41);
+    const auto x = tiny_mae_input(42);
     MaeWorkspace<double> w;
     const MaskBatch good = UniformMasking(12, 0.75).sample(2, 1, 0);
     CHECK_THROWS_WITH_AS(mae_backward(model, w), doctest::Contains("holds no forward pass"), ConfigError);
@@ -322,42 +322,42 @@ TEST_SUITE("train") {
     // A rejected forward leaves nothing to differentiate.
     CHECK_THROWS_AS(mae_backward(model, w), ConfigError);
 
-    MaeConfig c = tiny_config();
+    MaeConfig c = tiny_mae_config();
     c.decoder.in_dim = 6;
     CHECK_THROWS_WITH_AS(MaeModel<float>(c, 1), doctest::Contains("decoder.in_dim = 6, expected encoder.dim = 8"),
                          ConfigError);
-    c = tiny_config();
+    c = tiny_mae_config();
     c.decoder.out_dim = 8;
     CHECK_THROWS_WITH_AS(MaeModel<float>(c, 1), doctest::Contains("expected 0 or the token width m·τ = 4"),
                          ConfigError);
-    c = tiny_config();
+    c = tiny_mae_config();
     c.mask_ratio = 0.05;
     CHECK_THROWS_WITH_AS(MaeModel<float>(c, 1), doctest::Contains("masks 0 of 12"), ConfigError);
-    c = tiny_config();
+    c = tiny_mae_config();
     c.axes = 3;
     CHECK_THROWS_WITH_AS(MaeModel<float>(c, 1), doctest::Contains("MaeConfig: axes = 3"), ConfigError);
-    c = tiny_config();
+    c = tiny_mae_config();
     c.drop_path = 1.0;
     CHECK_THROWS_AS(MaeModel<float>(c, 1), ConfigError);
-    c = tiny_config();
+    c = tiny_mae_config();
     c.decoder.dim = 4;
     c.decoder_pos_from_encoder = true;
     CHECK_THROWS_WITH_AS(MaeModel<float>(c, 1), doctest::Contains("with decoder_pos_from_encoder, expected encoder.dim = 8"),
                          ConfigError);
-    MaeModel<float> m(tiny_config(), 1);
+    MaeModel<float> m(tiny_mae_config(), 1);
     CHECK_THROWS_WITH_AS(m.set_positions(std::vector<double>(5, 0.0)), doctest::Contains("expected N·d = 12·8"),
                          ShapeError);
     // JEPA's predictor predicts embeddings: an output width other than d is refused there.
     JepaConfig jc;
-    static_cast<ContextEncoderConfig&>(jc) = tiny_config();
+    static_cast<ContextEncoderConfig&>(jc) = tiny_mae_config();
     jc.predictor = PredictorConfig{8, 8, 1, 2, 2.0, false, 1e-6};
     jc.predictor.out_dim = 4;
     CHECK_THROWS_WITH_AS(JepaModel<float>(jc, 1), doctest::Contains("predictor.out_dim = 4"), ConfigError);
   }
 
   TEST_CASE("an MAE training step: scheduled AdamW on the encoder and the decoder") {
-    MaeModel<double> model(tiny_config(), 51);
-    const auto x = tiny_input(52);
+    MaeModel<double> model(tiny_mae_config(), 51);
+    const auto x = tiny_mae_input(52);
     AdamW<double> opt(model.trainable());
     const auto schedule = TrainingSchedule::reference(10, 4, 2);
     MaeWorkspace<double> w;
@@ -376,8 +376,8 @@ TEST_SUITE("train") {
   }
 
   TEST_CASE("a NaN stops the MAE step with NumericError before any parameter changes") {
-    MaeModel<double> model(tiny_config(), 61);
-    auto x = tiny_input(62);
+    MaeModel<double> model(tiny_mae_config(), 61);
+    auto x = tiny_mae_input(62);
     x[7] = std::numeric_limits<double>::quiet_NaN();
     AdamW<double> opt(model.trainable());
     const auto schedule = TrainingSchedule::reference(10, 4, 2);

@@ -4,7 +4,7 @@
 
 #include <tjepa/tjepa.hpp>
 
-#include "../support/temp_dir.hpp"
+#include "../support/files.hpp"
 // The modules this file tests (the umbrella above holds them all; named here so each is traceable).
 #include <tjepa/core/prefixed_params.hpp>
 #include <tjepa/optim/adamw.hpp>

@@ -1,9 +1,12 @@
 #pragma once
-// A fresh temporary directory per test, removed with everything in it at the end:
-// <temp>/tjepa_<tag>_<pid>_<n>, so that runs side by side never share one.
+// Files in tests: a fresh temporary directory per test, removed with everything in it at the end
+// (<temp>/tjepa_<tag>_<pid>_<n>, so that runs side by side never share one), and a whole file read
+// back as bytes.
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <system_error>
 
@@ -26,5 +29,11 @@ struct TempDir {
   }
   std::filesystem::path operator/(const std::string& name) const { return path / name; }
 };
+
+// The file's bytes ("" if it cannot be opened).
+inline std::string read_file(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
 
 }  // namespace tjepa_test
