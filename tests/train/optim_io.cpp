@@ -49,8 +49,7 @@ void fill_grads(tjepa::ParamSet<T>& ps, std::uint64_t seed, double scale = 1.0) 
 using tjepa_test::TempDir;
 
 std::vector<std::byte> read_bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::vector<char> c((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string c = tjepa_test::read_file(p);
   std::vector<std::byte> b(c.size());
   if (!c.empty()) std::memcpy(b.data(), c.data(), c.size());
   return b;
