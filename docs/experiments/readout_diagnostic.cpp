@@ -21,6 +21,8 @@
 //                           ERR=1: early stopping on the validation top-1 error (HeadTrainConfig::stop_on_error);
 //                           PATIENCE=n, VFRAC=x: the patience and the validation share
 // TRAIN_FRAMES=n (any mode): a longer or shorter labelled training recording
+// DEPTH=k (modes with ENCODER): read the embeddings after the encoder's first k blocks (k = 0: the
+// tokens and position table through the final norm)
 // ENCODER may be a --pretrain-cache file of tjepa eval (its parameters are under "encoder.").
 #include <tjepa/tjepa.hpp>
 #include <cstdio>
@@ -109,6 +111,17 @@ int main(int argc, char** argv) {
     const std::string file = argv[2];
     const bool cached = file.find(".safetensors") != std::string::npos && file.find("-seed") != std::string::npos;
     load_checkpoint<float>(file, {{cached ? "encoder." : "target.", &model->target}}, nullptr);
+  }
+  if (const char* v = std::getenv("DEPTH")) {
+    // The embeddings after the first DEPTH blocks: the later blocks' residual branches (attn.proj,
+    // mlp.fc2) are zeroed, so those blocks pass x through and the final norm reads block DEPTH's output.
+    const int keep = std::atoi(v);
+    for (int b = keep; b < cfg.depth; ++b)
+      for (const char* p : {"attn.proj.weight", "attn.proj.bias", "mlp.fc2.weight", "mlp.fc2.bias"}) {
+        auto w = model->target.value_span(model->target.id("blocks." + std::to_string(b) + "." + p));
+        std::fill(w.begin(), w.end(), 0.0f);
+      }
+    std::printf("depth %d of %d\n", keep, cfg.depth);
   }
   const int N = model->encoder.num_tokens(), dd = model->encoder.dim();
   AlignedVector<float> etr = embed_windows(model->target, model->tokenizer, model->encoder, *d.train, tr.windows);
