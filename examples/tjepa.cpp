@@ -104,7 +104,8 @@ int main(int argc, char** argv) {
   bool demo_quiet = false;
   nlohmann::json demo_overrides = nlohmann::json::object();
   auto* demo = app.add_subcommand(
-      "demo", "About 10 minutes: pre-train on the simulated grasping hand, then object / force / pose against baselines");
+      "demo", "tjepa eval cut to one seed and one head per task: pre-train on the simulated grasping hand, then "
+      "object / force / pose against baselines");
   demo->add_option("--seed", demo_seed, "seed of everything (data, init, masks, heads)")->capture_default_str();
   demo->add_option("--out", demo_out, "output directory")->capture_default_str();
   run_override<int>(demo, "--steps", "steps", demo_overrides, "pre-training steps");

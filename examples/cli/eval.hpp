@@ -21,9 +21,9 @@ struct EvalOptions {
 };
 
 // The demo: one pre-training seed, one head per task, rows constant / ridge / random / end to
-// end / Tactile-JEPA, sized for about 10 minutes on 2 cores: the end-to-end heads stop after 3
-// epochs (patience 2), which the row's name says; with the protocol's limits they take about 40
-// minutes.
+// end / Tactile-JEPA, sized for a 10-minute budget on 2 cores (how long it takes depends on the
+// core; docs/evaluation.md has the times measured): the end-to-end heads stop after 3 epochs
+// (patience 2), which the row's name says; with the protocol's limits they take 40-90 minutes.
 inline EvalOptions demo_eval_options(std::uint64_t seed) {
   EvalOptions o;
   GraspEvalConfig& c = o.eval;
