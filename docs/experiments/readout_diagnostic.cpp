@@ -116,6 +116,7 @@ int main(int argc, char** argv) {
     // The embeddings after the first DEPTH blocks: the later blocks' residual branches (attn.proj,
     // mlp.fc2) are zeroed, so those blocks pass x through and the final norm reads block DEPTH's output.
     const int keep = std::atoi(v);
+    require<ConfigError>(keep >= 0 && keep <= cfg.depth, "DEPTH = ", v, ", expected 0 ... ", cfg.depth);
     for (int b = keep; b < cfg.depth; ++b)
       for (const char* p : {"attn.proj.weight", "attn.proj.bias", "mlp.fc2.weight", "mlp.fc2.bias"}) {
         auto w = model->target.value_span(model->target.id("blocks." + std::to_string(b) + "." + p));
