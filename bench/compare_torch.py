@@ -47,6 +47,40 @@ class Attention(nn.Module):
         return self.proj((a @ v).transpose(1, 2).reshape(B, L, C))
 
 
+class AttentiveProbe(nn.Module):
+    """V-JEPA's AttentivePooler (one learned query, one CrossAttentionBlock) and the 2-layer MLP head
+    of REFERENCE §6, as bench/model.cpp's BM_ProbeTrainStep builds it: keys and values projected
+    for every token, as the reference does."""
+
+    def __init__(self, d=D, heads=HEADS, out=16):
+        super().__init__()
+        self.heads = heads
+        self.query_tokens = nn.Parameter(torch.randn(1, 1, d) * 0.02)
+        self.norm1 = nn.LayerNorm(d, eps=1e-6)
+        self.q = nn.Linear(d, d)
+        self.kv = nn.Linear(d, 2 * d)
+        self.proj = nn.Linear(d, d)
+        self.norm2 = nn.LayerNorm(d, eps=1e-6)
+        self.mlp = nn.Sequential(nn.Linear(d, MLP * d), nn.GELU(), nn.Linear(MLP * d, d))
+        self.head = nn.Sequential(nn.Linear(d, d), nn.GELU(), nn.Linear(d, out))
+
+    def forward(self, x):
+        B, L, C = x.shape
+        q0 = self.query_tokens.expand(B, -1, -1)
+        q = self.q(q0).reshape(B, 1, self.heads, C // self.heads).transpose(1, 2)
+        kv = self.kv(self.norm1(x)).reshape(B, L, 2, self.heads, C // self.heads).permute(2, 0, 3, 1, 4)
+        q1 = q0 + self.proj(manual_attention(q, kv[0], kv[1]).transpose(1, 2).reshape(B, 1, C))
+        q2 = q1 + self.mlp(self.norm2(q1))
+        return self.head(q2[:, 0])
+
+
+def probe_gflop(B, L, to_tokens, d=D):
+    """The reference's matmul FLOPs of one probe training step: the k/v projection 4 L d^2 per window
+    forward, as much again for its weight gradient and, to the tokens, once more (the query's row,
+    the attention and the MLPs are O(d^2) per window and not counted)."""
+    return B * (3 if to_tokens else 2) * 4 * L * d * d / 1e9
+
+
 def drop_path(x, p):
     """timm's stochastic depth: each sample's branch kept with probability 1 - p, scaled by 1/(1 - p)."""
     keep = 1.0 - p
@@ -314,8 +348,9 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--min-time", type=float, default=2.0)
-    ap.add_argument("--only", choices=("all", "kernels", "jepa"), default="all",
-                    help="kernels: encoder and attention; jepa: the whole JEPA steps")
+    ap.add_argument("--only", choices=("all", "kernels", "jepa", "probe"), default="all",
+                    help="kernels: encoder and attention; jepa: the whole JEPA steps; probe: the attentive "
+                         "probe's training step")
     # The JEPA step's masks: the sizes tjepa's collator draws in bench/train.cpp (seed 3, batch 0).
     ap.add_argument("--jepa-batch", type=int, default=8)
     ap.add_argument("--jepa-k", type=int, default=163, help="context tokens, N = 368 (BM_JepaTrainStep)")
@@ -370,7 +405,23 @@ def main():
                 name = f"jepa_step/{N}" if style == "timm" else f"jepa_step_{style}/{N}"
                 emit(name, ms, jepa_step_gflop(B, N, K, sizes), windows_per_s=round(B / (ms / 1e3), 3),
                      B=B, K=K, targets=sizes, drop_path=args.drop_path, drop_path_style=style)
-    if args.only == "jepa":
+    if args.only in ("all", "probe"):
+        B, L = 32, 368  # BM_ProbeTrainStep/368/32/{0,1}
+        probe = AttentiveProbe()
+        x = torch.randn(B, L, D)
+        dy = torch.randn(B, 16)
+        for to_tokens in (False, True):
+            xg = x.clone().requires_grad_(to_tokens)
+
+            def probe_step():
+                probe.zero_grad(set_to_none=False)
+                xg.grad = None
+                (probe(xg) * dy).sum().backward()
+
+            ms = timeit(probe_step, args.min_time)
+            emit(f"probe_train_step/B{B}/L{L}/{int(to_tokens)}", ms, probe_gflop(B, L, to_tokens),
+                 windows_per_s=round(B / (ms / 1e3), 3))
+    if args.only in ("jepa", "probe"):
         return
 
     enc = Encoder().eval()

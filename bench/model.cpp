@@ -6,6 +6,8 @@
 // FLOP convention: GEMMs 2·M·K·N (per block: qkv 6d², proj 2d², fc1 + fc2 16d², so 24·M·d²);
 // attention 4·L²·d per sample forward, 3.5× that forward+backward (the attention suite's
 // convention); backward GEMMs 2× forward. LayerNorm, GELU and adds are not counted.
+// The attentive probe is timed, not counted: its cross-attention folds the shared query into the
+// key weights (model/attention.hpp), so its work is a few passes over the tokens, not GEMMs.
 // Reference points (PyTorch, REFERENCE issue 8): encoder forward L = 368, batch 1: 62 ms;
 // training step batch 8, L = 368: 1368 ms.
 #include <benchmark/benchmark.h>
@@ -13,6 +15,7 @@
 #include <vector>
 
 #include <tjepa/core/random.hpp>
+#include <tjepa/model/attentive_probe.hpp>
 #include <tjepa/model/encoder.hpp>
 #include <tjepa/model/init.hpp>
 #include <tjepa/model/predictor.hpp>
@@ -235,5 +238,31 @@ void BM_TokenizerGrouped(benchmark::State& state) {
                                                  benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_TokenizerGrouped)->Args({0, 1})->Args({0, 8})->Args({1, 8})->Unit(benchmark::kMicrosecond)->UseRealTime();
+
+// One training step of the attentive probe (REFERENCE §6: 3 heads, MLP ratio 4, head hidden d)
+// on a batch of B windows of L frozen token embeddings, out = 16 classes: forward with cache, then
+// backward, to the parameters only (arg 2 = 0: a frozen encoder's probe) or to the tokens too
+// (arg 2 = 1: end to end). Counter: windows per second.
+void BM_ProbeTrainStep(benchmark::State& state) {
+  const int L = int(state.range(0)), B = int(state.range(1));
+  const bool to_tokens = state.range(2) != 0;
+  ParamSet<float> ps;
+  AttentiveProbe probe(ps, ProbeConfig{dim, heads, 4.0, dim, 16, 1e-6, {}});
+  ps.allocate();
+  init_params(ps, 1);
+  const auto x = random_floats(std::size_t(B) * L * dim, 2);
+  const auto dy = random_floats(std::size_t(B) * 16, 3);
+  std::vector<float> y(dy.size()), dx(x.size());
+  Workspace<float> ws;
+  ProbeCache<float> cache;
+  for (auto _ : state) {
+    ps.zero_grad();
+    probe.forward(ps, x.data(), B, L, nullptr, y.data(), &cache, ws);
+    probe.backward(ps, dy.data(), to_tokens ? dx.data() : nullptr, cache, ws);
+    benchmark::DoNotOptimize(ps.grad(probe.query));
+  }
+  state.counters["windows/s"] = benchmark::Counter(double(B), benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_ProbeTrainStep)->Args({368, 32, 0})->Args({368, 32, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace

@@ -73,11 +73,12 @@ inline void check_param_gradients(ParamSet<double>& ps, const std::function<doub
 
 // Values of every tensor ~ N(0, std²): away from the degenerate init (LayerNorm 1/0, zero biases)
 // so that every path of the gradient is exercised.
-inline void randomize(ParamSet<double>& ps, std::uint64_t seed, double std = 0.3) {
+template <class T>
+void randomize(ParamSet<T>& ps, std::uint64_t seed, double std = 0.3) {
   Rng rng(seed);
   for (std::size_t i = 0; i < ps.count(); ++i) {
     const double shift = ps.infos()[i].init == ParamInit::ones ? 1.0 : 0.0;
-    for (auto& v : ps.value_span(ps.id(i))) v = shift + rng.normal(0.0, std);
+    for (auto& v : ps.value_span(ps.id(i))) v = T(shift + rng.normal(0.0, std));
   }
 }
 

@@ -392,6 +392,123 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
+  // CrossAttention's reference: q, k and v projected for every token, softmax(q_h k_hᵀ/√Dh) v_h per
+  // head over the valid keys (output 0 when there are none), then proj.
+  template <class T>
+  std::vector<double> cross_attention_reference(const tjepa::ParamSet<T>& ps, const tjepa::CrossAttention& a,
+                                                const T* query, const T* x, const std::uint8_t* valid, int B, int L) {
+    const int d = a.dim(), H = a.heads, Dh = d / H;
+    auto linear = [&](const tjepa::LinearParams& lp, int row0, int rows, const T* in) {
+      std::vector<double> out(static_cast<std::size_t>(rows));
+      for (int o = 0; o < rows; ++o) {
+        double s = lp.has_bias ? double(ps.value(lp.bias)[row0 + o]) : 0.0;
+        for (int i = 0; i < lp.in; ++i) s += double(ps.value(lp.weight)[std::size_t(row0 + o) * lp.in + i]) * double(in[i]);
+        out[std::size_t(o)] = s;
+      }
+      return out;
+    };
+    const std::vector<double> q = linear(a.q, 0, d, query);
+    std::vector<double> y(std::size_t(B) * d);
+    for (int b = 0; b < B; ++b) {
+      std::vector<std::vector<double>> k, v;
+      for (int n = 0; n < L; ++n) {
+        k.push_back(linear(a.kv, 0, d, x + (std::size_t(b) * L + n) * d));
+        v.push_back(linear(a.kv, d, d, x + (std::size_t(b) * L + n) * d));
+      }
+      std::vector<T> att(std::size_t(d), T(0));
+      for (int h = 0; h < H; ++h) {
+        std::vector<double> s(std::size_t(L), -std::numeric_limits<double>::infinity());
+        double mx = -std::numeric_limits<double>::infinity();
+        for (int n = 0; n < L; ++n) {
+          if (valid && !valid[std::size_t(b) * L + n]) continue;
+          double dot = 0;
+          for (int j = 0; j < Dh; ++j) dot += q[std::size_t(h * Dh + j)] * k[std::size_t(n)][std::size_t(h * Dh + j)];
+          s[std::size_t(n)] = dot / std::sqrt(double(Dh));
+          mx = std::max(mx, s[std::size_t(n)]);
+        }
+        if (mx == -std::numeric_limits<double>::infinity()) continue;  // every key masked
+        double z = 0;
+        for (int n = 0; n < L; ++n) z += std::exp(s[std::size_t(n)] - mx);
+        for (int j = 0; j < Dh; ++j) {
+          double o = 0;
+          for (int n = 0; n < L; ++n) o += std::exp(s[std::size_t(n)] - mx) / z * v[std::size_t(n)][std::size_t(h * Dh + j)];
+          att[std::size_t(h * Dh + j)] = T(o);
+        }
+      }
+      const std::vector<double> yb = linear(a.proj, 0, d, att.data());
+      std::copy(yb.begin(), yb.end(), y.begin() + std::ptrdiff_t(b) * d);
+    }
+    return y;
+  }
+
+  // A CrossAttention on B = 3 samples of L = 5 tokens with random parameters, query and tokens;
+  // key 2 of sample 0 and every key of sample 1 are masked.
+  template <class T>
+  struct CrossAttentionCase {
+    static constexpr int B = 3, L = 5, d = 12, H = 3;
+    ParamSet<T> ps;
+    CrossAttention a;
+    std::vector<T> query, x, q, u, p, pooled, att, y;
+    std::vector<std::uint8_t> valid;
+    CrossAttentionCase() : a(CrossAttention::add(ps, "xattn", d, H, true)) {
+      ps.allocate();
+      test::randomize(ps, 21);
+      Rng rng(22);
+      query.resize(std::size_t(d));
+      x.resize(std::size_t(B) * L * d);
+      test::fill_normal(query, rng);
+      test::fill_normal(x, rng);
+      valid.assign(std::size_t(B) * L, 1);
+      valid[2] = 0;
+      std::fill(valid.begin() + L, valid.begin() + 2 * L, std::uint8_t(0));
+      q.resize(std::size_t(d));
+      u.resize(std::size_t(H) * d);
+      p.resize(std::size_t(B) * H * L);
+      pooled.resize(std::size_t(B) * H * d);
+      att.resize(std::size_t(B) * d);
+      y.resize(std::size_t(B) * d);
+    }
+    AttentionRows rows() const { return {B, L, valid.data()}; }
+    CrossAttentionSaved<T> saved() { return {q.data(), u.data(), p.data(), pooled.data(), att.data()}; }
+    void forward() { a.forward(ps, rows(), query.data(), x.data(), saved(), y.data()); }
+  };
+
+  TEST_CASE_TEMPLATE("CrossAttention (the shared query folded into the key weights) equals the reference that projects k and v for every token (masks / a sample with every key masked)", T, float, double) {
+    CrossAttentionCase<T> c;
+    c.forward();
+    const std::vector<double> ref = cross_attention_reference(c.ps, c.a, c.query.data(), c.x.data(), c.valid.data(), c.B, c.L);
+    double err = 0, scale = 0;
+    for (std::size_t i = 0; i < c.y.size(); ++i) {
+      err = std::max(err, std::abs(double(c.y[i]) - ref[i]));
+      scale = std::max(scale, std::abs(ref[i]));
+    }
+    CHECK(err <= (std::is_same_v<T, float> ? 1e-5 : 1e-13) * scale);
+    for (int i = 0; i < c.d; ++i) CHECK(c.att[std::size_t(c.d) + i] == T(0));  // sample 1: every key masked
+  }
+
+  TEST_CASE("CrossAttention with a shared query: gradients of the query / tokens / parameters (masks / every key masked)") {
+    CrossAttentionCase<double> c;
+    const int B = c.B, L = c.L, d = c.d, H = c.H;
+    Rng rng(24);
+    auto w = test::normal_vector(std::size_t(B) * d, rng);
+    auto loss = [&] {
+      c.forward();
+      return test::dot(w.data(), c.y.data(), c.y.size());
+    };
+    c.ps.zero_grad();
+    loss();
+    std::vector<double> dq(static_cast<std::size_t>(d)), datt(std::size_t(B) * d), dpooled(std::size_t(B) * H * d),
+        du(dpooled.size()), dp(c.p.size()), ds(c.p.size()), dquery(static_cast<std::size_t>(d), 0.0), dx(c.x.size(), 0.0);
+    c.a.backward(c.ps, c.rows(), w.data(), c.query.data(), c.x.data(), c.saved(),
+                 CrossAttentionScratch<double>{dq.data(), datt.data(), dpooled.data(), du.data(), dp.data(), ds.data()},
+                 dquery.data(), dx.data());
+    CHECK(gradient_error(c.query.data(), dquery.data(), c.query.size(), loss) < grad_tolerance);
+    CHECK(gradient_error(c.x.data(), dx.data(), c.x.size(), loss) < grad_tolerance);
+    for (int i = 0; i < d; ++i) CHECK(dx[std::size_t(2) * d + i] == 0.0);  // a masked key
+    for (std::size_t i = std::size_t(L) * d; i < std::size_t(2 * L) * d; ++i) CHECK(dx[i] == 0.0);
+    test::check_param_gradients(c.ps, loss);
+  }
+
   TEST_CASE("AttentiveProbe with padded tokens: gradients of inputs and parameters") {
     ParamSet<double> ps;
     AttentiveProbe probe(ps, ProbeConfig{12, 3, 2.0, 10, 4, 1e-6, {}});

@@ -5,15 +5,25 @@
 //   qkv = x · Wqkvᵀ + b  [B·L, 3d] (columns: q | k | v, head h at h·Dh within each)
 //   att = softmax(q kᵀ / √Dh) v per sample and head  [B·L, d]
 //   y   = att · Wprojᵀ + b  [B·L, d]
+// SelfAttention's (sample, head) pairs run in parallel; each is one kernel call with H = 1 and
+// the row strides of the fused buffers, so no L×L matrix is ever stored.
 // CrossAttention (V-JEPA's attentive pooler): <name>.q [d, d], <name>.kv [2d, d], <name>.proj.
-//   One query row per sample attends to that sample's L tokens.
-// The (sample, head) pairs run in parallel; each is one kernel call with H = 1 and the row
-// strides of the fused buffers, so no L×L matrix is ever stored.
+//   One learned query row, the same for every sample, attends to each sample's L tokens. The
+//   result is the reference's (q = Wq·query + bq, [k | v] = x · Wkvᵀ + bkv, softmax(q_h k_hᵀ/√Dh)
+//   v_h per head, then proj), computed without forming k and v: the query is folded into the key
+//   weights once per call, u_h = Wk_hᵀ q_h / √Dh, so the logits are x_n · u_h (q_h · bk_h is the
+//   same for every key and cancels in the softmax), and the values are taken after pooling,
+//   att_h = Wv_h (Σ_n p_hn x_n) + bv_h (the weights sum to 1). That is 4·d·H flops per token
+//   instead of the projection's 4·d², in the forward and again in the backward.
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <limits>
 #include <string>
 
+#include "tjepa/core/detail/simd.hpp"
 #include "tjepa/model/kernels/attention.hpp"
+#include "tjepa/model/kernels/softmax.hpp"
 #include "tjepa/model/layers.hpp"
 #include "tjepa/model/workspace.hpp"
 
@@ -28,34 +38,40 @@ struct AttentionRows {
   int Lq() const { return L - q_from; }
 };
 
-// What a forward pass fills and its backward reads. Self-attention: qkv [B·L, 3d] (columns
-// q | k | v). Cross-attention: q [B, d] and kv [B·L, 2d]. Both: att [B·Lq, d], the heads' outputs
-// before proj, and lse [B, H, Lq], the softmax's log-sum-exps (nullptr in inference).
+// What a self-attention forward fills and its backward reads: qkv [B·L, 3d] (columns q | k | v),
+// att [B·Lq, d], the heads' outputs before proj, and lse [B, H, Lq], the softmax's log-sum-exps
+// (nullptr in inference).
 template <class T>
 struct AttentionSaved {
   T* qkv = nullptr;
-  T* q = nullptr;
-  T* kv = nullptr;
   T* att = nullptr;
   T* lse = nullptr;
 };
 
-// The precision of the attention products (QKᵀ, PV) of a forward whose backward is fp32 (cross-
-// and causal attention): the workspace's, unless the forward keeps its statistics for that
-// backward (it recomputes P from the saved log-sum-exp, which must come from the same
-// arithmetic). SelfAttention runs forward and backward in the workspace's precision.
+// What CrossAttention's forward fills (inference too) and its backward reads.
 template <class T>
-Precision attention_precision(const AttentionSaved<T>& saved, const Workspace<T>& ws) {
-  return saved.lse ? Precision::fp32 : ws.precision;
-}
+struct CrossAttentionSaved {
+  T* q = nullptr;       // [d]     Wq · query + bq
+  T* u = nullptr;       // [H, d]  head h's query folded into its key weights: Wk_hᵀ q_h / √Dh
+  T* p = nullptr;       // [B, H, L] the attention weights
+  T* pooled = nullptr;  // [B, H, d] Σ_n p_hn x_n
+  T* att = nullptr;     // [B, d]  the heads' outputs before proj
+};
 
 // A backward pass's scratch, shaped like the saved buffers of the same names.
 template <class T>
 struct AttentionScratch {
   T* dqkv = nullptr;
-  T* dq = nullptr;
-  T* dkv = nullptr;
   T* datt = nullptr;
+};
+template <class T>
+struct CrossAttentionScratch {
+  T* dq = nullptr;       // [d]
+  T* datt = nullptr;     // [B, d]
+  T* dpooled = nullptr;  // [B, H, d]
+  T* du = nullptr;       // [B, H, d]
+  T* dp = nullptr;       // [B, H, L]
+  T* ds = nullptr;       // [B, H, L]
 };
 
 // Forward passes write y = residual + output (residual may equal y: y += output; nullptr: y =
@@ -165,29 +181,52 @@ struct CrossAttention {
     return a;
   }
   int dim() const { return proj.out; }
-  kernels::AttentionShape shape(int L) const {
-    const int d = dim();
-    return {1, L, heads, d / heads, d, 2 * d, 2 * d, d};
-  }
 
-  // query [B, d] (one row per sample), x [B·L, d] → y [B, d] (r.q_from is 0). saved.q [B, d],
-  // saved.kv [B·L, 2d] and saved.att [B, d] are filled; saved.lse [B, H] may be nullptr.
+  // query [d] (the one query row every sample shares), x [B·L, d] → y [B, d] (r.q_from is 0).
+  // Fills saved.{q, u, p, pooled, att}; the backward reads them.
   template <class T>
   void forward(const ParamSet<T>& ps, const AttentionRows& r, const T* query, const T* x,
-               const AttentionSaved<T>& saved, T* y, Workspace<T>& ws, const T* residual = nullptr) const {
-    const int d = dim(), B = r.B, L = r.L;
+               const CrossAttentionSaved<T>& saved, T* y, const T* residual = nullptr) const {
+    const int d = dim(), H = heads, Dh = d / H, B = r.B, L = r.L;
     require<ShapeError>(r.q_from == 0, "CrossAttention::forward: q_from = ", r.q_from, ", expected 0");
-    q.forward(ps, query, saved.q, B, ws.weights());
-    kv.forward(ps, x, saved.kv, B * L, ws.weights());
-    const kernels::AttentionShape s = shape(L);
-    kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(s);
+    q.forward(ps, query, saved.q, 1);
+    const T* Wk = ps.value(kv.weight);  // rows [0, d) of kv: the keys' weights
+    const T* Wv = Wk + std::size_t(d) * d;
+    const T* bv = kv.has_bias ? ps.value(kv.bias) + d : nullptr;
+    const T scale = T(1) / std::sqrt(T(Dh));
+    // u_h = scale · Wk_hᵀ q_h: the logits of head h are x_n · u_h (plus q_h · bk_h, the same for
+    // every key, which the softmax cancels).
+    std::fill(saved.u, saved.u + std::size_t(H) * d, T(0));
+    for (int i = 0; i < d; ++i)
+      detail::simd_axpy(scale * saved.q[i], Wk + std::size_t(i) * d, saved.u + std::size_t(i / Dh) * d, d);
     TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
     for (int b = 0; b < B; ++b) {
-      const T* k = saved.kv + std::size_t(b) * L * 2 * d;
-      kernels::attention_forward(s, saved.q + std::size_t(b) * d, k, k + d,
-                                 r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr,
-                                 saved.att + std::size_t(b) * d, saved.lse ? saved.lse + std::size_t(b) * heads : nullptr,
-                                 aws[detail::thread_id()], attention_precision(saved, ws));
+      const T* xb = x + std::size_t(b) * L * d;
+      const std::uint8_t* valid = r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr;
+      T* p = saved.p + std::size_t(b) * H * L;  // [H, L]
+      T* pooled = saved.pooled + std::size_t(b) * H * d;
+      T* att = saved.att + std::size_t(b) * d;
+      bool any = false;
+      for (int n = 0; n < L; ++n) {
+        const bool ok = valid == nullptr || valid[n] != 0;
+        any = any || ok;
+        for (int h = 0; h < H; ++h)
+          p[std::size_t(h) * L + n] = ok ? detail::simd_dot(xb + std::size_t(n) * d, saved.u + std::size_t(h) * d, d)
+                                         : -std::numeric_limits<T>::infinity();
+      }
+      std::fill(pooled, pooled + std::size_t(H) * d, T(0));
+      if (!any) {  // every key masked: no distribution to attend with, output 0 (as kernels::attention)
+        std::fill(p, p + std::size_t(H) * L, T(0));
+        std::fill(att, att + d, T(0));
+        continue;
+      }
+      kernels::softmax_forward(p, p, H, L);
+      for (int n = 0; n < L; ++n)
+        for (int h = 0; h < H; ++h)
+          detail::simd_axpy(p[std::size_t(h) * L + n], xb + std::size_t(n) * d, pooled + std::size_t(h) * d, d);
+      // att_h = Wv_h · pooled_h + bv_h (Σ_n p_n = 1 carries the bias through)
+      for (int i = 0; i < d; ++i)
+        att[i] = detail::simd_dot(Wv + std::size_t(i) * d, pooled + std::size_t(i / Dh) * d, d) + (bv ? bv[i] : T(0));
     }
     if (residual)
       proj.forward_residual(ps, saved.att, residual, y, B);
@@ -195,30 +234,75 @@ struct CrossAttention {
       proj.forward(ps, saved.att, y, B);
   }
 
-  // dquery [B, d] and dx [B·L, d] (either may be nullptr) += gradients given dy [B, d]; the
-  // parameters' gradients +=. scratch.dq [B, d], scratch.dkv [B·L, 2d], scratch.datt [B, d].
+  // dquery [d] and dx [B·L, d] (either may be nullptr) += gradients given dy [B, d]; the
+  // parameters' gradients +=. kv.bias's key half gets none: the softmax cancels it.
   template <class T>
   void backward(ParamSet<T>& ps, const AttentionRows& r, const T* dy, const T* query, const T* x,
-                const AttentionSaved<T>& saved, const AttentionScratch<T>& scratch, T* dquery, T* dx,
-                Workspace<T>& ws) const {
-    const int d = dim(), B = r.B, L = r.L;
-    std::fill(scratch.datt, scratch.datt + std::size_t(B) * d, T(0));
+                const CrossAttentionSaved<T>& saved, const CrossAttentionScratch<T>& scratch, T* dquery, T* dx) const {
+    const int d = dim(), H = heads, Dh = d / H, B = r.B, L = r.L;
+    const std::size_t Bd = std::size_t(B) * d, HL = std::size_t(H) * L, Hd = std::size_t(H) * d;
+    std::fill(scratch.datt, scratch.datt + Bd, T(0));
     proj.backward(ps, dy, saved.att, scratch.datt, B);
-    std::fill(scratch.dq, scratch.dq + std::size_t(B) * d, T(0));
-    std::fill(scratch.dkv, scratch.dkv + std::size_t(B) * L * 2 * d, T(0));
-    const kernels::AttentionShape s = shape(L);
-    kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(s);
+    const T* Wk = ps.value(kv.weight);
+    const T* Wv = Wk + std::size_t(d) * d;
+    T* dWk = ps.grad(kv.weight);
+    T* dWv = dWk + std::size_t(d) * d;
+    T* dbv = kv.has_bias ? ps.grad(kv.bias) + d : nullptr;
+    const T scale = T(1) / std::sqrt(T(Dh));
+    // att_h = Wv_h · pooled_h + bv_h: dWv, dbv (rows in parallel, samples in order)
+    for (int b = 0; b < B; ++b)  // a sample whose keys are all masked outputs att = 0 whatever W is
+      if (r.key_valid && std::none_of(r.key_valid + std::size_t(b) * L, r.key_valid + std::size_t(b + 1) * L,
+                                      [](std::uint8_t v) { return v != 0; }))
+        std::fill(scratch.datt + std::size_t(b) * d, scratch.datt + std::size_t(b + 1) * d, T(0));
+    TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(B) * d * d > detail::parallel_grain))
+    for (int i = 0; i < d; ++i)
+      for (int b = 0; b < B; ++b) {
+        const T g = scratch.datt[std::size_t(b) * d + i];
+        detail::simd_axpy(g, saved.pooled + std::size_t(b) * Hd + std::size_t(i / Dh) * d, dWv + std::size_t(i) * d, d);
+        if (dbv) dbv[i] += g;
+      }
     TJEPA_OMP(omp parallel for schedule(static) if (B > 1))
     for (int b = 0; b < B; ++b) {
-      const std::size_t ko = std::size_t(b) * L * 2 * d;
-      kernels::attention_backward(s, saved.q + std::size_t(b) * d, saved.kv + ko, saved.kv + ko + d,
-                                  r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr,
-                                  saved.att + std::size_t(b) * d, saved.lse + std::size_t(b) * heads,
-                                  scratch.datt + std::size_t(b) * d, scratch.dq + std::size_t(b) * d,
-                                  scratch.dkv + ko, scratch.dkv + ko + d, aws[detail::thread_id()]);
+      const T* xb = x + std::size_t(b) * L * d;
+      const T* p = saved.p + std::size_t(b) * HL;
+      T* dpooled = scratch.dpooled + std::size_t(b) * Hd;
+      T* dp = scratch.dp + std::size_t(b) * HL;
+      T* ds = scratch.ds + std::size_t(b) * HL;
+      T* du = scratch.du + std::size_t(b) * Hd;
+      std::fill(du, du + Hd, T(0));
+      std::fill(dpooled, dpooled + Hd, T(0));
+      std::fill(ds, ds + HL, T(0));
+      for (int i = 0; i < d; ++i)
+        detail::simd_axpy(scratch.datt[std::size_t(b) * d + i], Wv + std::size_t(i) * d, dpooled + std::size_t(i / Dh) * d, d);
+      // pooled_h = Σ_n p_hn x_n: ∂/∂p_hn = dpooled_h · x_n, then through the softmax to the logits
+      for (int n = 0; n < L; ++n)
+        for (int h = 0; h < H; ++h)
+          dp[std::size_t(h) * L + n] = detail::simd_dot(xb + std::size_t(n) * d, dpooled + std::size_t(h) * d, d);
+      kernels::softmax_backward(ds, dp, p, H, L);
+      // logits s_hn = x_n · u_h: du_h = Σ_n ds_hn x_n; dx_n += Σ_h ds_hn u_h + p_hn dpooled_h
+      for (int n = 0; n < L; ++n) {
+        const T* xn = xb + std::size_t(n) * d;
+        for (int h = 0; h < H; ++h) {
+          const T g = ds[std::size_t(h) * L + n];
+          detail::simd_axpy(g, xn, du + std::size_t(h) * d, d);
+          if (dx) {
+            T* dxn = dx + (std::size_t(b) * L + n) * d;
+            detail::simd_axpy(g, saved.u + std::size_t(h) * d, dxn, d);
+            detail::simd_axpy(p[std::size_t(h) * L + n], dpooled + std::size_t(h) * d, dxn, d);
+          }
+        }
+      }
     }
-    kv.backward(ps, scratch.dkv, x, dx, B * L);
-    q.backward(ps, scratch.dq, query, dquery, B);
+    // u_h = scale · Wk_hᵀ q_h: dWk_h += scale · q_h du_hᵀ, dq_h = scale · Wk_h du_h (du summed over samples)
+    T* du = scratch.du;
+    for (int b = 1; b < B; ++b)
+      for (std::size_t j = 0; j < Hd; ++j) du[j] += scratch.du[std::size_t(b) * Hd + j];
+    for (int i = 0; i < d; ++i) {
+      const T* duh = du + std::size_t(i / Dh) * d;
+      detail::simd_axpy(scale * saved.q[i], duh, dWk + std::size_t(i) * d, d);
+      scratch.dq[i] = scale * detail::simd_dot(Wk + std::size_t(i) * d, duh, d);
+    }
+    q.backward(ps, scratch.dq, query, dquery, 1);
   }
 };
 

@@ -35,7 +35,7 @@ template <class T>
 struct ProbeCache {
   int B = 0, L = 0;
   AlignedVector<T> x, xn, mean1, rstd1;       // [B·L, d], [B·L]
-  AlignedVector<T> q0, qbuf, kv, att, lse;    // [B, d], [B, d], [B·L, 2d], [B, d], [B, H]
+  AlignedVector<T> q, u, p, pooled, att;      // CrossAttentionSaved: [d], [H, d], [B, H, L], [B, H, d], [B, d]
   AlignedVector<T> q1, qn, mean2, rstd2, h;   // [B, d], [B, d], [B], [B], [B, hidden]
   AlignedVector<T> q2, z;                     // [B, d], [B, head_hidden]
   std::vector<std::uint8_t> key_valid;
@@ -90,7 +90,7 @@ struct AttentiveProbe {
       return;
     }
     const int d = config.dim, H = config.heads, hid = mlp.hidden();
-    const std::size_t M = std::size_t(B) * L;
+    const std::size_t M = std::size_t(B) * L, Bd = std::size_t(B) * d;
     auto buf = [&](AlignedVector<T> ProbeCache<T>::*field, AlignedVector<T>& scratch, std::size_t n) {
       return detail::grow(cache ? cache->*field : scratch, n);
     };
@@ -106,19 +106,19 @@ struct AttentiveProbe {
     T* xn = buf(&ProbeCache<T>::xn, ws.ln, M * d);
     norm1.forward(ps, x, xn, cache ? detail::grow(cache->mean1, M) : nullptr,
                   cache ? detail::grow(cache->rstd1, M) : nullptr, int(M));
-    T* q0 = buf(&ProbeCache<T>::q0, ws.rows, std::size_t(B) * d);
-    for (int b = 0; b < B; ++b) std::copy(ps.value(query), ps.value(query) + d, q0 + std::size_t(b) * d);
-    T* q1 = buf(&ProbeCache<T>::q1, ws.x, std::size_t(B) * d);
-    std::copy(q0, q0 + std::size_t(B) * d, q1);
-    const AttentionSaved<T> saved{.q = buf(&ProbeCache<T>::qbuf, ws.att, std::size_t(B) * d),
-                                  .kv = buf(&ProbeCache<T>::kv, ws.qkv, M * 2 * d),
-                                  .att = buf(&ProbeCache<T>::att, ws.branch, std::size_t(B) * d),
-                                  .lse = cache ? detail::grow(cache->lse, std::size_t(B) * H) : nullptr};
-    xattn.forward(ps, AttentionRows{B, L, key_valid}, q0, xn, saved, q1, ws, q1);
-    T* qn = buf(&ProbeCache<T>::qn, ws.rows2, std::size_t(B) * d);
+    const T* q0 = ps.value(query);
+    T* q1 = buf(&ProbeCache<T>::q1, ws.x, Bd);
+    for (int b = 0; b < B; ++b) std::copy(q0, q0 + d, q1 + std::size_t(b) * d);
+    const CrossAttentionSaved<T> saved{.q = buf(&ProbeCache<T>::q, ws.rows, std::size_t(d)),
+                                       .u = buf(&ProbeCache<T>::u, ws.rows2, std::size_t(H) * d),
+                                       .p = buf(&ProbeCache<T>::p, ws.qkv, M * H),
+                                       .pooled = buf(&ProbeCache<T>::pooled, ws.branch, Bd * H),
+                                       .att = buf(&ProbeCache<T>::att, ws.att, Bd)};
+    xattn.forward(ps, AttentionRows{B, L, key_valid}, q0, xn, saved, q1, q1);
+    T* qn = buf(&ProbeCache<T>::qn, ws.rows2, Bd);
     norm2.forward(ps, q1, qn, cache ? detail::grow(cache->mean2, std::size_t(B)) : nullptr,
                   cache ? detail::grow(cache->rstd2, std::size_t(B)) : nullptr, B);
-    std::copy(q1, q1 + std::size_t(B) * d, q2);
+    std::copy(q1, q1 + Bd, q2);
     T* h = buf(&ProbeCache<T>::h, ws.hidden, std::size_t(B) * hid);
     mlp.forward(ps, qn, h, detail::grow(ws.hidden2, std::size_t(B) * hid), q2, B, q2);
   }
@@ -165,29 +165,32 @@ struct AttentiveProbe {
       taxel.backward(ps, dq, dx, c.B, c.taxel, ws);
       return;
     }
-    const int d = config.dim, B = c.B, L = c.L, hid = mlp.hidden();
-    const std::size_t M = std::size_t(B) * L;
-    const std::uint8_t* kv = c.key_valid.empty() ? nullptr : c.key_valid.data();
+    const int d = config.dim, H = config.heads, B = c.B, L = c.L, hid = mlp.hidden();
+    const std::size_t M = std::size_t(B) * L, Bd = std::size_t(B) * d;
     T* s1 = detail::grow(ws.hidden2, std::size_t(B) * hid);
     T* s2 = detail::grow(ws.dhidden, std::size_t(B) * hid);
     // q₂ = q₁ + mlp(qn), qn = norm2(q₁): dq already holds the identity path
-    T* dqn = detail::grow(ws.dln, std::size_t(B) * d);
-    std::fill(dqn, dqn + std::size_t(B) * d, T(0));
+    T* dqn = detail::grow(ws.dln, Bd);
+    std::fill(dqn, dqn + Bd, T(0));
     mlp.backward(ps, dq, c.qn.data(), c.h.data(), s1, s2, dqn, B);
     norm2.backward(ps, dqn, c.q1.data(), c.mean2.data(), c.rstd2.data(), dq, B);
-    // q₁ = q₀ + xattn(q₀, xn), xn = norm1(x)
+    // q₁ = q₀ + xattn(q₀, xn), xn = norm1(x); q₀ is one row shared by every sample
     T* dxn = detail::grow(ws.dbranch, M * d);
     std::fill(dxn, dxn + M * d, T(0));
-    T* dqs = detail::grow(ws.drows, std::size_t(B) * d);
-    T* dkv = detail::grow(ws.dqkv, M * 2 * d);
-    T* datt = detail::grow(ws.att, std::size_t(B) * d);
-    const AttentionSaved<T> saved{.q = const_cast<T*>(c.qbuf.data()), .kv = const_cast<T*>(c.kv.data()),
-                                  .att = const_cast<T*>(c.att.data()), .lse = const_cast<T*>(c.lse.data())};
-    xattn.backward(ps, AttentionRows{B, L, kv}, dq, c.q0.data(), c.xn.data(), saved,
-                   AttentionScratch<T>{.dq = dqs, .dkv = dkv, .datt = datt}, dq, dxn, ws);
     T* du = ps.grad(query);
     for (int b = 0; b < B; ++b)
       for (int i = 0; i < d; ++i) du[i] += dq[std::size_t(b) * d + i];
+    const CrossAttentionSaved<T> saved{.q = const_cast<T*>(c.q.data()), .u = const_cast<T*>(c.u.data()),
+                                       .p = const_cast<T*>(c.p.data()), .pooled = const_cast<T*>(c.pooled.data()),
+                                       .att = const_cast<T*>(c.att.data())};
+    const CrossAttentionScratch<T> scratch{.dq = detail::grow(ws.rows, std::size_t(d)),
+                                           .datt = detail::grow(ws.att, Bd),
+                                           .dpooled = detail::grow(ws.drows, Bd * H),
+                                           .du = detail::grow(ws.dkept, Bd * H),
+                                           .dp = detail::grow(ws.dqkv, M * H),
+                                           .ds = detail::grow(ws.qkv, M * H)};
+    xattn.backward(ps, AttentionRows{B, L, c.key_valid.empty() ? nullptr : c.key_valid.data()}, dq,
+                   ps.value(query), c.xn.data(), saved, scratch, du, dxn);
     norm1.backward(ps, dxn, c.x.data(), c.mean1.data(), c.rstd1.data(), dx, int(M));
   }
 };

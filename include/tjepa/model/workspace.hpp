@@ -37,8 +37,8 @@ struct Workspace {
   AlignedVector<T> hidden2;  // [M, hidden] recomputed activation
   AlignedVector<T> drows;    // [rows, ·]
   AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
-  // How the forward products of the tokenizer, the encoder (qkv, proj, MLP), the predictor's
-  // blocks and the attentive probe's cross-attention read their weights:
+  // How the forward products of the tokenizer, the encoder (qkv, proj, MLP) and the predictor's
+  // blocks read their weights:
   // - frozen_weights: inference on weights that do not change between calls (a frozen encoder in
   //   a control loop): each weight is packed once, into `packed`, instead of on every call. Clear
   //   `packed` when the values change (its entries are keyed by address).

@@ -1,8 +1,8 @@
 #pragma once
 // Small xsimd helpers: the native vector type and width, horizontal sum and max, and the row
-// reductions of the row-wise kernels (LayerNorm, GELU, softmax); the attention kernels
-// (model/kernels/detail/attention_simd.hpp) use the same vector type. Every loop runs whole
-// vectors, then a scalar tail, so any length works.
+// reductions and updates of the row-wise kernels (LayerNorm, GELU, softmax, the shared-query
+// cross-attention); the attention kernels (model/kernels/detail/attention_simd.hpp) use the same
+// vector type. Every loop runs whole vectors, then a scalar tail, so any length works.
 #include <cstddef>
 
 #include "tjepa/core/detail/vendor.hpp"
@@ -55,6 +55,17 @@ T simd_dot(const T* x, const T* y, std::size_t n) {
   T s = hsum(acc);
   for (; i < n; ++i) s += x[i] * y[i];
   return s;
+}
+
+// y[i] += a·x[i]
+template <class T>
+void simd_axpy(T a, const T* x, T* y, std::size_t n) {
+  constexpr std::size_t W = simd_width<T>;
+  const simd<T> va(a);
+  std::size_t i = 0;
+  for (; i + W <= n; i += W)
+    xsimd::fma(va, xsimd::load_unaligned(x + i), xsimd::load_unaligned(y + i)).store_unaligned(y + i);
+  for (; i < n; ++i) y[i] += a * x[i];
 }
 
 }  // namespace tjepa::detail
