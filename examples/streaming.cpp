@@ -256,7 +256,7 @@ int main(int argc, char** argv) {
   app.add_flag("--realtime", realtime,
                "run under SCHED_FIFO (priority 10), as a control loop would: other threads no longer preempt it");
   std::string precision = "fp32";
-  app.add_option("--precision", precision, "arithmetic of the encoder's and probe's products")
+  app.add_option("--precision", precision, "arithmetic of the encoder's products (the probe's are fp32)")
       ->check(CLI::IsMember({"fp32", "bf16"}))
       ->capture_default_str();
   app.add_flag("--repack", repack, "pack the weights for the GEMM on every call, as training does (A/B of frozen weights)");

@@ -6,8 +6,12 @@
 #endif
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <array>
 #include <atomic>
+#include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <new>
 #include <string>
 #include <vector>
@@ -431,7 +435,8 @@ TEST_SUITE("nn") {
         for (int n = 0; n < L; ++n) z += std::exp(s[std::size_t(n)] - mx);
         for (int j = 0; j < Dh; ++j) {
           double o = 0;
-          for (int n = 0; n < L; ++n) o += std::exp(s[std::size_t(n)] - mx) / z * v[std::size_t(n)][std::size_t(h * Dh + j)];
+          for (int n = 0; n < L; ++n)
+            if (!valid || valid[std::size_t(b) * L + n]) o += std::exp(s[std::size_t(n)] - mx) / z * v[std::size_t(n)][std::size_t(h * Dh + j)];
           att[std::size_t(h * Dh + j)] = T(o);
         }
       }
@@ -441,16 +446,16 @@ TEST_SUITE("nn") {
     return y;
   }
 
-  // A CrossAttention on B = 3 samples of L = 5 tokens with random parameters, query and tokens;
-  // key 2 of sample 0 and every key of sample 1 are masked.
+  // A CrossAttention (3 heads) on B samples of L tokens of width d with random parameters, query
+  // and tokens; key 2 of sample 0 and every key of sample 1 are masked.
   template <class T>
   struct CrossAttentionCase {
-    static constexpr int B = 3, L = 5, d = 12, H = 3;
+    int B, L, d, H = 3;
     ParamSet<T> ps;
     CrossAttention a;
     std::vector<T> query, x, q, u, p, pooled, att, y;
     std::vector<std::uint8_t> valid;
-    CrossAttentionCase() : a(CrossAttention::add(ps, "xattn", d, H, true)) {
+    CrossAttentionCase(int B_, int L_, int d_) : B(B_), L(L_), d(d_), a(CrossAttention::add(ps, "xattn", d_, 3, true)) {
       ps.allocate();
       test::randomize(ps, 21);
       Rng rng(22);
@@ -473,21 +478,38 @@ TEST_SUITE("nn") {
     void forward() { a.forward(ps, rows(), query.data(), x.data(), saved(), y.data()); }
   };
 
-  TEST_CASE_TEMPLATE("CrossAttention (the shared query folded into the key weights) equals the reference that projects k and v for every token (masks / a sample with every key masked)", T, float, double) {
-    CrossAttentionCase<T> c;
-    c.forward();
-    const std::vector<double> ref = cross_attention_reference(c.ps, c.a, c.query.data(), c.x.data(), c.valid.data(), c.B, c.L);
-    double err = 0, scale = 0;
-    for (std::size_t i = 0; i < c.y.size(); ++i) {
-      err = std::max(err, std::abs(double(c.y[i]) - ref[i]));
-      scale = std::max(scale, std::abs(ref[i]));
+  TEST_CASE_TEMPLATE("CrossAttention (the shared query folded into the key weights) equals the reference that projects k and v for every token (masks / a sample with every key masked / NaN in masked tokens)", T, float, double) {
+    // Small, and large enough for whole vectors of every width and the parallel weight gradient.
+    for (const auto [B, L, d] : {std::array{3, 5, 12}, std::array{64, 37, 48}}) {
+      CAPTURE(L);
+      CrossAttentionCase<T> c(B, L, d);
+      for (int i = 0; i < d; ++i) c.x[std::size_t(2) * d + i] = std::numeric_limits<T>::quiet_NaN();  // masked
+      c.forward();
+      const std::vector<double> ref = cross_attention_reference(c.ps, c.a, c.query.data(), c.x.data(), c.valid.data(), B, L);
+      double err = 0, scale = 0;
+      for (std::size_t i = 0; i < c.y.size(); ++i) {
+        err = std::max(err, std::abs(double(c.y[i]) - ref[i]));
+        scale = std::max(scale, std::abs(ref[i]));
+      }
+      CHECK(err <= (std::is_same_v<T, float> ? 1e-5 : 1e-13) * scale);  // NaN fails it
+      for (int i = 0; i < d; ++i) CHECK(c.att[std::size_t(d) + i] == T(0));  // sample 1: every key masked
+      // The backward stays finite too, and the masked tokens get no gradient.
+      std::vector<T> dy(c.y.size(), T(1)), dq(static_cast<std::size_t>(d)), datt(c.att.size()), dpooled(c.pooled.size()),
+          du(c.pooled.size()), dp(c.p.size()), ds(c.p.size()), dquery(static_cast<std::size_t>(d), T(0)), dx(c.x.size(), T(0));
+      c.ps.zero_grad();
+      c.a.backward(c.ps, c.rows(), dy.data(), c.query.data(), c.x.data(), c.saved(),
+                   CrossAttentionScratch<T>{dq.data(), datt.data(), dpooled.data(), du.data(), dp.data(), ds.data()},
+                   dquery.data(), dx.data());
+      CHECK(std::all_of(dx.begin(), dx.end(), [](T v) { return std::isfinite(v); }));
+      CHECK(std::all_of(dquery.begin(), dquery.end(), [](T v) { return std::isfinite(v); }));
+      for (std::size_t i = 0; i < c.ps.count(); ++i)
+        for (T v : c.ps.grad_span(c.ps.id(i))) CHECK(std::isfinite(v));
+      for (int i = 0; i < d; ++i) CHECK(dx[std::size_t(2) * d + i] == T(0));
     }
-    CHECK(err <= (std::is_same_v<T, float> ? 1e-5 : 1e-13) * scale);
-    for (int i = 0; i < c.d; ++i) CHECK(c.att[std::size_t(c.d) + i] == T(0));  // sample 1: every key masked
   }
 
   TEST_CASE("CrossAttention with a shared query: gradients of the query / tokens / parameters (masks / every key masked)") {
-    CrossAttentionCase<double> c;
+    CrossAttentionCase<double> c(3, 5, 12);
     const int B = c.B, L = c.L, d = c.d, H = c.H;
     Rng rng(24);
     auto w = test::normal_vector(std::size_t(B) * d, rng);

@@ -221,9 +221,11 @@ struct CrossAttention {
         continue;
       }
       kernels::softmax_forward(p, p, H, L);
-      for (int n = 0; n < L; ++n)
+      for (int n = 0; n < L; ++n) {
+        if (valid && !valid[n]) continue;  // a masked token is never read (it may hold anything)
         for (int h = 0; h < H; ++h)
           detail::simd_axpy(p[std::size_t(h) * L + n], xb + std::size_t(n) * d, pooled + std::size_t(h) * d, d);
+      }
       // att_h = Wv_h · pooled_h + bv_h (Σ_n p_n = 1 carries the bias through)
       for (int i = 0; i < d; ++i)
         att[i] = detail::simd_dot(Wv + std::size_t(i) * d, pooled + std::size_t(i / Dh) * d, d) + (bv ? bv[i] : T(0));
@@ -275,12 +277,15 @@ struct CrossAttention {
       for (int i = 0; i < d; ++i)
         detail::simd_axpy(scratch.datt[std::size_t(b) * d + i], Wv + std::size_t(i) * d, dpooled + std::size_t(i / Dh) * d, d);
       // pooled_h = Σ_n p_hn x_n: ∂/∂p_hn = dpooled_h · x_n, then through the softmax to the logits
+      const std::uint8_t* valid = r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr;
       for (int n = 0; n < L; ++n)
         for (int h = 0; h < H; ++h)
-          dp[std::size_t(h) * L + n] = detail::simd_dot(xb + std::size_t(n) * d, dpooled + std::size_t(h) * d, d);
+          dp[std::size_t(h) * L + n] = valid && !valid[n] ? T(0)  // p = 0 there, and x_n is not read
+                                                          : detail::simd_dot(xb + std::size_t(n) * d, dpooled + std::size_t(h) * d, d);
       kernels::softmax_backward(ds, dp, p, H, L);
       // logits s_hn = x_n · u_h: du_h = Σ_n ds_hn x_n; dx_n += Σ_h ds_hn u_h + p_hn dpooled_h
       for (int n = 0; n < L; ++n) {
+        if (valid && !valid[n]) continue;  // ds = p = 0: no gradient
         const T* xn = xb + std::size_t(n) * d;
         for (int h = 0; h < H; ++h) {
           const T g = ds[std::size_t(h) * L + n];

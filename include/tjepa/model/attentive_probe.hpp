@@ -115,7 +115,7 @@ struct AttentiveProbe {
                                        .pooled = buf(&ProbeCache<T>::pooled, ws.branch, Bd * H),
                                        .att = buf(&ProbeCache<T>::att, ws.att, Bd)};
     xattn.forward(ps, AttentionRows{B, L, key_valid}, q0, xn, saved, q1, q1);
-    T* qn = buf(&ProbeCache<T>::qn, ws.rows2, Bd);
+    T* qn = buf(&ProbeCache<T>::qn, ws.rows2, Bd);  // ws.rows2 held saved.u, not read again
     norm2.forward(ps, q1, qn, cache ? detail::grow(cache->mean2, std::size_t(B)) : nullptr,
                   cache ? detail::grow(cache->rstd2, std::size_t(B)) : nullptr, B);
     std::copy(q1, q1 + Bd, q2);

@@ -12,7 +12,7 @@
 //   a whole model. (BlockStack::backward, inside the encoder and predictor, is in place: its dx
 //   enters as ∂L/∂x_out and leaves as ∂L/∂x_in.)
 // Calls with many buffers take them in argument structs (AttentionRows, AttentionSaved,
-// PredictorInput), as the kernels take an AttentionShape.
+// CrossAttentionSaved, PredictorInput), as the kernels take an AttentionShape.
 #include <cstdint>
 #include <string>
 #include <utility>

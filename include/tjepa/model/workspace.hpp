@@ -20,14 +20,14 @@ struct Workspace {
   AlignedVector<T> x;       // [M, d] running activation of the inference path
   AlignedVector<T> stream;  // [M, d] residual stream of a stack that keeps only some rows
   AlignedVector<T> ln;      // [M, d] LayerNorm output
-  AlignedVector<T> qkv;     // [M, 3d]
+  AlignedVector<T> qkv;     // [M, 3d]; the probe's attention weights [M, H] (its backward: their gradient)
   AlignedVector<T> att;     // [M, d] attention output before proj
   AlignedVector<T> hidden;  // [M, hidden] MLP activation (training)
   AlignedVector<T> mlp;     // the row-tiled inference MLP: packed weights + [tile, hidden] per thread
-  AlignedVector<T> branch;  // [M, d] a residual branch under drop-path
+  AlignedVector<T> branch;  // [M, d] a residual branch under drop-path; the probe's pooled tokens [B, H, d]
   AlignedVector<T> scales;  // [depth, 2, B] drop-path scales of the inference path
-  AlignedVector<T> rows;    // [rows, ·] gathered rows (predictor targets, tokenizer groups)
-  AlignedVector<T> rows2;   // [rows, ·] second gathered buffer
+  AlignedVector<T> rows;    // [rows, ·] gathered rows (predictor targets, tokenizer groups); the probe's query
+  AlignedVector<T> rows2;   // [rows, ·] second gathered buffer; the probe's folded keys, then its norm2 output
   // Backward scratch.
   AlignedVector<T> dx;       // [M, d] gradient flowing down the residual stream
   AlignedVector<T> dbranch;  // [M, d]
@@ -35,8 +35,8 @@ struct Workspace {
   AlignedVector<T> dqkv;     // [M, 3d]
   AlignedVector<T> dhidden;  // [M, hidden]
   AlignedVector<T> hidden2;  // [M, hidden] recomputed activation
-  AlignedVector<T> drows;    // [rows, ·]
-  AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps
+  AlignedVector<T> drows;    // [rows, ·]; the probe's ∂pooled [B, H, d]
+  AlignedVector<T> dkept;    // [B·Lk, d] gradient of the rows a stack keeps; the probe's ∂u per sample [B, H, d]
   // How the forward products of the tokenizer, the encoder (qkv, proj, MLP) and the predictor's
   // blocks read their weights:
   // - frozen_weights: inference on weights that do not change between calls (a frozen encoder in
