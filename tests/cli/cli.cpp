@@ -578,14 +578,16 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK(o.eval.heads.sequence.max_epochs == GraspHeadConfig{}.sequence.max_epochs);
   CHECK(o.eval.heads.sequence.patience == GraspHeadConfig{}.sequence.patience);
   CHECK(o.eval.heads.sequence_pooling.kind == PoolingKind::taxel);
-  // End to end: the protocol trains it with the heads' limits; the demo caps it at 3 epochs (its
+  // End to end: the protocol trains it with the heads' limits; the demo caps it at 2 epochs (its
   // budget) and the row's name says so.
   CHECK(GraspHeadConfig{}.end_to_end_max_epochs == GraspHeadConfig{}.probe.max_epochs);
   CHECK(GraspHeadConfig{}.end_to_end_patience == GraspHeadConfig{}.probe.patience);
   CHECK(end_to_end_name(GraspHeadConfig{}) == "end to end");
-  CHECK(o.eval.heads.end_to_end_max_epochs == 3);
+  CHECK(o.eval.heads.end_to_end_max_epochs == 2);
   CHECK(o.eval.heads.end_to_end_patience == 2);
-  CHECK(end_to_end_name(o.eval.heads) == "end to end (at most 3 epochs, patience 2)");
+  CHECK(end_to_end_name(o.eval.heads) == "end to end (at most 2 epochs, patience 2)");
+  CHECK_FALSE(o.eval.linear_readout);  // the demo leaves the linear read-outs to tjepa eval
+  o.eval.linear_readout = true;        // which writes them: checked here at toy size
   GraspHeadConfig impatient;
   impatient.end_to_end_patience = 2;  // the heads' epochs, a shorter patience: named too
   CHECK(end_to_end_name(impatient) == "end to end (at most 200 epochs, patience 2)");
