@@ -181,6 +181,12 @@ struct CrossAttention {
     return a;
   }
   int dim() const { return proj.out; }
+  // Whether sample b has a key to attend to. One whose keys are all masked has no distribution to
+  // attend with: its output is 0 (as kernels::attention's) and it passes no gradient to kv.
+  static bool has_keys(const AttentionRows& r, int b) {
+    return r.key_valid == nullptr || std::any_of(r.key_valid + std::size_t(b) * r.L, r.key_valid + std::size_t(b + 1) * r.L,
+                                                 [](std::uint8_t v) { return v != 0; });
+  }
 
   // query [d] (the one query row every sample shares), x [B·L, d] → y [B, d] (r.q_from is 0).
   // Fills saved.{q, u, p, pooled, att}; the backward reads them.
@@ -206,19 +212,17 @@ struct CrossAttention {
       T* p = saved.p + std::size_t(b) * H * L;  // [H, L]
       T* pooled = saved.pooled + std::size_t(b) * H * d;
       T* att = saved.att + std::size_t(b) * d;
-      bool any = false;
-      for (int n = 0; n < L; ++n) {
-        const bool ok = valid == nullptr || valid[n] != 0;
-        any = any || ok;
-        for (int h = 0; h < H; ++h)
-          p[std::size_t(h) * L + n] = ok ? detail::simd_dot(xb + std::size_t(n) * d, saved.u + std::size_t(h) * d, d)
-                                         : -std::numeric_limits<T>::infinity();
-      }
       std::fill(pooled, pooled + std::size_t(H) * d, T(0));
-      if (!any) {  // every key masked: no distribution to attend with, output 0 (as kernels::attention)
+      if (!has_keys(r, b)) {
         std::fill(p, p + std::size_t(H) * L, T(0));
         std::fill(att, att + d, T(0));
         continue;
+      }
+      for (int n = 0; n < L; ++n) {
+        const bool ok = valid == nullptr || valid[n] != 0;
+        for (int h = 0; h < H; ++h)
+          p[std::size_t(h) * L + n] = ok ? detail::simd_dot(xb + std::size_t(n) * d, saved.u + std::size_t(h) * d, d)
+                                         : -std::numeric_limits<T>::infinity();
       }
       kernels::softmax_forward(p, p, H, L);
       for (int n = 0; n < L; ++n) {
@@ -252,10 +256,8 @@ struct CrossAttention {
     T* dbv = kv.has_bias ? ps.grad(kv.bias) + d : nullptr;
     const T scale = T(1) / std::sqrt(T(Dh));
     // att_h = Wv_h · pooled_h + bv_h: dWv, dbv (rows in parallel, samples in order)
-    for (int b = 0; b < B; ++b)  // a sample whose keys are all masked outputs att = 0 whatever W is
-      if (r.key_valid && std::none_of(r.key_valid + std::size_t(b) * L, r.key_valid + std::size_t(b + 1) * L,
-                                      [](std::uint8_t v) { return v != 0; }))
-        std::fill(scratch.datt + std::size_t(b) * d, scratch.datt + std::size_t(b + 1) * d, T(0));
+    for (int b = 0; b < B; ++b)  // att = 0 whatever Wv and bv are
+      if (!has_keys(r, b)) std::fill(scratch.datt + std::size_t(b) * d, scratch.datt + std::size_t(b + 1) * d, T(0));
     TJEPA_OMP(omp parallel for schedule(static) if (std::size_t(B) * d * d > detail::parallel_grain))
     for (int i = 0; i < d; ++i)
       for (int b = 0; b < B; ++b) {
