@@ -560,6 +560,25 @@ TEST_SUITE("nn") {
     CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
     for (int c = 0; c < d; ++c) CHECK(dx[std::size_t(2) * d + c] == 0.0);  // a padded token
     test::check_param_gradients(ps, loss);
+    // NaN in the padded tokens changes nothing: the same outputs and the same gradients.
+    auto run = [&] {
+      std::vector<double> out(y.size()), grads;
+      probe.forward(ps, x.data(), B, L, valid.data(), out.data(), nullptr, ws);  // inference
+      ps.zero_grad();
+      probe.forward(ps, x.data(), B, L, valid.data(), y.data(), &cache, ws);
+      CHECK(y == out);
+      std::fill(dx.begin(), dx.end(), 0.0);
+      probe.backward(ps, w.data(), dx.data(), cache, ws);
+      for (std::size_t i = 0; i < ps.count(); ++i)
+        for (double g : ps.grad_span(ps.id(i))) grads.push_back(g);
+      out.insert(out.end(), grads.begin(), grads.end());
+      out.insert(out.end(), dx.begin(), dx.end());
+      return out;
+    };
+    const std::vector<double> clean = run();
+    for (const std::size_t r : {std::size_t(2), std::size_t(L + 5)})
+      std::fill_n(x.begin() + std::ptrdiff_t(r * d), d, std::numeric_limits<double>::quiet_NaN());
+    CHECK(run() == clean);
   }
 
   TEST_CASE("TaxelPooling (model/taxel_pooling.hpp) alone: gradients of inputs and parameters - inference equals the cached forward") {

@@ -103,8 +103,18 @@ struct AttentiveProbe {
       else
         cache->key_valid.clear();
     }
+    // Padded tokens are never read: norm1 sees their rows as zeros, so whatever they hold (NaN
+    // too) reaches neither the output nor a gradient (the backward reads cache->x, zeroed alike).
+    const T* xin = x;
+    if (key_valid && std::find(key_valid, key_valid + M, std::uint8_t(0)) != key_valid + M) {
+      T* xz = cache ? cache->x.data() : detail::grow(ws.dbranch, M * d);
+      if (!cache) std::copy(x, x + M * d, xz);
+      for (std::size_t r = 0; r < M; ++r)
+        if (!key_valid[r]) std::fill(xz + r * d, xz + (r + 1) * d, T(0));
+      xin = xz;
+    }
     T* xn = buf(&ProbeCache<T>::xn, ws.ln, M * d);
-    norm1.forward(ps, x, xn, cache ? detail::grow(cache->mean1, M) : nullptr,
+    norm1.forward(ps, xin, xn, cache ? detail::grow(cache->mean1, M) : nullptr,
                   cache ? detail::grow(cache->rstd1, M) : nullptr, int(M));
     const T* q0 = ps.value(query);
     T* q1 = buf(&ProbeCache<T>::q1, ws.x, Bd);
