@@ -30,7 +30,7 @@ struct Workspace {
   AlignedVector<T> rows2;   // [rows, ·] second gathered buffer; the probe's folded keys, then its norm2 output
   // Backward scratch.
   AlignedVector<T> dx;       // [M, d] gradient flowing down the residual stream
-  AlignedVector<T> dbranch;  // [M, d]
+  AlignedVector<T> dbranch;  // [M, d]; the probe's inference copy of its tokens with padded rows zeroed
   AlignedVector<T> dln;      // [M, d]
   AlignedVector<T> dqkv;     // [M, 3d]
   AlignedVector<T> dhidden;  // [M, hidden]
