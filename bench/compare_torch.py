@@ -49,8 +49,8 @@ class Attention(nn.Module):
 
 class AttentiveProbe(nn.Module):
     """V-JEPA's AttentivePooler (one learned query, one CrossAttentionBlock) and the 2-layer MLP head
-    of REFERENCE §6, as bench/model.cpp's BM_ProbeTrainStep builds it: keys and values projected
-    for every token, as the reference does."""
+    of the paper's Sec. IV-B, as bench/model.cpp's BM_ProbeTrainStep builds it: keys and values
+    projected for every token, as the reference does."""
 
     def __init__(self, d=D, heads=HEADS, out=16):
         super().__init__()
@@ -183,8 +183,8 @@ def deco50_group_sizes():
 
 
 class TaxelTokenizer(nn.Module):
-    """Per taxel (REFERENCE §4, tjepa's Tokenizer::per_taxel): one affine map R^{m·tau} -> R^d shared by
-    all taxels, then LayerNorm."""
+    """Per taxel (the paper's eq. 1, Sec. III-B; tjepa's Tokenizer::per_taxel): one affine map
+    R^{m·tau} -> R^d shared by all taxels, then LayerNorm."""
 
     def __init__(self, width, d=D):
         super().__init__()
@@ -275,7 +275,7 @@ def sample_masks(B, N, K, target_sizes, gen):
 
 
 class JepaStep:
-    """One optimizer step of Tactile-JEPA (REFERENCE §5) in plain PyTorch."""
+    """One optimizer step of Tactile-JEPA (the paper's Sec. III-B and IV-D) in plain PyTorch."""
 
     def __init__(self, tokenizer, N, drop, style, total_steps=50000):
         self.context = JepaEncoder(tokenizer, N, drop, style).train()

@@ -1,15 +1,15 @@
-// Benchmarks of the model modules (float): the ViT-Tiny encoder of REFERENCE §4 (12 blocks,
-// d = 192, 3 heads, MLP 768), inference at the token counts of Sparsh-skin (368) and DECO-50
-// (528), a training-shaped forward+backward, the predictor at training shape, and the grouped
-// tokenizer on 2124 taxels.
+// Benchmarks of the model modules (float): the ViT-Tiny encoder of the paper's Sec. IV-D (12
+// blocks, d = 192, 3 heads, MLP 768), inference at the token counts of Sparsh-skin (368) and
+// DECO-50 (528), a training-shaped forward+backward, the predictor at training shape, and the
+// grouped tokenizer on 2124 taxels.
 //
 // FLOP convention: GEMMs 2·M·K·N (per block: qkv 6d², proj 2d², fc1 + fc2 16d², so 24·M·d²);
 // attention 4·L²·d per sample forward, 3.5× that forward+backward (the attention suite's
 // convention); backward GEMMs 2× forward. LayerNorm, GELU and adds are not counted.
 // The attentive probe is timed, not counted: its cross-attention folds the shared query into the
 // key weights (model/attention.hpp), so its work is a few passes over the tokens, not GEMMs.
-// Reference points (PyTorch, REFERENCE issue 8): encoder forward L = 368, batch 1: 62 ms;
-// training step batch 8, L = 368: 1368 ms.
+// PyTorch's times for the same shapes: bench/compare.sh runs bench/compare_torch.py beside these
+// (bench/RESULTS.md).
 #include <benchmark/benchmark.h>
 
 #include <vector>
@@ -83,7 +83,7 @@ BENCHMARK(BM_EncoderForwardFrozen)->Args({368, 1})->Args({528, 1})->Args({2124, 
 // The same with bf16 products (AVX512-BF16, fp32 accumulation): qkv, proj and the MLP in bf16,
 // attention and norms fp32.
 void BM_EncoderForwardBf16(benchmark::State& state) {
-  if (!detail::bgemm::native) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
+  if (!has_native_bf16()) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
   encoder_forward(state, Precision::bf16);
 }
 BENCHMARK(BM_EncoderForwardBf16)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
@@ -148,7 +148,7 @@ BENCHMARK(BM_PredictorForwardBackward)->Unit(benchmark::kMillisecond)->UseRealTi
 // or masks: those are the training stage's): tokenizer (368 taxels, m·τ = 30) forward+backward,
 // target encoder forward on all 368 tokens (drop-path 0.3, no cache), context encoder
 // forward+backward on 258 tokens, predictor forward+backward on 4 tiled targets of 51 tokens.
-// Compare with PyTorch's 1368 ms per training step.
+// Compare with PyTorch's train_step/B8/L368 (bench/compare_torch.py, bench/RESULTS.md).
 void BM_JepaStepModel(benchmark::State& state) {
   const int N = 368, B = 8, K = 258, t = 51, R = 4, in = 30;
   ParamSet<float> ps, target, pps;
@@ -239,7 +239,7 @@ void BM_TokenizerGrouped(benchmark::State& state) {
 }
 BENCHMARK(BM_TokenizerGrouped)->Args({0, 1})->Args({0, 8})->Args({1, 8})->Unit(benchmark::kMicrosecond)->UseRealTime();
 
-// One training step of the attentive probe (REFERENCE §6: 3 heads, MLP ratio 4, head hidden d)
+// One training step of the attentive probe (paper, Sec. IV-B: 3 heads; MLP ratio 4, head hidden d)
 // on a batch of B windows of L frozen token embeddings, out = 16 classes: forward with cache, then
 // backward, to the parameters only (arg 2 = 0: a frozen encoder's probe) or to the tokens too
 // (arg 2 = 1: end to end). Counter: windows per second.

@@ -1,6 +1,6 @@
-// One JEPA training step at the reference scale (REFERENCE §4-5: ViT-Tiny encoder d = 192, 12
-// blocks, 3 heads; predictor 4 blocks), float, batch 8 (the PyTorch reference point in
-// bench/model.cpp), forward + backward + clipping + AdamW + EMA, drop-path 0.3, with the library's
+// One JEPA training step at the paper's scale (Sec. III-B, IV-D: ViT-Tiny encoder d = 192, 12
+// blocks, 3 heads; predictor 4 blocks), float, batch 8 (as bench/compare_torch.py's jepa_step),
+// forward + backward + clipping + AdamW + EMA, drop-path 0.3, with the library's
 // own masks (MaskCollator, seed 3, batch 0), on the thread count given as the first argument:
 //   BM_JepaTrainStep      Allegro/Xela skin, N = 368 tokens of m·τ = 30 values (K 163, targets 4 × 53)
 //   BM_JepaTrainStepDeco  DECO-50, two Inspire hands: 2124 taxels in 528 groups of 4 and 5
@@ -32,7 +32,7 @@ double block_flops(double tokens, double L, double d) { return tokens * (24 * d 
 // One step of `model` on batch x [B, N, token width] with masks from `graph`'s collator.
 void run_jepa_step(benchmark::State& state, const tjepa::TaxelGraph& graph, const tjepa::JepaConfig& config,
                    const std::vector<float>& x, int B, tjepa::Precision precision) {
-  if (precision == tjepa::Precision::bf16 && !tjepa::detail::bgemm::native)
+  if (precision == tjepa::Precision::bf16 && !tjepa::has_native_bf16())
     return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
 #ifdef _OPENMP
   const int previous = omp_get_max_threads();

@@ -5,7 +5,7 @@
 #include <cstdlib>
 #include <span>
 
-#include <tjepa/tjepa.hpp>
+#include <tjepa/sim.hpp>
 
 using namespace tjepa;
 

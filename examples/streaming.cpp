@@ -46,7 +46,7 @@
 #include <vector>
 
 #include "cli/setup.hpp"
-#include <tjepa/downstream/probe_training.hpp>
+#include <tjepa/downstream/probe_labels.hpp>
 
 // Every heap allocation of the process, counted at the C level (operator new, std::vector and
 // xsimd's aligned allocator all end in one of these): glibc lets the program interpose them.
@@ -309,7 +309,7 @@ int main(int argc, char** argv) {
                         model->num_tokens(), " taxels of ", model->config.in_dim, " values, the hand has ", N,
                         " taxels of ", tau * m);
     const int d = model->dim();
-    ForceIndenterProbe<float> probe(d, model->config.encoder.heads, num_indenter_shapes, 1);
+    ProbeHead<float> probe(d, model->config.encoder.heads, force_axes, num_indenter_shapes, 1);
 
     // Everything the loop touches, made once.
     std::vector<float> ring(static_cast<std::size_t>(tau) * N * m, 0.0f);  // [τ, N, m]
@@ -373,7 +373,7 @@ int main(int argc, char** argv) {
     std::printf("streaming: %d taxels x %d axes, window of %d frames, encoder d=%d, %d blocks, %d heads%s, %s products%s\n",
                 N, m, tau, d, model->config.encoder.depth, model->config.encoder.heads,
                 checkpoint.empty() ? " (random weights)" : "", precision_name(ws.precision),
-                ws.precision == Precision::bf16 && !detail::bgemm::native ? " (no AVX512-BF16: computed in fp32)" : "");
+                ws.precision == Precision::bf16 && !has_native_bf16() ? " (no AVX512-BF16: computed in fp32)" : "");
     std::printf("%d ticks after %d warm-up ticks, 1 thread%s%s\n", ticks, warmup,
                 rate > 0 ? (spin ? ", busy-waiting between ticks" : ", sleeping between ticks") : ", back to back",
                 realtime ? ", SCHED_FIFO" : "");

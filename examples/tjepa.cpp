@@ -73,15 +73,15 @@ int main(int argc, char** argv) {
   probe->add_option("--simulate-test-frames", pb.simulate_test_frames, "simulated held-out frames")
       ->capture_default_str()->check(CLI::Range(1, 1 << 30));
   probe->add_option("--max-windows", pb.max_windows, "labelled windows per split (0: all)")->capture_default_str();
-  probe->add_option("--epochs", pb.probe.epochs, "probe epochs")->capture_default_str();
+  probe->add_option("--epochs", pb.probe.max_epochs, "probe epoch limit (early stopping)")->capture_default_str();
+  probe->add_option("--patience", pb.probe.patience, "epochs without a better validation loss before stopping")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   probe->add_option("--batch", pb.probe.batch, "probe batch")->capture_default_str();
   probe->add_option("--repeats", pb.repeats, "probes with seeds seed, seed+1, ... averaged (mean ± sd)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  probe->add_option_function<double>("--lr", [&pb](const double& v) { pb.probe.lr = v; pb.probe_lrs = {v}; },
-                                     "one probe learning rate (no sweep)");
-  probe->add_option("--lrs", pb.probe_lrs, "probe learning rates, chosen among on a validation split")
-      ->capture_default_str();
+  probe->add_option("--lr", pb.probe.lr, "probe learning rate")->capture_default_str();
   probe->add_option("--out", pb.out, "write the results as JSON here");
   probe->add_flag("--force", pb.force, "overwrite --out");
   probe->add_flag("--quiet", pb.quiet, "no progress line");

@@ -1,11 +1,11 @@
-// Diagnostics of docs/evaluation.md ("After the first run"): one pre-training seed (0), the
+// Diagnostics of docs/history/evaluation-log.md ("After the first run"): one pre-training seed (0), the
 // grasp protocol's data. Build from the repository root and run one mode at a time:
 //   g++ -std=c++20 -O2 -march=native -fopenmp -Iinclude -I/usr/include/eigen3 \
 //       docs/experiments/grasp_variants.cpp -o /tmp/grasp_variants
 //   OMP_NUM_THREADS=1 /tmp/grasp_variants heads               validation curves, random encoder
 //   OMP_NUM_THREADS=1 /tmp/grasp_variants jepa standardize    Tactile-JEPA with standardized targets
 //   OMP_NUM_THREADS=1 /tmp/grasp_variants pose                sequence head up to 100 epochs, patience 20
-#include <tjepa/tjepa.hpp>
+#include <tjepa/eval.hpp>
 #include <cstdio>
 #include <iostream>
 using namespace tjepa;

@@ -1,7 +1,7 @@
-#include <tjepa/tjepa.hpp>
+#include <tjepa/eval.hpp>
 #include <cstdio>
 using namespace tjepa;
-// Pose diagnostic for docs/evaluation.md: how much of the pose do the contacts' centroids
+// Pose diagnostic for docs/history/evaluation-log.md: how much of the pose do the contacts' centroids
 // hold, and how does the sequence head train on a random encoder's features without early
 // stopping? Build and run from the repository root:
 //   g++ -std=c++20 -O2 -march=native -fopenmp -Iinclude -I/usr/include/eigen3 \

@@ -1,4 +1,4 @@
-// Diagnostics of docs/evaluation.md ("Where the pose and the force are", eighth session): the grasp
+// Diagnostics of docs/history/evaluation-log.md ("Where the pose and the force are"): the grasp
 // protocol's data (GraspEvalConfig defaults), one encoder at a time. A throwaway driver kept so that
 // the numbers quoted there can be rerun; the protocol's own read-outs are in tjepa eval's linear
 // table (score_linear_readouts). Build from the repository root:
@@ -24,7 +24,7 @@
 // DEPTH=k (modes with ENCODER): read the embeddings after the encoder's first k blocks (k = 0: the
 // tokens and position table through the final norm)
 // ENCODER may be a --pretrain-cache file of tjepa eval (its parameters are under "encoder.").
-#include <tjepa/tjepa.hpp>
+#include <tjepa/eval.hpp>
 #include <cstdio>
 #include <iostream>
 using namespace tjepa;
@@ -99,7 +99,7 @@ int main(int argc, char** argv) {
   auto model = make_jepa_model<float>(cfg, graph, axes, s);
   if (mode == "pretrain") {
     MaskCollator collator(graph, cfg.masks());
-    Trainer<float> trainer(*model, *d.pretrain, std::move(collator), cfg);
+    JepaTrainer<float> trainer(*model, *d.pretrain, std::move(collator), cfg);
     trainer.on_step = [&](const JepaStepStats& st) {
       if ((st.step + 1) % 300 == 0) std::printf("step %ld loss %g std %g\n", long(st.step + 1), st.loss, st.target_sample_std), fflush(stdout);
     };

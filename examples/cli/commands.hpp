@@ -11,6 +11,8 @@
 //
 // Every command writes its files through OutputFiles: on an error nothing it wrote is left.
 #include <array>
+#include <chrono>
+#include <iostream>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -22,8 +24,8 @@
 #include <nlohmann/json.hpp>
 
 #include <tjepa/downstream/embed.hpp>
-#include <tjepa/downstream/probe_training.hpp>
-#include <tjepa/tjepa.hpp>
+#include <tjepa/downstream/probe_labels.hpp>
+#include <tjepa/eval.hpp>
 
 #include "output.hpp"
 #include "pretrain.hpp"
@@ -165,7 +167,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
   if (lead) files.make_dir(dir);
   const auto owned = make_jepa_model(run, skin.graph, axes, run.seed);
   JepaModel<float>& model = *owned;
-  Trainer<float> trainer(model, src, skin.graph, run);
+  JepaTrainer<float> trainer(model, src, skin.graph, run);
   trainer.parallel = o.parallel;
   trainer.extras = data_state(pre, drift ? &*drift : nullptr);
   if (!o.resume.empty()) trainer.resume(o.resume);
@@ -188,12 +190,20 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
 // ---------------------------------------------------------------------------------------------
 // Probes (shared by `probe` and `demo`)
 
+// Held-out metrics of a force + indenter probe.
+struct ProbeMetrics {
+  std::array<double, force_axes> force_rmse{};  // N, per axis (shear u, shear v, normal)
+  double indenter_accuracy = 0;
+  double majority_accuracy = 0;                 // chance level: the most frequent class
+  int windows = 0;
+};
+
 struct ProbeRow {
   std::string name;
   ProbeMetrics metrics;               // one probe, or the mean over `runs`
   double seconds = 0;
-  double lr = 0;                      // the probe's learning rate (chosen by validation when swept)
-  std::vector<double> lr_objective;   // validation objective per swept rate
+  double lr = 0;                      // the probe's learning rate
+  std::vector<double> lr_objective;   // unused (kept for the JSON's schema)
   std::vector<ProbeRow> runs;         // the repeats averaged into metrics (empty: a single probe)
   ProbeMetrics spread;                // their sample standard deviation (0 for a single probe)
 };
@@ -280,14 +290,16 @@ inline nlohmann::json probe_rows_json(const std::vector<ProbeRow>& rows) {
 
 // The mean-force / majority-class row: what a probe must beat to have learned anything.
 inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& test, int classes) {
-  const ForceScaler s = ForceScaler::fit(train);
+  std::vector<std::int64_t> all(static_cast<std::size_t>(train.size()));
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::int64_t>(i);
+  const ColumnScaler s = ColumnScaler::fit(train.force, force_axes, all);
   std::vector<float> y(static_cast<std::size_t>(test.size()) * (force_axes + classes), 0.0f);
   std::vector<int> count(static_cast<std::size_t>(classes), 0);
   for (int c : train.indenter) ++count[static_cast<std::size_t>(c)];
   const int major = static_cast<int>(std::max_element(count.begin(), count.end()) - count.begin());
   for (int i = 0; i < test.size(); ++i) {
     float* r = y.data() + static_cast<std::size_t>(i) * (force_axes + classes);
-    for (int a = 0; a < force_axes; ++a) r[a] = s.mean[static_cast<std::size_t>(a)];
+    for (int a = 0; a < force_axes; ++a) r[a] = static_cast<float>(s.mean[static_cast<std::size_t>(a)]);
     r[force_axes + major] = 1.0f;
   }
   ProbeRow row{"constant (train mean / majority)", {}, 0, 0, {}, {}, {}};
@@ -301,31 +313,15 @@ inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& t
   return row;
 }
 
-// train_probe with a progress line (step, loss, windows/s, ETA).
-template <class Features>
-void train_with_progress(ForceIndenterProbe<float>& probe, Features& features, const ProbeLabels& labels,
-                         const ProbeTrainConfig& cfg, const std::string& label, bool quiet) {
-  ProgressLine bar(label, 1, quiet);
-  train_probe(probe, features, labels, cfg, [&](const ProbeStepInfo& s) {
-    char extra[64];
-    std::snprintf(extra, sizeof extra, "loss %.4f", s.loss);
-    if (s.step == 0) bar = ProgressLine(label, s.total_steps, quiet);
-    bar.update(s.step + 1, (s.step + 1) * cfg.batch, extra);
-  });
-}
-
-// A probe on the frozen encoder (tokenizer + encoder reading `params`). With more than one rate in
-// `lrs`, the probe's learning rate is chosen among them on a validation split of the training
-// windows (select_probe_lr), then the probe trains on all of them; otherwise cfg.lr. repeats > 1:
-// that many probes (seeds cfg.seed, cfg.seed + 1, ...) on the same embeddings, averaged
-// (average_rows); the rate is chosen by the first and kept by the others (it depends on the
-// embeddings, which they share; the sweep is most of a probe's cost). center_tokens: each token's
+// A probe head (3 force outputs + the indenter logits) trained early-stopped on the frozen
+// encoder's embeddings of the training windows (train_head: a validation split of them decides
+// the epoch), scored on the held-out windows. repeats > 1: that many heads (seeds cfg.seed,
+// cfg.seed + 1, ...) on the same embeddings, averaged (average_rows). center_tokens: each token's
 // resting embedding is removed first (center_token_embeddings, fitted on the training windows).
 inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& params, const Tokenizer& tok,
                              const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
-                             const WindowSource& test_src, const ProbeLabels& test, ProbeTrainConfig cfg,
-                             int heads, bool quiet, const std::vector<double>& lrs = {}, int repeats = 1,
-                             bool center_tokens = false) {
+                             const WindowSource& test_src, const ProbeLabels& test, const HeadTrainConfig& cfg,
+                             int heads, bool quiet, int repeats = 1, bool center_tokens = false) {
   require<ConfigError>(repeats >= 1, "frozen_probe: repeats = ", repeats, ", expected >= 1");
   ProgressLine embed_progress("  embed " + name, train.size() + test.size(), quiet);
   const auto t0 = std::chrono::steady_clock::now();
@@ -342,47 +338,31 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
   }
   FrozenFeatures<float> ftrain(std::move(emb_train), enc.num_tokens(), enc.dim());
   FrozenFeatures<float> ftest(std::move(emb_test), enc.num_tokens(), enc.dim());
+  const HeadTargets train_targets = head_targets(train, num_indenter_shapes);
+  const HeadTargets test_targets = head_targets(test, num_indenter_shapes);
   std::vector<ProbeRow> runs;
   for (int r = 0; r < repeats; ++r) {
     const auto t1 = std::chrono::steady_clock::now();
-    ProbeTrainConfig c = cfg;
+    HeadTrainConfig c = cfg;
     c.seed = cfg.seed + static_cast<std::uint64_t>(r);
     const std::string label = repeats > 1 ? name + " #" + std::to_string(r + 1) : name;
-    ProbeLrChoice choice{c.lr, {}};
-    if (r > 0 && lrs.size() > 1) {
-      choice = {runs.front().lr, {}};  // the rate is a property of the embeddings: chosen once
-      c.lr = choice.lr;
-    } else if (lrs.size() > 1) {
-      ProgressLine sweep("  probe lr sweep " + label, static_cast<std::int64_t>(lrs.size()), quiet);
-      choice = select_probe_lr(std::span<const float>(ftrain.embeddings()), enc.num_tokens(), enc.dim(), train, lrs,
-                               c, heads, num_indenter_shapes);
-      sweep.update(static_cast<std::int64_t>(lrs.size()), 0, "");
-      c.lr = choice.lr;
-    }
-    ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, c.seed);
-    train_with_progress(probe, ftrain, train, c, "  probe " + label, quiet);
-    ProbeRow row{label, evaluate_probe(probe, ftest, test), 0, c.lr, choice.objective, {}, {}};
+    ProbeHead<float> head(enc.dim(), heads, force_axes, num_indenter_shapes, c.seed);
+    const HeadTrainResult fit = train_head(head, ftrain, train_targets, c);
+    if (!quiet)
+      std::cerr << "  probe " << label << ": best epoch " << fit.best_epoch + 1 << " of " << fit.epochs()
+                << " (validation loss " << fit.best_validation << ")\n";
+    const HeadMetrics hm = evaluate_head(head, ftest, test_targets);
+    ProbeRow row{label, {}, 0, c.lr, {}, {}, {}};
+    std::copy_n(hm.rmse.begin(), force_axes, row.metrics.force_rmse.begin());
+    row.metrics.indenter_accuracy = hm.accuracy;
+    row.metrics.majority_accuracy = hm.majority_accuracy;
+    row.metrics.windows = hm.samples;
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count() +
                   (r == 0 ? embed_seconds : 0.0);
     runs.push_back(std::move(row));
   }
   if (repeats == 1) return runs.front();
   return average_rows(name, std::move(runs));
-}
-
-// An encoder (fresh, `params` as initialized) trained end to end with the probe.
-inline ProbeRow end_to_end_probe(const std::string& name, ParamSet<float>& params, const Tokenizer& tok,
-                                 const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
-                                 const WindowSource& test_src, const ProbeLabels& test, const ProbeTrainConfig& cfg,
-                                 int heads, bool quiet) {
-  const auto t0 = std::chrono::steady_clock::now();
-  EncoderFeatures<float> ftrain(params, tok, enc, train_src, train.window);
-  ForceIndenterProbe<float> probe(enc.dim(), heads, num_indenter_shapes, cfg.seed);
-  train_with_progress(probe, ftrain, train, cfg, "  train " + name, quiet);
-  EncoderFeatures<float> ftest(params, tok, enc, test_src, test.window);
-  ProbeRow row{name, evaluate_probe(probe, ftest, test), 0, cfg.lr, {}, {}, {}};
-  row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  return row;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -398,8 +378,7 @@ struct ProbeOptions {
   int simulate_train_frames = 20000, simulate_test_frames = 10000;  // the demo's (8000 + 4000 gave noisy results)
   int min_contact = 5;                     // frames in contact for a window to count
   int max_windows = 0;                     // per split, 0 = all
-  ProbeTrainConfig probe{.epochs = 60, .batch = 32, .lr = 1e-3};  // the demo's (10 epochs left it at the mean)
-  std::vector<double> probe_lrs{3e-4, 1e-3, 3e-3};  // swept on a validation split (one rate: no sweep)
+  HeadTrainConfig probe{.max_epochs = 60, .batch = 32, .lr = 1e-3};  // early-stopped on a validation split
   int repeats = 1;                         // probes with seeds seed, seed + 1, ... averaged
   bool center_tokens = false;              // center_token_embeddings before the probe
   std::string out;                         // results JSON ("" = none)
@@ -458,7 +437,7 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes),
                              frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
                                           train_src, train, test_src, test, o.probe, m.config.heads, o.quiet,
-                                          o.probe_lrs, o.repeats, o.center_tokens)};
+                                          o.repeats, o.center_tokens)};
   print_probe_table(out, rows);
   if (!o.out.empty()) {
     OutputFiles files;

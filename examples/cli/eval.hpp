@@ -6,7 +6,7 @@
 #include <iostream>
 #include <string>
 
-#include <tjepa/tjepa.hpp>
+#include <tjepa/eval.hpp>
 
 #include "output.hpp"
 

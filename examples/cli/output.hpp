@@ -16,7 +16,7 @@
 
 #include <unistd.h>
 
-#include <tjepa/tjepa.hpp>
+#include <tjepa/eval.hpp>
 
 namespace tjepa::cli {
 

@@ -26,8 +26,8 @@ inline const std::vector<std::string>& pretrain_log_columns() {
 }
 
 // Runs the trainer until step stop_after (< 0: the end of its schedule), printing progress unless quiet.
-inline PretrainOutcome pretrain(Trainer<float>& trainer, bool quiet, std::int64_t stop_after = -1) {
-  const int B = trainer.config().batch;
+inline PretrainOutcome pretrain(JepaTrainer<float>& trainer, bool quiet, std::int64_t stop_after = -1) {
+  const int B = trainer.objective().config().batch;
   PretrainOutcome out;
   out.log.header = pretrain_log_columns();
   ProgressLine progress("pretrain", trainer.total_steps(), quiet);
@@ -51,7 +51,7 @@ inline PretrainOutcome pretrain(Trainer<float>& trainer, bool quiet, std::int64_
 }
 
 // Writes checkpoint.safetensors (the trainer's), log.csv and loss.svg into dir (registered with files).
-inline void write_pretrain_outputs(const std::filesystem::path& dir, const Trainer<float>& trainer,
+inline void write_pretrain_outputs(const std::filesystem::path& dir, JepaTrainer<float>& trainer,
                                    const PretrainOutcome& outcome, OutputFiles& files) {
   trainer.save(files.add(dir / "checkpoint.safetensors"));
   write_file_atomic(files.add(dir / "log.csv"), outcome.log.str());

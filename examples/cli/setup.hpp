@@ -15,7 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include <tjepa/tjepa.hpp>
+#include <tjepa/eval.hpp>
 
 namespace tjepa::cli {
 

@@ -1,8 +1,14 @@
 #pragma once
-// tjepa: Tactile-JEPA for distributed tactile skins. This umbrella header only includes the
-// user-facing headers, in the order of the data's path. The kernels under the model's modules
-// (tjepa::kernels: attention, linear, LayerNorm, GELU, softmax, gathers, drop-path) have their own
-// umbrella, <tjepa/kernels.hpp>, for those who call or benchmark them directly.
+// tjepa: Tactile-JEPA for distributed tactile skins. This umbrella header includes the
+// algorithm's user-facing headers, in the order of the data's path: layouts, graph, sensors,
+// data, masks, model, optim, io, train (every objective through one Trainer), and the generic
+// downstream pieces (heads, ridge, metrics, Welch tests). Three other umbrellas stand beside it:
+//   <tjepa/kernels.hpp>  the compute kernels under the modules (tjepa::kernels), for those who
+//                        call or benchmark them directly
+//   <tjepa/sim.hpp>      the simulated skins and the simulated Allegro hand (test data)
+//   <tjepa/eval.hpp>     the paper's evaluation protocol on the simulated hand (grasp tasks,
+//                        run_grasp_eval, its tables and caches), which the `tjepa` command uses
+// No header reachable from this one includes sim/ or eval/ (tests/check_layers.cmake).
 
 #include "tjepa/version.hpp"
 
@@ -48,11 +54,6 @@
 #include "tjepa/data/window.hpp"
 #include "tjepa/data/window_source.hpp"
 
-#include "tjepa/sim/simulated_dataset.hpp"
-#include "tjepa/sim/simulated_skin.hpp"
-#include "tjepa/sim/grasp_objects.hpp"
-#include "tjepa/sim/grasping_hand.hpp"
-
 #include "tjepa/masks/collator.hpp"
 #include "tjepa/masks/config.hpp"
 #include "tjepa/masks/context.hpp"
@@ -91,8 +92,10 @@
 #include "tjepa/train/loss.hpp"
 #include "tjepa/train/config.hpp"
 #include "tjepa/train/trained_model.hpp"
-#include "tjepa/train/mae.hpp"
+#include "tjepa/train/objective.hpp"
 #include "tjepa/train/trainer.hpp"
+#include "tjepa/train/jepa_objective.hpp"
+#include "tjepa/train/mae.hpp"
 
 #include "tjepa/downstream/causal_attention.hpp"
 #include "tjepa/downstream/cross_entropy.hpp"
@@ -101,11 +104,7 @@
 #include "tjepa/downstream/metrics.hpp"
 #include "tjepa/downstream/early_stopping.hpp"
 #include "tjepa/downstream/probe_head.hpp"
-#include "tjepa/downstream/probe_training.hpp"
+#include "tjepa/downstream/probe_labels.hpp"
 #include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/downstream/ridge.hpp"
 #include "tjepa/downstream/welch.hpp"
-#include "tjepa/downstream/grasp_tasks.hpp"
-#include "tjepa/downstream/eval_table.hpp"
-#include "tjepa/downstream/pretrain_cache.hpp"
-#include "tjepa/downstream/grasp_eval.hpp"

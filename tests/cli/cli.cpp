@@ -204,7 +204,7 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
     pb.checkpoint = ck.string();
     pb.simulate_train_frames = 600;
     pb.simulate_test_frames = 400;
-    pb.probe.epochs = 1;
+    pb.probe.max_epochs = 1;
     pb.probe.batch = 8;
     pb.out = (t.path / "probe.json").string();
     pb.quiet = true;
@@ -235,7 +235,7 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
     pb.train_labels = (t.path / "train_labels.npy").string();
     pb.test_data = (t.path / "test.npy").string();
     pb.test_labels = (t.path / "test_labels.npy").string();
-    pb.probe.epochs = 1;
+    pb.probe.max_epochs = 1;
     pb.probe.batch = 8;
     pb.quiet = true;
     std::ostringstream pout;
@@ -316,7 +316,7 @@ TEST_CASE("resume across programs: tjepa pretrain to a user Trainer and back giv
     po.stop_after = 3;
     REQUIRE(run_pretrain(po, out) == 0);
     auto model = make_jepa_model(cfg, skin.graph, 3, 12345);  // everything must come from the file
-    Trainer<float> trainer(*model, src, skin.graph, cfg);
+    JepaTrainer<float> trainer(*model, src, skin.graph, cfg);
     trainer.resume(t.path / "half" / "checkpoint.safetensors");
     CHECK(trainer.step() == 3);
     const auto tail = trainer.run();
@@ -330,7 +330,7 @@ TEST_CASE("resume across programs: tjepa pretrain to a user Trainer and back giv
   }
   SUBCASE("a user Trainer stops at 3, then pretrain --resume continues") {
     auto model = make_jepa_model(cfg, skin.graph, 3, cfg.seed);
-    Trainer<float> trainer(*model, src, skin.graph, cfg);
+    JepaTrainer<float> trainer(*model, src, skin.graph, cfg);
     trainer.extras = data_state(pre);
     const auto head = trainer.run(3);
     for (int s = 0; s < 3; ++s) CHECK(to_text(head[s].loss) == straight[s]);

@@ -6,8 +6,8 @@
 #include <doctest/doctest.h>
 
 #include <tjepa/downstream/embed.hpp>
-#include <tjepa/downstream/probe_training.hpp>
-#include <tjepa/tjepa.hpp>
+#include <tjepa/downstream/probe_labels.hpp>
+#include <tjepa/eval.hpp>
 
 #include <cmath>
 #include <numeric>
@@ -61,7 +61,7 @@ TEST_CASE("metrics: RMSE per column / accuracy / majority") {
 
 TEST_CASE("probe loss: gradient through the AttentiveProbe matches central differences") {
   const int B = 3, L = 5, d = 12, C = 4;
-  ForceIndenterProbe<double> p(d, 3, C, 1);
+  ProbeHead<double> p(d, 3, force_axes, C, 1);
   Rng rng(2);
   for (auto& v : p.params.values()) v += 0.3 * rng.normal();
   std::vector<double> x(static_cast<std::size_t>(B) * L * d);
@@ -74,7 +74,8 @@ TEST_CASE("probe loss: gradient through the AttentiveProbe matches central diffe
   std::vector<double> y(static_cast<std::size_t>(B) * (3 + C)), dy(y.size());
   auto loss = [&](bool grad) {
     p.probe.forward(p.params, x.data(), B, L, nullptr, y.data(), grad ? &cache : nullptr, ws);
-    const auto l = detail::probe_loss(y.data(), f.data(), c.data(), B, C, 0.7, grad ? dy.data() : nullptr);
+    const auto l = detail::head_loss(y.data(), static_cast<std::size_t>(force_axes + C), f.data(), c.data(), B,
+                                     force_axes, C, 0.7, grad ? dy.data() : nullptr);
     return l[0] + 0.7 * l[1];
   };
   p.params.zero_grad();
@@ -123,31 +124,28 @@ EncodedFeatures encoded_features(int S, int d, std::uint64_t seed, float shear_u
   return e;
 }
 
-TEST_CASE("train_probe: learns an encoded force and class (frozen features)") {
+TEST_CASE("train_head: learns an encoded force and class (frozen features) through the Trainer") {
   const int S = 128, L = 1, d = 12;
   const auto [v, lab] = encoded_features(S, d, 5, 0.0f, 0);
   FrozenFeatures<float> f(v, L, d);
-  ForceIndenterProbe<float> p(d, 3, 4, 0);
-  ProbeTrainConfig cfg;
-  cfg.epochs = 100;
-  cfg.batch = 16;
-  cfg.lr = 3e-3;
-  std::vector<double> losses;
-  train_probe(p, f, lab, cfg, [&](const ProbeStepInfo& s) { losses.push_back(s.loss); });
-  CHECK(losses.size() == static_cast<std::size_t>(100 * (S / 16)));
-  CHECK(losses.back() < 0.2 * losses.front());
-  const ProbeMetrics m = evaluate_probe(p, f, lab);
+  const HeadTargets targets = head_targets(lab, 4);
+  ProbeHead<float> p(d, 3, force_axes, 4, 0);
+  HeadTrainConfig cfg{.max_epochs = 100, .patience = 100, .batch = 16, .lr = 3e-3};
+  const HeadTrainResult r = train_head(p, f, targets, cfg);
+  CHECK(r.epochs() == 100);  // patience as long as the run: no early stop
+  CHECK(r.train_loss.back() < 0.2 * r.train_loss.front());
+  const HeadMetrics m = evaluate_head(p, f, targets);
   double sd = 0;
   for (int i = 0; i < S; ++i) sd += std::pow(lab.force[3 * i + 2] - 5.0, 2);
   sd = std::sqrt(sd / S);  // ≈ 2.9: the constant predictor's RMSE
-  CHECK(m.force_rmse[2] < 0.7 * sd);
-  CHECK(m.force_rmse[0] < 1e-3);  // u, v are always 0: the scaler's mean
-  CHECK(m.indenter_accuracy > 0.9);
+  CHECK(m.rmse[2] < 0.7 * sd);
+  CHECK(m.rmse[0] < 1e-3);  // u, v are always 0: the scaler's mean
+  CHECK(m.accuracy > 0.9);
   CHECK(m.majority_accuracy < 0.5);
-  CHECK(m.windows == S);
-  // Same seed, same probe.
-  ForceIndenterProbe<float> q(d, 3, 4, 0);
-  train_probe(q, f, lab, cfg);
+  CHECK(m.samples == S);
+  // Same seed, same head.
+  ProbeHead<float> q(d, 3, force_axes, 4, 0);
+  train_head(q, f, targets, cfg);
   CHECK(std::equal(p.params.values().begin(), p.params.values().end(), q.params.values().begin()));
 }
 
@@ -233,44 +231,6 @@ TEST_CASE("standardize_channels: training channels at mean 0 and sd 1 / held-out
   CHECK_THROWS_WITH_AS(standardize_channels<float>(nan_values, {}, d), doctest::Contains("expected finite"), NumericError);
 }
 
-TEST_CASE("select_probe_lr: the rate whose probe does best on a held-out split wins") {
-  const int S = 160, L = 1, d = 12;
-  const auto [v, lab] = encoded_features(S, d, 9, 0.5f, 100);
-  // A subset keeps the labels of the ids asked for, in order.
-  const std::vector<std::int64_t> ids{3, 0, 7};
-  const ProbeLabels sub = subset(lab, ids);
-  CHECK(sub.window == std::vector<std::int64_t>{103, 100, 107});
-  CHECK(sub.indenter == std::vector<int>{lab.indenter[3], lab.indenter[0], lab.indenter[7]});
-  CHECK(sub.force[3] == lab.force[0]);
-
-  ProbeTrainConfig cfg;
-  cfg.epochs = 40;
-  cfg.batch = 16;
-  const std::vector<double> lrs{1e-7, 3e-3};  // the first barely moves the probe
-  const ProbeLrChoice c = select_probe_lr(std::span<const float>(v), L, d, lab, lrs, cfg, 3, 4);
-  REQUIRE(c.objective.size() == 2);
-  CHECK(c.lr == 3e-3);
-  CHECK(c.objective[1] < 0.8 * c.objective[0]);
-  // Seeded: the same choice and the same validation objectives again.
-  const ProbeLrChoice again = select_probe_lr(std::span<const float>(v), L, d, lab, lrs, cfg, 3, 4);
-  CHECK(again.objective == c.objective);
-
-  // probe_objective is the training objective: force MSE in the probe's standardized units plus
-  // the cross-entropy. An untrained probe predicts about the training mean: force term about 1
-  // per axis that varies, ln 4 for the classes.
-  ForceIndenterProbe<float> p(d, 3, 4, 0);
-  p.scaler = ForceScaler::fit(lab);
-  FrozenFeatures<float> f(v, L, d);
-  const double o = probe_objective(p, f, lab, 1.0);
-  CHECK(o > 0.5);
-  CHECK(o < 3.5);
-  CHECK(probe_objective(p, f, lab, 0.0) < o);
-
-  CHECK_THROWS_AS(select_probe_lr(std::span<const float>(v), L, d, lab, std::vector<double>{}, cfg, 3, 4), ConfigError);
-  CHECK_THROWS_AS(select_probe_lr(std::span<const float>(v), L, d, lab, lrs, cfg, 3, 4, 1.0), ConfigError);
-  CHECK_THROWS_AS(select_probe_lr(std::span<const float>(v).first(10), L, d, lab, lrs, cfg, 3, 4), ShapeError);
-}
-
 TEST_CASE("end to end: the encoder trains with the probe / embeddings match the inference path") {
   const Skin skin = layouts::grid_skin({.rows = 4, .cols = 4, .pitch = 4.0, .group_rows = 2, .group_cols = 2});
   SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, 3);
@@ -315,11 +275,9 @@ TEST_CASE("end to end: the encoder trains with the probe / embeddings match the 
     CHECK(diff > 1e-2);
   }
 
-  ForceIndenterProbe<float> p(8, 2, 4, 0);
-  ProbeTrainConfig cfg;
-  cfg.epochs = 2;
-  cfg.batch = 8;
-  train_probe(p, feats, lab, cfg);
+  ProbeHead<float> p(8, 2, force_axes, 4, 0);
+  const HeadTrainConfig cfg{.max_epochs = 2, .batch = 8};
+  train_head(p, feats, head_targets(lab, 4), cfg);
   double moved = 0;
   for (std::size_t i = 0; i < before.size(); ++i) moved += std::abs(ps.values()[i] - before[i]);
   CHECK(moved > 0);  // end to end: the encoder's parameters changed

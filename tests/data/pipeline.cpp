@@ -4,7 +4,7 @@
 #include <doctest/doctest.h>
 
 #include <tjepa/data/drift_tracker.hpp>
-#include <tjepa/tjepa.hpp>
+#include <tjepa/eval.hpp>
 
 #include <algorithm>
 #include <cmath>

@@ -14,7 +14,7 @@
 #include <string>
 
 #include <tjepa/dist/mpi.hpp>
-#include <tjepa/tjepa.hpp>
+#include <tjepa/sim.hpp>
 
 using namespace tjepa;
 
@@ -49,7 +49,7 @@ int main(int argc, char** argv) {
     cfg.warmup_steps = 4, cfg.drop_path = 0.3, cfg.seed = 5;
     const WindowSource source(rec, WindowSpec{cfg.tau}, {}, pre);
     auto model = make_jepa_model(cfg, skin.graph, rec.axes(), cfg.seed);
-    Trainer<float> trainer(*model, source, skin.graph, cfg);
+    JepaTrainer<float> trainer(*model, source, skin.graph, cfg);
     trainer.parallel = dist::mpi_data_parallel<float>(mpi.comm());
     trainer.parallel.check_every = 5;  // the fingerprint check in the Trainer runs too
     trainer.checkpoint = checkpoint;

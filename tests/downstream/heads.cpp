@@ -8,7 +8,7 @@
 // and the whole protocol at toy size (downstream/grasp_eval.hpp).
 #include <doctest/doctest.h>
 
-#include <tjepa/tjepa.hpp>
+#include <tjepa/eval.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -16,7 +16,9 @@
 #include <numbers>
 #include <tuple>
 #include <type_traits>
+#include <filesystem>
 #include <map>
+#include <memory>
 #include <set>
 #include <vector>
 
@@ -26,6 +28,92 @@
 using namespace tjepa;
 
 TEST_SUITE("downstream") {
+
+// A linear head y = w·x on 40 samples of 4 features, early-stopped by the Trainer: a
+// HeadObjective of the test's own (forward, backward, validate).
+struct LinearHeadRun {
+  std::vector<double> x, y;
+  ParamSet<double> params;
+  ParamId w;
+  std::vector<double> residual;
+  std::span<const std::int64_t> batch;
+  explicit LinearHeadRun(std::uint64_t init) {
+    Rng rng(4);
+    for (int i = 0; i < 40; ++i) {
+      double t = 0;
+      for (int k = 0; k < 4; ++k) x.push_back(rng.normal()), t += (k + 1) * x.back();
+      y.push_back(t + 0.3 * rng.normal());
+    }
+    w = params.add("weight", {4});
+    params.allocate();
+    Rng r(init);
+    for (auto& v : params.values()) v = r.normal();
+  }
+  double mse(std::span<const std::int64_t> ids, bool keep) {
+    double l = 0;
+    if (keep) residual.assign(ids.size(), 0.0), batch = ids;
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      double p = 0;
+      for (int k = 0; k < 4; ++k) p += params.value(w)[k] * x[static_cast<std::size_t>(ids[i]) * 4 + k];
+      const double e = p - y[static_cast<std::size_t>(ids[i])];
+      l += e * e / static_cast<double>(ids.size());
+      if (keep) residual[i] = e;
+    }
+    return l;
+  }
+  void backward() {
+    for (std::size_t i = 0; i < batch.size(); ++i)
+      for (int k = 0; k < 4; ++k)
+        params.grad(w)[k] += 2 * residual[i] * x[static_cast<std::size_t>(batch[i]) * 4 + k] / static_cast<double>(batch.size());
+  }
+  Trainer<HeadObjective<double>>* make(std::unique_ptr<Trainer<HeadObjective<double>>>& t, const HeadTrainConfig& c,
+                                       const ValidationSplit& split) {
+    t = std::make_unique<Trainer<HeadObjective<double>>>(
+        std::vector<PrefixedParams<double>>{{"head.", &params}}, split.fit, c,
+        [this](std::span<const std::int64_t> ids) { return mse(ids, true); }, [this] { backward(); },
+        [this, split] { return mse(split.validation, false); });
+    return t.get();
+  }
+};
+
+TEST_CASE("an early-stopped head through the Trainer: save mid-epoch then resume is bitwise the whole run") {
+  const HeadTrainConfig cfg{.max_epochs = 40, .patience = 3, .batch = 8, .lr = 0.05, .seed = 1};
+  const ValidationSplit split = split_for_validation(40, cfg.validation_fraction, cfg.seed);
+  std::unique_ptr<Trainer<HeadObjective<double>>> t1, t2, t3;
+  LinearHeadRun straight(1);
+  straight.make(t1, cfg, split)->run();
+  const EarlyStoppingRecord& r = t1->record();
+  REQUIRE(r.epochs() >= 2);
+  CHECK(t1->stopped_early() == (r.epochs() < cfg.max_epochs));
+  const auto best = std::min_element(r.validation_loss.begin(), r.validation_loss.end());
+  CHECK(r.best_epoch == best - r.validation_loss.begin());
+  CHECK(straight.mse(split.validation, false) == r.best_validation);  // the best epoch's parameters restored
+
+  const std::filesystem::path ckpt = std::filesystem::temp_directory_path() / "tjepa_head_resume.safetensors";
+  LinearHeadRun first(1);
+  Trainer<HeadObjective<double>>* a = first.make(t2, cfg, split);
+  a->checkpoint = ckpt;
+  a->checkpoint_every = 3;  // 32 fitting samples: 4 steps per epoch, so step 6 is mid-epoch 1
+  a->run(7);
+  LinearHeadRun resumed(99);  // another init: everything comes from the file
+  Trainer<HeadObjective<double>>* b = resumed.make(t3, cfg, split);
+  b->resume(ckpt);
+  CHECK(b->step() == 6);
+  CHECK(b->record().epochs() == 1);
+  b->run();
+  CHECK(b->record().validation_loss == r.validation_loss);
+  CHECK(b->record().train_loss == r.train_loss);
+  CHECK(b->record().best_epoch == r.best_epoch);
+  CHECK(std::ranges::equal(resumed.params.values(), straight.params.values()));
+  const nlohmann::json meta = nlohmann::json::parse(load_safetensors(ckpt).metadata.at("config"));
+  CHECK(meta["objective"] == "head");
+  std::filesystem::remove(ckpt);
+  // A head has no all_reduce: the Trainer refuses to run it data parallel.
+  LinearHeadRun sharded(1);
+  Trainer<HeadObjective<double>>* c = sharded.make(t1, cfg, split);
+  c->parallel.ranks = 2;
+  CHECK_THROWS_WITH_AS(c->run(1), doctest::Contains("cannot run data parallel"), ConfigError);
+}
 
 TEST_CASE("student_t_cdf: closed forms at df 1 2 3 4 and table quantiles") {
   const double pi = std::numbers::pi;

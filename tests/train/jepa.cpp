@@ -453,26 +453,26 @@ TEST_SUITE("train") {
     TrainConfig tc = blob_trainer_config(18, 6, 5);
     tc.drop_path = 0.1;  // exercises the per-step noise seeds
     TempPath ckpt("resume");
-    auto arm = [&](Trainer<float>& t) {
+    auto arm = [&](JepaTrainer<float>& t) {
       t.checkpoint = ckpt.path;
       t.checkpoint_every = 4;  // steps 4 and 8 land mid-epoch
     };
 
     JepaModel<float> straight_model(blob_config(), 7);
-    Trainer<float> straight(straight_model, source, graph, tc);
+    JepaTrainer<float> straight(straight_model, source, graph, tc);
     CHECK(straight.total_steps() == 18);
     std::vector<double> straight_loss;
     for (const auto& st : straight.run()) straight_loss.push_back(st.loss);
 
     JepaModel<float> first_model(blob_config(), 7);
-    Trainer<float> first(first_model, source, graph, tc);
+    JepaTrainer<float> first(first_model, source, graph, tc);
     arm(first);
     const auto head = first.run(10);  // checkpoints after steps 4 and 8
     REQUIRE(head.size() == 10);
     for (int s = 0; s < 10; ++s) CHECK(head[s].loss == straight_loss[s]);
 
     JepaModel<float> resumed_model(blob_config(), 12345);  // a different init: everything must come from the file
-    Trainer<float> resumed(resumed_model, source, graph, tc);
+    JepaTrainer<float> resumed(resumed_model, source, graph, tc);
     arm(resumed);
     resumed.resume(ckpt.path);
     CHECK(resumed.step() == 8);
@@ -494,8 +494,93 @@ TEST_SUITE("train") {
     TrainConfig other = tc;
     other.steps = 24;
     JepaModel<float> m2(blob_config(), 1);
-    Trainer<float> t2(m2, source, graph, other);
+    JepaTrainer<float> t2(m2, source, graph, other);
     CHECK_THROWS_WITH_AS(t2.resume(ckpt.path), doctest::Contains("was written with train.steps = 18"), ConfigError);
+  }
+
+  TEST_CASE("MAE through the Trainer: the verbs' loop step for step / save then resume is bitwise / no JEPA file") {
+    const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
+    TrainConfig tc = blob_trainer_config(14, 4, 3);
+    tc.drop_path = 0.1;  // exercises the per-step noise seeds
+    const MaeConfig mc = mae_config(tc, 36, 2);
+    CHECK(mc.drop_path == 0.1);
+
+    // The loop by hand from the verbs: the shared data order, uniform masks and noise streams.
+    MaeModel<float> by_hand(mc, 7);
+    {
+      AdamW<float> opt(by_hand.trainable(), tc.adamw());
+      const TrainingSchedule schedule = tc.schedule();
+      const UniformMasking masking(36, mc.mask_ratio);
+      MaeWorkspace<float> w;
+      MaskBatch masks;
+      WindowBatch batch;
+      AlignedVector<float> x;
+      std::vector<double> losses;
+      for (std::int64_t s = 0; s < tc.steps; ++s) {
+        const auto order = source.epoch_order(streams::data(tc.seed), static_cast<std::uint64_t>(s / 6));
+        source.gather(std::span<const std::int64_t>(order).subspan(static_cast<std::size_t>(s % 6) * 16, 16), batch);
+        windows_to_tokens(batch, x);
+        masking.sample_into(masks, 16, streams::masks(tc.seed), static_cast<std::uint64_t>(s));
+        losses.push_back(mae_train_step(by_hand, opt, schedule, s, x.data(), 16, masks, w, streams::noise(tc.seed, s)).loss);
+      }
+      MaeModel<float> model(mc, 7);
+      MaeTrainer<float> trainer(model, source, tc);
+      CHECK(trainer.total_steps() == 14);
+      const auto stats = trainer.run();
+      REQUIRE(stats.size() == losses.size());
+      for (std::size_t s = 0; s < losses.size(); ++s) CHECK(stats[s].loss == losses[s]);  // bitwise
+      CHECK(std::ranges::equal(model.context.values(), by_hand.context.values()));
+      CHECK(std::ranges::equal(model.decoder_params.values(), by_hand.decoder_params.values()));
+    }
+
+    TempPath ckpt("mae_resume");
+    MaeModel<float> first_model(mc, 7);
+    MaeTrainer<float> first(first_model, source, tc);
+    first.checkpoint = ckpt.path;
+    first.checkpoint_every = 4;
+    REQUIRE(first.run(10).size() == 10);  // checkpoints after steps 4 and 8
+    MaeModel<float> resumed_model(mc, 999);  // another init: everything must come from the file
+    MaeTrainer<float> resumed(resumed_model, source, tc);
+    resumed.resume(ckpt.path);
+    CHECK(resumed.step() == 8);
+    const auto tail = resumed.run();
+    REQUIRE(tail.size() == 6);
+    for (std::size_t k = 0; k < tail.size(); ++k) CHECK(tail[k].step == static_cast<std::int64_t>(8 + k));
+    CHECK(std::ranges::equal(resumed_model.context.values(), by_hand.context.values()));
+    CHECK(std::ranges::equal(resumed_model.decoder_params.values(), by_hand.decoder_params.values()));
+    const nlohmann::json meta = nlohmann::json::parse(load_safetensors(ckpt.path).metadata.at("config"));
+    CHECK(meta["objective"] == "mae");
+    CHECK(meta["version"] == checkpoint_metadata_version);
+
+    // A JEPA checkpoint is not an MAE run's, and the other way round.
+    TempPath jepa_ckpt("mae_vs_jepa");
+    JepaModel<float> jm(blob_config(), 7);
+    JepaTrainer<float> jt(jm, source, blob_graph(), tc);
+    jt.save(jepa_ckpt.path);
+    CHECK_THROWS_WITH_AS(resumed.resume(jepa_ckpt.path), doctest::Contains("a checkpoint of a 'jepa' run"), ConfigError);
+    CHECK_THROWS_WITH_AS(jt.resume(ckpt.path), doctest::Contains("a checkpoint of a 'mae' run"), ConfigError);
+  }
+
+  TEST_CASE("a checkpoint without a metadata version (version 1) is a JEPA run's and resumes") {
+    const auto source = blob_source(100, 2);
+    const TrainConfig tc = blob_trainer_config(6, 2, 4);
+    TempPath ckpt("v1");
+    JepaModel<float> m(blob_config(), 3);
+    JepaTrainer<float> t(m, source, blob_graph(), tc);
+    t.run(3);
+    t.save(ckpt.path);
+    // Today's files before the version: config = {"train", "model"} only.
+    SafetensorsFile f = load_safetensors(ckpt.path);
+    nlohmann::json meta = nlohmann::json::parse(f.metadata.at("config"));
+    meta.erase("version");
+    meta.erase("objective");
+    f.metadata["config"] = meta.dump();
+    save_safetensors(ckpt.path, f);
+    JepaModel<float> m2(blob_config(), 3);
+    JepaTrainer<float> t2(m2, source, blob_graph(), tc);
+    t2.resume(ckpt.path);
+    CHECK(t2.step() == 3);
+    CHECK(load_trained_model(ckpt.path).step == 3);
   }
 
   TEST_CASE("data parallel: 3 ranks (threads) gather only their shards and follow the 1-process curve") {
@@ -508,7 +593,7 @@ TEST_SUITE("train") {
     TrainConfig tc = blob_trainer_config(8, 2, 5);
     tc.drop_path = 0.2;  // per-sample noise must not depend on the shard
     JepaModel<float> single_model(blob_config(), 7);
-    Trainer<float> single(single_model, source, graph, tc);
+    JepaTrainer<float> single(single_model, source, graph, tc);
     std::vector<double> single_loss, single_spread;
     for (const auto& st : single.run()) {
       single_loss.push_back(st.loss);
@@ -548,7 +633,7 @@ TEST_SUITE("train") {
     }
     std::vector<double> loss[R], spread;
     auto rank_main = [&](int r) {
-      Trainer<float, GatherLog> t(*models[static_cast<std::size_t>(r)], logs[static_cast<std::size_t>(r)], graph, tc);
+      JepaTrainer<float, GatherLog> t(*models[static_cast<std::size_t>(r)], logs[static_cast<std::size_t>(r)], graph, tc);
       t.parallel.rank = r;
       t.parallel.ranks = R;
       t.parallel.sum = [&, r](std::span<float> v) { sum(slot, r, v); };
@@ -580,7 +665,7 @@ TEST_SUITE("train") {
       std::vector<std::int64_t> expect;
       const int first = 16 * r / R, last = 16 * (r + 1) / R;
       for (std::int64_t s = 0; s < tc.steps; ++s) {
-        const auto order = source.epoch_order(tc.seed ^ Trainer<float>::kDataSalt, static_cast<std::uint64_t>(s / 6));
+        const auto order = source.epoch_order(tc.seed ^ streams::data_salt, static_cast<std::uint64_t>(s / 6));
         const auto b = static_cast<std::ptrdiff_t>((s % 6) * 16);
         expect.insert(expect.end(), order.begin() + b + first, order.begin() + b + last);
       }
@@ -598,7 +683,7 @@ TEST_SUITE("train") {
   TEST_CASE("a NaN stops the trainer with NumericError and leaves the last checkpoint intact") {
     const auto source = blob_source(100, 2);
     JepaModel<float> model(blob_config(), 3);
-    Trainer<float> trainer(model, source, blob_graph(), blob_trainer_config(6, 3, 0));
+    JepaTrainer<float> trainer(model, source, blob_graph(), blob_trainer_config(6, 3, 0));
     TempPath ckpt("nan");
     trainer.checkpoint = ckpt.path;
     trainer.checkpoint_every = 2;
@@ -606,7 +691,7 @@ TEST_SUITE("train") {
     REQUIRE(std::filesystem::exists(ckpt.path));
     const auto good = load_safetensors(ckpt.path);
     model.context.values()[model.context.id(3).offset] = std::numeric_limits<float>::infinity();
-    CHECK_THROWS_WITH_AS(trainer.run(), doctest::Contains("JEPA step 2"), NumericError);
+    CHECK_THROWS_WITH_AS(trainer.run(), doctest::Contains("jepa step 2: the loss is"), NumericError);
     CHECK(trainer.step() == 2);
     const auto after = load_safetensors(ckpt.path);
     CHECK(after.metadata.at("step") == "2");
@@ -616,7 +701,7 @@ TEST_SUITE("train") {
   TEST_CASE("on a small synthetic set the loss falls and the target embeddings do not collapse") {
     const auto source = blob_source(1200, 3);  // 600 windows: 37 batches of 16 per epoch
     JepaModel<float> model(blob_config(), 13);
-    Trainer<float> trainer(model, source, blob_graph(), blob_trainer_config(8 * 37, 37, 11));
+    JepaTrainer<float> trainer(model, source, blob_graph(), blob_trainer_config(8 * 37, 37, 11));
     trainer.log_every = 100;
     std::ostringstream log;
     trainer.log = &log;
@@ -650,7 +735,7 @@ TEST_SUITE("train") {
       JepaModel<float> model(blob_config(), 13);
       TrainConfig tc = blob_trainer_config(300, 37, 11);
       tc.precision = precision;
-      Trainer<float> trainer(model, source, blob_graph(), tc);
+      JepaTrainer<float> trainer(model, source, blob_graph(), tc);
       std::vector<double> loss;
       for (const auto& st : trainer.run()) loss.push_back(st.loss);
       return loss;

@@ -2,7 +2,7 @@
 // DriftTracker: removes the slow drift of each taxel's no-contact reading (temperature, creep of
 // the elastomer, the magnet) before the Preprocessor, causally, frame by frame.
 //
-// Why: the Preprocessor subtracts one baseline measured once (REFERENCE §1). A magnetic taxel's
+// Why: the Preprocessor subtracts one baseline measured once (paper, Sec. IV-D). A magnetic taxel's
 // rest reading wanders afterwards by tens of counts, independently per taxel. After per-axis
 // standardization that wander is the largest variation of an idle taxel, and most taxels are
 // idle in most windows; no other taxel predicts it. Touch controllers re-zero the same way:

@@ -1,6 +1,8 @@
 #pragma once
-// Preprocessor: the per-reading transforms of REFERENCE §1, with statistics fitted on training data
-// only and saved with the model (state() / from_state()). Steps, in order:
+// Preprocessor: the per-reading transforms of the paper's Sec. IV-D (data preprocessing) and of the
+// reference implementation (E-Kovtun/tactile, tactile_ssl/data/xela/preprocessing.py), with
+// statistics fitted on training data only and saved with the model (state() / from_state()).
+// Steps, in order:
 //
 //   1. drop-outs   readings outside [valid_min, valid_max] become 0 (a magnetic taxel that lost its
 //                  signal reports counts far outside its range); optionally NaN becomes 0 too.
@@ -35,7 +37,7 @@ enum class Scaling : int { none = 0, per_axis = 1, scalar = 2, part_max = 3 };
 
 struct PreprocessConfig {
   bool clip_dropouts = false;  // step 1
-  float valid_min = 20000.0f;  // Xela counts (REFERENCE §1)
+  float valid_min = 20000.0f;  // Xela counts (the reference implementation's outlier bounds)
   float valid_max = 60000.0f;
   bool nan_as_dropout = false;     // NaN readings become 0 (otherwise they are a DataError in training)
   bool subtract_baseline = false;  // step 2: needs fit_baseline()

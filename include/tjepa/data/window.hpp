@@ -1,7 +1,8 @@
 #pragma once
-// Windowing: training sees windows of τ frames, X[t:t+τ], starting every `stride` frames
-// (REFERENCE §1: non-overlapping, stride = τ). A window is handed to the model taxel-major,
-// [N, τ, m], so each taxel's τ·m values are contiguous: the tokenizer's input (paper eq. 1).
+// Windowing: training sees windows of τ frames, X[t:t+τ] (paper, Sec. III-A), starting every
+// `stride` frames (non-overlapping, stride = τ, in the reference implementation: E-Kovtun/tactile,
+// tactile_ssl/data/xela/preprocessing.py). A window is handed to the model taxel-major, [N, τ, m],
+// so each taxel's τ·m values are contiguous: the tokenizer's input (paper eq. 1).
 //
 // Window starts are t = 0, stride, 2·stride, ... with t + τ <= T: every window that fits. (The
 // reference's index, arange(0, T − T mod τ − τ, stride), leaves out the last full window.)

@@ -7,7 +7,7 @@
 //     tjepa::dist::MpiSession mpi(&argc, &argv);
 //     return mpi.run_or_abort([&] {
 //       ...
-//       Trainer<float> trainer(model, source, graph, cfg);
+//       JepaTrainer<float> trainer(model, source, graph, cfg);
 //       trainer.parallel = tjepa::dist::mpi_data_parallel<float>(mpi.comm());
 //       if (mpi.rank() == 0) trainer.log = &std::cout;  // Trainer writes checkpoints on rank 0 only
 //       trainer.run();

@@ -1,6 +1,6 @@
 #pragma once
-// Early stopping, the training loop every downstream head of the evaluation protocol shares
-// (attentive probe heads, the sequence head, the end-to-end baseline):
+// The downstream heads' objective (attentive probe heads, the sequence head, the end-to-end
+// baseline), trained early-stopped by the Trainer (train/trainer.hpp):
 //   - a seeded split holds out validation_fraction of the training samples (validation_split):
 //     whole groups of samples, stratified (when the targets carry SampleGroups: the grasp episodes,
 //     stratified by object, so that no episode has samples on both sides); else random samples,
@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <span>
 #include <vector>
@@ -27,6 +28,8 @@
 #include "tjepa/core/prefixed_params.hpp"
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
+#include "tjepa/train/objective.hpp"
+#include "tjepa/train/trainer.hpp"
 
 namespace tjepa {
 
@@ -64,15 +67,6 @@ struct HeadTrainConfig {
     require<ConfigError>(class_weight >= 0, "HeadTrainConfig: class_weight = ", class_weight, ", expected >= 0");
     require<ConfigError>(clip_grad_norm > 0, "HeadTrainConfig: clip_grad_norm = ", clip_grad_norm, ", expected > 0");
   }
-};
-
-// The learning curve of one early-stopped training.
-struct HeadTrainResult {
-  std::vector<double> train_loss;       // [epochs run] mean training loss per epoch
-  std::vector<double> validation_loss;  // [epochs run] validation loss (the stopping criterion) after each epoch
-  int best_epoch = -1;                  // 0-based epoch whose parameters were restored
-  double best_validation = std::numeric_limits<double>::infinity();
-  int epochs() const { return static_cast<int>(validation_loss.size()); }
 };
 
 // Samples 0..S−1 split into fitting and validation ids: a seeded shuffle, the last
@@ -209,55 +203,90 @@ inline ValidationSplit validation_split(int S, const HeadTrainConfig& cfg, const
   return split_for_validation(S, cfg.validation_fraction, cfg.seed, cfg.validation_blocks, cfg.validation_gap);
 }
 
-// The loop at the top of this file. step(ids) runs forward and backward on a batch of fitting
-// ids (the parts' gradients are zeroed before) and returns its loss; validate() returns the
-// validation loss of the current parameters.
-template <class T, class Step, class Validate>
-HeadTrainResult train_with_early_stopping(const std::vector<PrefixedParams<T>>& parts,
-                                          std::span<const std::int64_t> fit_ids, const HeadTrainConfig& cfg,
-                                          Step&& step, Validate&& validate) {
-  cfg.validate();
-  require<DataError>(!fit_ids.empty(), "train_with_early_stopping: no fitting samples");
-  AdamW<T> opt(parts);
-  const int S = static_cast<int>(fit_ids.size()), B = std::min(cfg.batch, S);
-  const std::int64_t per_epoch = S / B, warmup = static_cast<std::int64_t>(cfg.warmup_epochs) * per_epoch;
-  std::vector<AlignedVector<T>> best(parts.size());
-  std::vector<std::int64_t> order(fit_ids.begin(), fit_ids.end());
-  HeadTrainResult r;
-  std::int64_t k = 0;
-  for (int e = 0; e < cfg.max_epochs; ++e) {
-    std::copy(fit_ids.begin(), fit_ids.end(), order.begin());
-    Rng(cfg.seed, 0x65706f6368ull /* "epoch" */ + static_cast<std::uint64_t>(e)).shuffle(std::span<std::int64_t>(order));
-    double total = 0;
-    for (std::int64_t i = 0; i < per_epoch; ++i, ++k) {
-      for (const auto& p : parts) p.params->zero_grad();
-      const double loss = step(std::span<const std::int64_t>(order.data() + i * B, static_cast<std::size_t>(B)));
-      require<NumericError>(std::isfinite(loss), "train_with_early_stopping: epoch ", e, ", step ", i, ": the loss is ",
-                            loss);
-      clip_grad_norm<T>(parts, cfg.clip_grad_norm);
-      const double lr = k < warmup ? cfg.lr * (0.1 + 0.9 * static_cast<double>(k + 1) / static_cast<double>(warmup))
-                                   : cfg.lr;
-      opt.step(lr, cfg.weight_decay);
-      total += loss;
-    }
-    const double v = validate();
-    require<NumericError>(!std::isnan(v), "train_with_early_stopping: epoch ", e, ": the validation loss is NaN");
-    r.train_loss.push_back(total / static_cast<double>(per_epoch));
-    r.validation_loss.push_back(v);
-    if (v < r.best_validation) {
-      r.best_validation = v;
-      r.best_epoch = e;
-      for (std::size_t j = 0; j < parts.size(); ++j) {
-        const auto vals = parts[j].params->values();
-        best[j].assign(vals.begin(), vals.end());
-      }
-    } else if (e - r.best_epoch >= cfg.patience) {
-      break;
-    }
+// A head's training as an early-stopped Objective: `forward(ids)` runs the head (and a trainable
+// encoder) forward on a batch of fitting ids and returns its loss, keeping what `backward()`
+// needs; `backward()` adds the gradients into the parts; `validate()` returns the validation
+// loss of the current parameters. train_head and train_sequence_head build one; so can a head of
+// a user's. Single process: its loss may use its batch's statistics (no all_reduce).
+template <class T>
+class HeadObjective {
+ public:
+  using value_type = T;
+  using stats_type = StepStats;
+
+  HeadObjective(std::vector<PrefixedParams<T>> parts, std::vector<std::int64_t> fit_ids, HeadTrainConfig cfg,
+                std::function<double(std::span<const std::int64_t>)> forward_fn, std::function<void()> backward_fn,
+                std::function<double()> validate_fn, nlohmann::json metadata = nlohmann::json::object())
+      : parts_((cfg.validate(), std::move(parts))), fit_(std::move(fit_ids)), cfg_(cfg),
+        forward_(std::move(forward_fn)), backward_(std::move(backward_fn)), validate_(std::move(validate_fn)),
+        metadata_(std::move(metadata)), optimizer_(parts_) {
+    require<DataError>(!fit_.empty(), "HeadObjective: no fitting samples");
+    require<ConfigError>(forward_ && backward_ && validate_, "HeadObjective: forward, backward and validate are "
+                         "all needed");
+    B_ = std::min(cfg_.batch, static_cast<int>(fit_.size()));
+    per_epoch_ = static_cast<std::int64_t>(fit_.size()) / B_;
+    warmup_ = static_cast<std::int64_t>(cfg_.warmup_epochs) * per_epoch_;
   }
-  if (r.best_epoch >= 0)
-    for (std::size_t j = 0; j < parts.size(); ++j) std::ranges::copy(best[j], parts[j].params->values().begin());
-  return r;
-}
+  HeadObjective(const HeadObjective&) = delete;
+  HeadObjective& operator=(const HeadObjective&) = delete;
+
+  const HeadTrainConfig& config() const { return cfg_; }
+
+  // The Objective interface (train/objective.hpp).
+  std::int64_t num_samples() const { return static_cast<std::int64_t>(fit_.size()); }
+  int batch_size() const { return B_; }
+  std::int64_t total_steps() const { return static_cast<std::int64_t>(cfg_.max_epochs) * per_epoch_; }
+  std::vector<std::int64_t> epoch_order(std::uint64_t e) const {
+    std::vector<std::int64_t> order = fit_;
+    Rng(cfg_.seed, epoch_salt + e).shuffle(std::span<std::int64_t>(order));
+    return order;
+  }
+  void zero_grad() {
+    for (const auto& p : parts_) p.params->zero_grad();
+  }
+  double forward(const StepBatch& b) { return loss_ = forward_(b.ids); }
+  void backward() { backward_(); }
+  StepStats update(std::int64_t k) {
+    StepStats st;
+    st.step = k;
+    st.loss = loss_;
+    st.grad_norm = clip_or_stop<T>(parts_, cfg_.clip_grad_norm, loss_, k, "head");
+    st.lr = k < warmup_ ? cfg_.lr * (0.1 + 0.9 * static_cast<double>(k + 1) / static_cast<double>(warmup_)) : cfg_.lr;
+    st.weight_decay = cfg_.weight_decay;
+    optimizer_.step(st.lr, st.weight_decay);
+    return st;
+  }
+  std::vector<PrefixedParams<T>> parts() { return parts_; }
+  AdamW<T>& optimizer() { return optimizer_; }
+  nlohmann::json metadata() const {
+    nlohmann::json m{{"objective", "head"}, {"head", metadata_}};
+    m["train"] = {{"max_epochs", cfg_.max_epochs},     {"patience", cfg_.patience},
+                  {"validation_fraction", cfg_.validation_fraction}, {"batch", cfg_.batch},
+                  {"lr", cfg_.lr},                     {"warmup_epochs", cfg_.warmup_epochs},
+                  {"weight_decay", cfg_.weight_decay}, {"class_weight", cfg_.class_weight},
+                  {"clip_grad_norm", cfg_.clip_grad_norm}, {"stop_on_error", cfg_.stop_on_error},
+                  {"seed", cfg_.seed}};
+    return m;
+  }
+  double validate() { return validate_(); }
+  int patience() const { return cfg_.patience; }
+
+ private:
+  static constexpr std::uint64_t epoch_salt = 0x65706f6368ull;  // "epoch"
+  std::vector<PrefixedParams<T>> parts_;
+  std::vector<std::int64_t> fit_;
+  HeadTrainConfig cfg_;
+  std::function<double(std::span<const std::int64_t>)> forward_;
+  std::function<void()> backward_;
+  std::function<double()> validate_;
+  nlohmann::json metadata_;
+  AdamW<T> optimizer_;
+  int B_ = 0;
+  std::int64_t per_epoch_ = 0, warmup_ = 0;
+  double loss_ = 0;
+};
+
+// The learning curve of one early-stopped training.
+using HeadTrainResult = EarlyStoppingRecord;
 
 }  // namespace tjepa

@@ -202,11 +202,12 @@ double head_validation(const ProbeHead<T>& head, Features& features, const HeadT
 }
 
 // Trains head (and the features' encoder, if trainable) on samples 0..S−1 of targets with early
-// stopping: the scaler is fitted on the fitting split, the validation split is held out of
-// training; at return the parameters are those of the best validation epoch.
+// stopping (a Trainer over a HeadObjective): the scaler is fitted on the fitting split, the
+// validation split is held out of training; at return the parameters are those of the best
+// validation epoch. log: the Trainer's log line every log_every steps.
 template <class T, class Features>
 HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTargets& targets,
-                           const HeadTrainConfig& cfg) {
+                           const HeadTrainConfig& cfg, std::ostream* log = nullptr, std::int64_t log_every = 0) {
   cfg.validate();
   targets.validate("train_head");
   const int S = targets.size(), R = head.regression, C = head.classes, out = head.outputs();
@@ -226,8 +227,9 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
   AlignedVector<T> y, dy, dx;
   std::vector<double> z;
   std::vector<int> lab;
-  auto step = [&](std::span<const std::int64_t> ids) {
-    const int B = static_cast<int>(ids.size());
+  int B = 0;
+  auto forward = [&](std::span<const std::int64_t> ids) {
+    B = static_cast<int>(ids.size());
     z.resize(static_cast<std::size_t>(B) * R);
     lab.resize(C > 0 ? static_cast<std::size_t>(B) : 0);
     for (int b = 0; b < B; ++b) {
@@ -241,17 +243,26 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
     head.probe.forward(head.params, x, B, L, nullptr, yp, &cache, ws);
     const auto [f, ce] = detail::head_loss(yp, static_cast<std::size_t>(out), z.data(), lab.data(), B, R, C,
                                            cfg.class_weight, dyp);
+    return f + cfg.class_weight * ce;
+  };
+  auto backward = [&] {
     T* dxp = nullptr;
     if (features.trainable()) {
       dxp = detail::grow(dx, static_cast<std::size_t>(B) * L * d);
       std::fill(dxp, dxp + static_cast<std::size_t>(B) * L * d, T(0));
     }
-    head.probe.backward(head.params, dyp, dxp, cache, ws);
+    head.probe.backward(head.params, dy.data(), dxp, cache, ws);
     if (dxp) features.backward(dxp);
-    return f + cfg.class_weight * ce;
   };
   auto validate = [&] { return head_validation(head, features, targets, split.validation, cfg); };
-  return train_with_early_stopping<T>(parts, split.fit, cfg, step, validate);
+  Trainer<HeadObjective<T>> trainer(std::move(parts), split.fit, cfg, forward, backward, validate,
+                                    nlohmann::json{{"kind", "probe"}, {"regression", R}, {"classes", C}});
+  if (log) {
+    trainer.log = log;
+    trainer.log_every = log_every;
+  }
+  trainer.run();
+  return trainer.record();
 }
 
 // Predictions [S, R + C] for samples 0..S−1: regression in the targets' units, then the logits.

@@ -260,8 +260,9 @@ HeadTrainResult train_sequence_head(SequenceModel<T>& model, Features& features,
   Workspace<T> ws;
   AlignedVector<T> y, dy, dx;
   std::vector<std::int64_t> w;
-  auto step = [&](std::span<const std::int64_t> seq) {
-    const int B = static_cast<int>(seq.size());
+  int B = 0;
+  auto forward = [&](std::span<const std::int64_t> seq) {
+    B = static_cast<int>(seq.size());
     const std::size_t n = static_cast<std::size_t>(B) * L * P;
     detail::sequence_windows(targets, seq, w);
     T* yp = detail::grow(y, n);
@@ -278,17 +279,22 @@ HeadTrainResult train_sequence_head(SequenceModel<T>& model, Features& features,
         f += e * e;
         dyp[k] = static_cast<T>(2.0 * e / static_cast<double>(n));
       }
+    return f / static_cast<double>(n);
+  };
+  auto backward = [&] {
     T* dxp = nullptr;
     if (features.trainable()) {
       dxp = detail::grow(dx, static_cast<std::size_t>(B) * L * N * d);
       std::fill(dxp, dxp + static_cast<std::size_t>(B) * L * N * d, T(0));
     }
-    model.head.backward(model.params, dyp, dxp, cache, ws);
+    model.head.backward(model.params, dy.data(), dxp, cache, ws);
     if (dxp) features.backward(dxp);
-    return f / static_cast<double>(n);
   };
   auto validate = [&] { return sequence_objective(model, features, targets, split.validation); };
-  return train_with_early_stopping<T>(parts, split.fit, cfg, step, validate);
+  Trainer<HeadObjective<T>> trainer(std::move(parts), split.fit, cfg, forward, backward, validate,
+                                    nlohmann::json{{"kind", "sequence"}, {"length", L}, {"outputs", P}});
+  trainer.run();
+  return trainer.record();
 }
 
 // Predictions [Q, L, P] in the targets' units for every sequence of targets.

@@ -1,8 +1,10 @@
 #pragma once
-// Block grouping (the DECO-50 scheme, REFERENCE.md §2): every region of a grid layout is cut into
-// 2 x 2 blocks (n_g = 4); a 3 x 3 region is cut into a 2 x 2 block (its rows 0-1, cols 0-1) and
-// the L-shaped rest (n_g = 5). Tokens come region by region in layout order, blocks row-major
-// inside a region, members row-major inside a block. On the Inspire hand: 264 tokens per hand.
+// Block grouping (the DECO-50 scheme of the paper's Sec. IV-D, "Taxel grouping", as the reference
+// implementation builds it: E-Kovtun/tactile, tactile_ssl/data/deco_geometry.py): every region of
+// a grid layout is cut into 2 x 2 blocks (n_g = 4); a 3 x 3 region is cut into a 2 x 2 block (its
+// rows 0-1, cols 0-1) and the L-shaped rest (n_g = 5). Tokens come region by region in layout
+// order, blocks row-major inside a region, members row-major inside a block. On the Inspire hand:
+// 264 tokens per hand.
 #include <algorithm>
 #include <vector>
 

@@ -43,6 +43,16 @@ namespace tjepa {
 inline constexpr std::string_view checkpoint_format = "tjepa.checkpoint.v1";
 inline constexpr std::string_view encoder_export_format = "tjepa.encoder.v1";
 
+// The version of a checkpoint's config metadata: 1 (no "version" key) is a JEPA run's
+// {"train", "model"}; 2 adds "version" and "objective".
+inline constexpr int checkpoint_metadata_version = 2;
+
+// The objective a checkpoint's config metadata names ("jepa" for version 1).
+inline std::string checkpoint_objective(const nlohmann::json& config) {
+  if (!config.is_object() || !config.contains("objective")) return "jepa";
+  return config["objective"].is_string() ? config["objective"].get<std::string>() : std::string("(not a string)");
+}
+
 // Everything in a checkpoint that is not a model tensor or an optimizer moment.
 struct CheckpointState {
   std::int64_t step = 0;                           // optimizer steps done

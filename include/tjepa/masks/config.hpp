@@ -1,6 +1,8 @@
 #pragma once
-// MaskConfig: every range and count of the mask sampler, with the reference's defaults
-// (Sparsh-skin, REFERENCE.md §3). N is the number of tokens of the graph the masks are drawn over.
+// MaskConfig: every range and count of the mask sampler, with the Sparsh-skin defaults (the paper's
+// Sec. IV-D, "Mask sampling", and the reference implementation: E-Kovtun/tactile,
+// tactile_ssl/utils/jepa_masking.py). N is the number of tokens of the graph the masks are drawn
+// over.
 #include <string>
 
 #include "tjepa/core/error.hpp"

@@ -1,5 +1,5 @@
 #pragma once
-// AttentiveProbe (REFERENCE §6; V-JEPA's AttentivePooler with one CrossAttentionBlock, then a
+// AttentiveProbe (paper, Sec. IV-B; V-JEPA's AttentivePooler with one CrossAttentionBlock, then a
 // 2-layer MLP head). For frozen token embeddings x [B, L, d]:
 //   q₀ = query_tokens                                  [1, 1, d], one learned query
 //   q₁ = q₀ + CrossAttn(q₀, norm1(x))                  3 heads, keys = the sample's L tokens

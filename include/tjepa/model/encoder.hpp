@@ -1,5 +1,6 @@
 #pragma once
-// Encoder (ViT-Tiny of REFERENCE §4): position table, pre-norm blocks, final LayerNorm.
+// Encoder (paper, Sec. III-B; ViT-Tiny, Sec. IV-D): position table, pre-norm blocks, final
+// LayerNorm.
 //
 //   x[b, k] = tokens[b, c[b, k]] + pos_embed[c[b, k]]      c = context indices [B, K] (or all N)
 //   x ← blocks(x);  out = norm(x)                           out [B, K, d]

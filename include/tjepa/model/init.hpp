@@ -1,6 +1,7 @@
 #pragma once
-// Initialization of a ParamSet as in REFERENCE §4 (timm's init_weights_vit_timm, which the
-// reference's SignalTransformer applies): Linear weights ~ N(0, 0.02²) truncated at ±2
+// Initialization of a ParamSet as in the reference implementation (E-Kovtun/tactile,
+// tactile_ssl/model/signal_transformer.py: timm's init_weights_vit_timm, which its
+// SignalTransformer applies): Linear weights ~ N(0, 0.02²) truncated at ±2
 // (absolute bounds, as torch.nn.init.trunc_normal_), biases 0, LayerNorm (1, 0), position table
 // N(0, 0.02²) (trunc_normal_ with the same bounds), predictor mask token 0. The reference does
 // NOT rescale proj / fc2 by depth (I-JEPA's fix_init_weight is not in its SignalTransformer), so

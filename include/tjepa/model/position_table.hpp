@@ -1,7 +1,7 @@
 #pragma once
 // PositionTable: a learned row e_i ∈ R^d per token, PyTorch `pos_embed` [1, N, d], added to the
-// tokens before masking (REFERENCE §4). Rows are read by token index, so the context encoder adds
-// the rows of its context tokens and the predictor reads the rows of its targets.
+// tokens before masking (paper, Sec. III-B). Rows are read by token index, so the context encoder
+// adds the rows of its context tokens and the predictor reads the rows of its targets.
 #include <string>
 
 #include "tjepa/model/kernels/gather.hpp"

@@ -1,5 +1,6 @@
 #pragma once
-// Predictor (REFERENCE §4; the reference's SignalJEPAPredictor with pos_embed_fn="given"):
+// Predictor (paper, Sec. III-B; the reference implementation's SignalJEPAPredictor with
+// pos_embed_fn="given", E-Kovtun/tactile, tactile_ssl/algorithm/xela_jepa.py):
 //
 //   e = ctx · W_inᵀ + b                                   ctx [Bc, K, d_in] → e [Bc, K, pd]
 //   x[b] = [ e[b mod Bc] ; pos[t[b, j]] + mask_token ]    x [B, K + t, pd], B = Bc · R

@@ -1,5 +1,5 @@
 #pragma once
-// Tokenizer (paper eq. 1, REFERENCE §4): a token's window of values → R^d by an affine map, then
+// Tokenizer (paper eq. 1, Sec. III-B): a token's window of values → R^d by an affine map, then
 // LayerNorm. Tokens are rows of x [B, G, W]:
 //   per taxel: one map shared by all N taxels, W = m·τ.
 //     PyTorch: patch_embed.proj.{weight [d, m, τ], bias [d]}, patch_embed.norm.{weight, bias}.

@@ -72,7 +72,8 @@ struct TrainingSchedule {
   CosineWeightDecay wd;
   LinearMomentum momentum;
 
-  // REFERENCE §5 for a run of `epochs` × `steps_per_epoch` steps with `warmup_epochs` of warm-up.
+  // The paper's schedule (Sec. IV-D, training details) for a run of `epochs` × `steps_per_epoch`
+  // steps with `warmup_epochs` of warm-up.
   static TrainingSchedule reference(std::int64_t epochs, std::int64_t steps_per_epoch,
                                     std::int64_t warmup_epochs) {
     require<ConfigError>(epochs > 0, "TrainingSchedule: epochs = ", epochs, ", expected > 0");

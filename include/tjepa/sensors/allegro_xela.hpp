@@ -1,5 +1,6 @@
 #pragma once
-// Built-in layout: Xela uSkin on the Allegro hand (Sparsh-skin), REFERENCE.md §2.
+// Built-in layout: Xela uSkin on the Allegro hand (Sparsh-skin, paper Sec. IV-A), its pads and
+// edges as in the reference implementation (E-Kovtun/tactile, tactile_ssl/graph/builders.py).
 //
 // 368 taxels in 18 pads, one part. Taxel order (the data's order): thumb tip, thumb pads 1-2; index,
 // middle, ring (tip, then pads 1-3, tip-to-base); then palm pads 0-2. Inside a pad, live cells

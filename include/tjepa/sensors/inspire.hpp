@@ -1,5 +1,6 @@
 #pragma once
-// Built-in layout: the Inspire FTP hand (DECO-50), REFERENCE.md §2. 1062 taxels per hand in 17
+// Built-in layout: the Inspire FTP hand (DECO-50, paper Sec. IV-A), its regions as in the reference
+// implementation (E-Kovtun/tactile, tactile_ssl/data/deco_geometry.py). 1062 taxels per hand in 17
 // regions; two hands give 2124 taxels in two parts ("left", "right") that are not connected.
 //
 // Region order inside a hand (the order of the hand's tactile registers): little, ring, middle,

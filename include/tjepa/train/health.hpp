@@ -4,18 +4,29 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <ostream>
 #include <vector>
 
 #include "tjepa/core/detail/parallel.hpp"
 
 namespace tjepa {
 
-// What one JEPA training step reports.
-struct JepaStepStats {
-  std::int64_t step = 0;        // optimizer step index s (0-based)
-  double loss = 0;              // mean over targets of each target's mean loss
-  double lr = 0, weight_decay = 0, momentum = 0;  // the schedule values this step used
-  double grad_norm = 0;         // joint gradient norm before clipping
+// What every objective's update reports (train/objective.hpp); objectives extend it.
+struct StepStats {
+  std::int64_t step = 0;            // optimizer step s (0-based)
+  double loss = 0;                  // the batch's loss (over all ranks)
+  double lr = 0, weight_decay = 0;  // the rates this step used
+  double grad_norm = 0;             // joint gradient norm before clipping
+
+  // The log line's fields after "step s/S epoch e".
+  void write(std::ostream& os) const {
+    os << "loss " << loss << " lr " << lr << " wd " << weight_decay << " grad_norm " << grad_norm;
+  }
+};
+
+// What one JEPA training step reports: loss = mean over targets of each target's mean loss.
+struct JepaStepStats : StepStats {
+  double momentum = 0;          // the target encoder's EMA momentum this step used
   double target_std = 0;        // std of the target encoder's embeddings over tokens, mean over dims
   // Std over the batch's samples at each token and dim, averaged: how much the target embeddings
   // depend on the input. An encoder that ignores its input and embeds each taxel by its position
@@ -23,6 +34,11 @@ struct JepaStepStats {
   // data it is small (most taxels are idle in every window) and grows as pre-training learns.
   double target_sample_std = 0;
   std::vector<double> target_losses;  // [num targets]
+
+  void write(std::ostream& os) const {
+    os << "loss " << loss << " lr " << lr << " wd " << weight_decay << " ema " << momentum << " grad_norm "
+       << grad_norm << " target_std " << target_std;
+  }
 };
 
 // Per-column moments of M rows: mean[j] and m2[j] = Σ_m (x[m, j] − mean[j])².

@@ -41,6 +41,7 @@
 #include "tjepa/train/health.hpp"
 #include "tjepa/train/jepa_model.hpp"
 #include "tjepa/train/loss.hpp"
+#include "tjepa/train/objective.hpp"
 
 namespace tjepa {
 
@@ -255,22 +256,14 @@ class JepaStep {
   // for a loss that is a plain mean over the rows of a target (MSE, smooth-L1, a user's per-row
   // loss): it must not use statistics over the batch.
   void all_reduce(const DataParallel<T>& dp, int count, int B) {
-    require<ConfigError>(dp.sum && dp.sum_stats, "JepaStep::all_reduce: the DataParallel has no sum functions");
     require<ConfigError>(!cfg_.standardize_targets,
                          "JepaStep::all_reduce: standardize_targets uses the whole batch's statistics; a shard "
                          "cannot compute them");
-    const double share = static_cast<double>(count) / B;
-    for (const auto& part : model_.trainable()) {
-      const std::span<T> g = part.params->grads();
-      const T sc = static_cast<T>(share);
-      for (T& v : g) v *= sc;
-      dp.sum(g);
-    }
     JepaLossResult& r = result_;
     std::vector<double> stats{r.loss};
     stats.insert(stats.end(), r.target_losses.begin(), r.target_losses.end());
-    for (double& v : stats) v *= share;
-    dp.sum_stats(std::span<double>(stats));
+    const auto parts = model_.trainable();
+    all_reduce_mean<T>(parts, stats, dp, count, B);
     r.loss = stats[0];
     std::copy(stats.begin() + 1, stats.end(), r.target_losses.begin());
     // Moments over all ranks' rows: Σ n·mean and Σ (m2 + n·mean²) per column, and Σ n.
@@ -299,14 +292,8 @@ class JepaStep {
   // schedule's rate and weight decay at s, the target encoder's EMA. Returns the step's stats.
   JepaStepStats update(AdamW<T>& opt, const TrainingSchedule& schedule, std::int64_t s) {
     const JepaLossResult& r = result_;
-    if (!std::isfinite(r.loss))
-      fail<NumericError>("JEPA step ", s, ": the loss is ", r.loss,
-                         "; training stopped before the update (parameters and checkpoints are unchanged)");
     const auto parts = model_.trainable();
-    const double norm = clip_grad_norm<T>(parts, cfg_.clip_grad_norm);
-    if (!std::isfinite(norm))
-      fail<NumericError>("JEPA step ", s, ": the gradient norm is ", norm, " (loss ", r.loss,
-                         "); training stopped before the update (parameters and checkpoints are unchanged)");
+    const double norm = clip_or_stop<T>(parts, cfg_.clip_grad_norm, r.loss, s, "JEPA");
     JepaStepStats st;
     st.step = s;
     st.loss = r.loss;

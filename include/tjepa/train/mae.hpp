@@ -29,9 +29,9 @@
 // decoder's are "decoder." + the Predictor's names (input_projection.*, mask_token, blocks.*,
 // norm.*, output_projection.*) and pos_embed [1, N, pd].
 //
-// mae_train_step mirrors jepa_train_step without the EMA (MAE has no target encoder): zero grads,
-// forward, backward, clip, AdamW. A NaN or Inf in the loss or gradient throws NumericError
-// before any parameter changes.
+// MaeObjective trains it through the Trainer (MaeTrainer): zero grads, forward, backward, clip,
+// AdamW, as the JEPA step without the EMA (MAE has no target encoder). A NaN or Inf in the loss
+// or gradient throws NumericError before any parameter changes.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -205,10 +205,11 @@ inline void check_mae_masks(const MaskBatch& masks, int B, int N) {
 
 // The MAE loss of batch x [B, N, W] (W = model.token_width()) with masks.context the visible
 // and masks.targets[0] the masked tokens. Keeps in w what mae_backward needs. noise_seed drives
-// drop-path: the same seed gives the same loss.
+// drop-path: the same seed gives the same loss. A shard of a larger batch passes its offset
+// first_sample, so its samples draw the batch's noise.
 template <class T>
 double mae_forward(MaeModel<T>& model, const T* x, int B, const MaskBatch& masks, MaeWorkspace<T>& w,
-                   std::uint64_t noise_seed) {
+                   std::uint64_t noise_seed, std::uint64_t first_sample = 0) {
   const int N = model.num_tokens(), d = model.dim(), W = model.token_width();
   require<ShapeError>(B > 0, "mae_forward: B = ", B, ", expected > 0");
   require<ShapeError>(x != nullptr, "mae_forward: x is null, expected [B, N, W] = [", B, ", ", N, ", ", W, "]");
@@ -217,7 +218,7 @@ double mae_forward(MaeModel<T>& model, const T* x, int B, const MaskBatch& masks
   const int* masked = masks.targets.front().indices.data();
   w.B = 0;  // nothing to differentiate until this pass is complete
   Rng noise(noise_seed);
-  const DropPath dp{model.config.drop_path, noise()};
+  const DropPath dp{model.config.drop_path, noise(), first_sample};
 
   T* tokens = detail::grow(w.tokens, static_cast<std::size_t>(B) * N * d);
   T* z = detail::grow(w.z, static_cast<std::size_t>(B) * K * d);
@@ -256,38 +257,37 @@ void mae_backward(MaeModel<T>& model, MaeWorkspace<T>& w) {
   model.tokenizer.backward(model.context, dtokens, static_cast<T*>(nullptr), w.tokenizer_cache, w.ws);
 }
 
-// What one MAE training step reports.
-struct MaeStepStats {
-  std::int64_t step = 0;          // optimizer step index s (0-based)
-  double loss = 0;                // mean squared reconstruction error over the masked tokens
-  double lr = 0, weight_decay = 0;  // the schedule values this step used
-  double grad_norm = 0;           // joint gradient norm before clipping
-};
+// What one MAE training step reports: loss = the mean squared reconstruction error over the
+// masked tokens.
+struct MaeStepStats : StepStats {};
 
-// One optimizer step s (0-based) on batch x [B, N, W] with its masks. See the header comment.
+// The update of MAE step s after backward: the NaN stop and clipping (clip_or_stop), then AdamW
+// at the schedule's rate and weight decay for s. loss: the step's (over all ranks).
+template <class T>
+MaeStepStats mae_update(MaeModel<T>& model, AdamW<T>& opt, const TrainingSchedule& schedule, std::int64_t s,
+                        double loss) {
+  const auto parts = model.trainable();
+  MaeStepStats st;
+  st.step = s;
+  st.loss = loss;
+  st.grad_norm = clip_or_stop<T>(parts, model.config.clip_grad_norm, loss, s, "MAE");
+  st.lr = schedule.lr_at(s);
+  st.weight_decay = schedule.wd_at(s);
+  opt.step(st.lr, st.weight_decay);
+  return st;
+}
+
+// zero_grad, mae_forward, mae_backward, mae_update: one optimizer step s on batch x [B, N, W]
+// with its masks (what MaeObjective does each step, on arrays of the caller's).
 template <class T>
 MaeStepStats mae_train_step(MaeModel<T>& model, AdamW<T>& opt, const TrainingSchedule& schedule, std::int64_t s,
                             const T* x, int B, const MaskBatch& masks, MaeWorkspace<T>& w, std::uint64_t noise_seed) {
   model.context.zero_grad();
   model.decoder_params.zero_grad();
   const double loss = mae_forward(model, x, B, masks, w, noise_seed);
-  if (!std::isfinite(loss))
-    fail<NumericError>("MAE step ", s, ": the loss is ", loss,
-                       "; training stopped before the update (parameters and checkpoints are unchanged)");
+  if (!std::isfinite(loss)) return mae_update(model, opt, schedule, s, loss);  // throws NumericError
   mae_backward(model, w);
-  const auto parts = model.trainable();
-  const double norm = clip_grad_norm<T>(parts, model.config.clip_grad_norm);
-  if (!std::isfinite(norm))
-    fail<NumericError>("MAE step ", s, ": the gradient norm is ", norm, " (loss ", loss,
-                       "); training stopped before the update (parameters and checkpoints are unchanged)");
-  MaeStepStats st;
-  st.step = s;
-  st.loss = loss;
-  st.lr = schedule.lr_at(s);
-  st.weight_decay = schedule.wd_at(s);
-  st.grad_norm = norm;
-  opt.step(st.lr, st.weight_decay);
-  return st;
+  return mae_update(model, opt, schedule, s, loss);
 }
 
 // The MAE config of a Tactile-JEPA run's encoder: the same tokenizer and encoder as
@@ -303,36 +303,84 @@ inline MaeConfig mae_config(const TrainConfig& cfg, int num_tokens, int axes, do
   return m;
 }
 
-// Pre-trains an MAE on source for cfg.steps steps of cfg.batch windows with cfg's schedule and
-// AdamW: the same budget, and the same windows in the same order, as Trainer with cfg (its data
-// stream), uniform masks drawn from (seed, step). on_step sees every step's stats.
-template <class T>
-std::vector<MaeStepStats> pretrain_mae(MaeModel<T>& model, const WindowSource& source, const TrainConfig& cfg,
-                                       const std::function<void(const MaeStepStats&)>& on_step = {}) {
-  cfg.validate();
-  const int B = cfg.batch;
-  const std::int64_t per_epoch = source.batches_per_epoch(B);
-  require<DataError>(per_epoch > 0, "pretrain_mae: the source holds ", source.size(), " windows, fewer than one batch of ", B);
-  AdamW<T> opt(model.trainable(), cfg.adamw());
-  const TrainingSchedule schedule = cfg.schedule();
-  const UniformMasking masking(model.num_tokens(), model.config.mask_ratio);
-  MaeWorkspace<T> w;
-  MaskBatch masks;
-  WindowBatch batch;
-  AlignedVector<T> x;
-  std::vector<std::int64_t> order;
-  std::vector<MaeStepStats> log;
-  for (std::int64_t s = 0; s < cfg.steps; ++s) {
-    const std::int64_t e = s / per_epoch, b = s % per_epoch;
-    if (b == 0 || order.empty()) order = source.epoch_order(cfg.seed ^ Trainer<T>::kDataSalt, static_cast<std::uint64_t>(e));
-    source.gather(std::span<const std::int64_t>(order).subspan(static_cast<std::size_t>(b * B), static_cast<std::size_t>(B)), batch);
-    windows_to_tokens(batch, x);
-    masking.sample_into(masks, B, cfg.seed ^ Trainer<T>::kMaskSalt, static_cast<std::uint64_t>(s));
-    log.push_back(mae_train_step(model, opt, schedule, s, x.data(), B, masks, w,
-                                 Rng(cfg.seed ^ Trainer<T>::kNoiseSalt, static_cast<std::uint64_t>(s))()));
-    if (on_step) on_step(log.back());
+// MAE pre-training as an Objective (train/objective.hpp): the same budget, schedule, AdamW and
+// windows in the same order as a JepaObjective with the same TrainConfig (the shared data
+// stream), uniform masks drawn from (streams::masks(seed), step), drop-path from
+// streams::noise(seed, step). Of cfg it reads the data order (seed, batch), the schedule (steps,
+// warm-up, rates, weight decay) and AdamW's betas and eps; the model's shape, masking, drop-path
+// and clipping are the MaeConfig's. Its checkpoints: {"objective": "mae", "train": cfg, "mae":
+// the MaeConfig} in the config metadata, the encoder and decoder under "context_encoder." and
+// "decoder.", AdamW's moments.
+template <class T, class Source = WindowSource>
+class MaeObjective {
+ public:
+  using value_type = T;
+  using stats_type = MaeStepStats;
+
+  // The model and source must outlive the objective.
+  MaeObjective(MaeModel<T>& model, const Source& source, TrainConfig config)
+      : data((config.validate(), source), config.seed, config.batch), model_(model), cfg_(std::move(config)),
+        masking_(model.num_tokens(), model.config.mask_ratio), optimizer_(model.trainable(), cfg_.adamw()),
+        schedule_(cfg_.schedule()) {}
+  MaeObjective(const MaeObjective&) = delete;
+  MaeObjective& operator=(const MaeObjective&) = delete;
+
+  WindowBatches<T, Source> data;  // the windows and how they become tokens (data.to_tokens)
+
+  MaeModel<T>& model() { return model_; }
+  const TrainConfig& config() const { return cfg_; }
+  const TrainingSchedule& schedule() const { return schedule_; }
+  MaeWorkspace<T>& workspace() { return w_; }
+
+  // The Objective interface (train/objective.hpp).
+  std::int64_t num_samples() const { return data.size(); }
+  int batch_size() const { return cfg_.batch; }
+  std::int64_t total_steps() const { return schedule_.total_steps(); }
+  std::vector<std::int64_t> epoch_order(std::uint64_t epoch) const { return data.epoch_order(epoch); }
+  void zero_grad() {
+    model_.context.zero_grad();
+    model_.decoder_params.zero_grad();
   }
-  return log;
-}
+  double forward(const StepBatch& b) {
+    require<ConfigError>(model_.config.group_size.empty() || data.to_tokens,
+                         "MaeObjective: a grouped tokenizer needs its own data.to_tokens");
+    const T* x = data.tokens(b.ids, model_.num_tokens(), model_.token_width());
+    masking_.sample_into(masks_, b.batch, streams::masks(cfg_.seed), static_cast<std::uint64_t>(b.step));
+    const MaskBatch* masks = &masks_;
+    if (b.size() != b.batch) {
+      masks_.slice_into(shard_masks_, b.first, b.size());
+      masks = &shard_masks_;
+    }
+    loss_ = mae_forward(model_, x, b.size(), *masks, w_, streams::noise(cfg_.seed, b.step),
+                        static_cast<std::uint64_t>(b.first));
+    return loss_;
+  }
+  void backward() { mae_backward(model_, w_); }
+  void all_reduce(const DataParallel<T>& dp, int count, int B) {
+    double stats[1] = {loss_};
+    const auto parts = model_.trainable();
+    all_reduce_mean<T>(parts, stats, dp, count, B);
+    loss_ = stats[0];
+  }
+  MaeStepStats update(std::int64_t s) { return mae_update(model_, optimizer_, schedule_, s, loss_); }
+  std::vector<PrefixedParams<T>> parts() { return model_.parts(); }
+  AdamW<T>& optimizer() { return optimizer_; }
+  nlohmann::json metadata() const {
+    return {{"objective", "mae"}, {"train", cfg_.to_json()}, {"mae", model_.config.to_json()}};
+  }
+
+ private:
+  MaeModel<T>& model_;
+  TrainConfig cfg_;
+  UniformMasking masking_;
+  AdamW<T> optimizer_;
+  TrainingSchedule schedule_;
+  MaeWorkspace<T> w_;
+  MaskBatch masks_, shard_masks_;
+  double loss_ = 0;
+};
+
+template <class T, class Source = WindowSource>
+using MaeTrainer = Trainer<MaeObjective<T, Source>>;
 
 }  // namespace tjepa

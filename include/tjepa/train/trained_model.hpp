@@ -89,6 +89,10 @@ inline TrainedModel load_trained_model(const std::filesystem::path& path) {
   require<FileError>(it != file.metadata.end(), path.string(), ": no 'config' metadata; not a tjepa checkpoint");
   const std::string where = path.string() + ": metadata 'config'";
   const nlohmann::json meta = json_parse<FileError>(it->second, where);
+  require<FileError>(meta.is_object(), where, ": expected a JSON object");
+  const std::string objective = checkpoint_objective(meta);
+  require<FileError>(objective == "jepa", path.string(), " is a checkpoint of a '", objective,
+                     "' run; load_trained_model reads Tactile-JEPA runs ('jepa')");
   TrainedModel m;
   try {
     m.config.update(json_get<nlohmann::json, FileError>(meta, "train", where), where + ".train");

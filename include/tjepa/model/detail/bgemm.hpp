@@ -37,6 +37,15 @@ enum class Precision { fp32, bf16 };
 
 inline const char* precision_name(Precision p) { return p == Precision::bf16 ? "bf16" : "fp32"; }
 
+// Whether this translation unit was compiled with AVX512-BF16 (-mavx512bf16, or a -march that has
+// it): only then does Precision::bf16 run bf16 products; elsewhere it runs fp32.
+constexpr bool has_native_bf16() { return TJEPA_BF16_NATIVE != 0; }
+
+// The precision that Precision p actually runs in on this build.
+constexpr Precision effective_precision(Precision p) {
+  return p == Precision::bf16 && has_native_bf16() ? Precision::bf16 : Precision::fp32;
+}
+
 }  // namespace tjepa
 
 namespace tjepa::detail::bgemm {

@@ -118,11 +118,11 @@ inline void forward_gemm(float* out, const float* in, const float* w, kernels::W
 namespace tjepa::kernels {
 
 // Weights packed once for the GEMMs (detail/sgemm.hpp, detail/bgemm.hpp) and reused by later
-// products. Every forward product otherwise packs its weight again (a transposing copy: about
-// 150 µs of a 3.5 ms streaming tick at d = 96 with 4 blocks); inference on weights that do not
-// change (Workspace::frozen_weights) skips that. Keyed by the weight's address and precision:
-// clear() when the values change. keep = false packs nothing and only carries the precision
-// (each product then packs per call). Nothing is packed for double.
+// products. Every forward product otherwise packs its weight again (a transposing copy of the
+// weight per call); inference on weights that do not change (Workspace::frozen_weights) skips
+// that. Keyed by the weight's address and precision: clear() when the values change. keep = false
+// packs nothing and only carries the precision (each product then packs per call). Nothing is
+// packed for double.
 template <class T>
 class PackedWeights {
  public:

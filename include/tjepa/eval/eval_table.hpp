@@ -17,7 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tjepa/core/error.hpp"
-#include "tjepa/downstream/grasp_tasks.hpp"
+#include "tjepa/eval/grasp_tasks.hpp"
 #include "tjepa/downstream/welch.hpp"
 #include "tjepa/graph/svg.hpp"
 

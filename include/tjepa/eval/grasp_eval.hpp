@@ -35,9 +35,9 @@
 #include "tjepa/data/drift_tracker.hpp"
 #include "tjepa/data/preprocessor.hpp"
 #include "tjepa/data/window_source.hpp"
-#include "tjepa/downstream/eval_table.hpp"
-#include "tjepa/downstream/grasp_tasks.hpp"
-#include "tjepa/downstream/pretrain_cache.hpp"
+#include "tjepa/eval/eval_table.hpp"
+#include "tjepa/eval/grasp_tasks.hpp"
+#include "tjepa/eval/pretrain_cache.hpp"
 #include "tjepa/graph/skin.hpp"
 #include "tjepa/sensors/allegro_xela.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"
@@ -344,7 +344,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
     std::optional<GridPlacement> grid;
     if (v && v->ijepa_blocks) grid = GridPlacement::from_layout(d.skin.layout, layouts::allegro::kPhalanxPitch);
     MaskCollator collator(graph, v ? v->masks : cfg.masks(), grid);
-    Trainer<float> trainer(*model, *d.pretrain, std::move(collator), cfg);
+    JepaTrainer<float> trainer(*model, *d.pretrain, std::move(collator), cfg);
     const auto t = clock::now();
     JepaStepStats first, last;
     trainer.on_step = [&](const JepaStepStats& st) {
@@ -420,11 +420,13 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       const nlohmann::json key = cache.key("MAE", s, {{"train", cfg.to_json()}, {"mae_mask_ratio", c.mae_mask_ratio}});
       if (!from_cache("MAE", s, key, mae.context)) {
         const auto t = clock::now();
-        const auto log = pretrain_mae(mae, *d.pretrain, cfg, [&](const MaeStepStats& st) {
+        MaeTrainer<float> trainer(mae, *d.pretrain, cfg);
+        trainer.on_step = [&](const MaeStepStats& st) {
           if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
             say("  MAE seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
                 std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss));
-        });
+        };
+        const auto log = trainer.run();
         pretrained(key, mae.context,
                    {{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss}, {"last_loss", log.back().loss},
                     {"seconds", seconds(t)}});

@@ -33,7 +33,7 @@
 #include "tjepa/downstream/embed.hpp"
 #include "tjepa/downstream/features.hpp"
 #include "tjepa/downstream/probe_head.hpp"
-#include "tjepa/downstream/probe_training.hpp"
+#include "tjepa/downstream/probe_labels.hpp"
 #include "tjepa/downstream/ridge.hpp"
 #include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/sim/grasp_objects.hpp"
