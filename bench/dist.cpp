@@ -30,7 +30,7 @@ int main(int argc, char** argv) {
     JepaModel<float> model(JepaConfig::reference(N, 30, 3), 1);
     AdamW<float> opt(model.trainable());
     const auto schedule = TrainingSchedule::reference(500, 100, 30);
-    JepaStep<float> step(model, JepaStepConfig{});  // drop-path 0.3, as the reference
+    JepaStep<float> step(model, JepaStepConfig{.drop_path = 0.3});  // drop-path 0.3, as the reference
     const DataParallel<float> dp = dist::mpi_data_parallel<float>(mpi.comm());
     const Shard shard = dp.shard(B);
     Rng rng(2);

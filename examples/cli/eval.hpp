@@ -1,6 +1,6 @@
 #pragma once
 // tjepa eval and tjepa demo: the downstream protocol on the simulated grasping hand
-// (downstream/grasp_eval.hpp), printed and written as results.md, results.json, results.svg.
+// (eval/grasp_eval.hpp), printed and written as results.md, results.json, results.svg.
 #include <chrono>
 #include <filesystem>
 #include <iostream>
@@ -21,10 +21,9 @@ struct EvalOptions {
 };
 
 // The demo: one pre-training seed, one head per task, rows constant / ridge / random / end to
-// end / Tactile-JEPA, sized for a 10-minute budget on 2 cores (how long it takes depends on the
-// core; docs/evaluation.md has the times measured): the end-to-end heads stop after 2 epochs,
-// which the row's name says (with the protocol's limits they take 40-90 minutes), and the linear
-// read-out table is left to `tjepa eval`.
+// end / Tactile-JEPA, sized to run in minutes rather than hours (docs/evaluation.md, "The demo"):
+// the end-to-end heads stop after 2 epochs, which the row's name says (the protocol's limits
+// allow up to 200 epochs), and the linear read-out table is left to `tjepa eval`.
 inline EvalOptions demo_eval_options(std::uint64_t seed) {
   EvalOptions o;
   GraspEvalConfig& c = o.eval;

@@ -4,8 +4,8 @@
 // the best epoch restored), and the sequence head (gradients against central differences, which
 // include downstream/causal_attention.hpp's parameters and inputs; causal attention against a
 // plain-loop reference; training), and the grasp protocol:
-// the tasks (downstream/grasp_tasks.hpp), the table and its statistics (downstream/eval_table.hpp)
-// and the whole protocol at toy size (downstream/grasp_eval.hpp).
+// the tasks (eval/grasp_tasks.hpp), the table and its statistics (eval/eval_table.hpp)
+// and the whole protocol at toy size (eval/grasp_eval.hpp).
 #include <doctest/doctest.h>
 
 #include <tjepa/eval.hpp>
@@ -906,7 +906,7 @@ TEST_CASE("train_sequence_head: the taxel pooling reads where the contact is - t
 }
 
 // ---------------------------------------------------------------------------------------------
-// The grasp protocol (downstream/grasp_tasks.hpp, eval_table.hpp, grasp_eval.hpp)
+// The grasp protocol (eval/grasp_tasks.hpp, eval_table.hpp, grasp_eval.hpp)
 
 namespace {
 struct GraspSplit {

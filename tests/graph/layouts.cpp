@@ -303,7 +303,8 @@ TEST_SUITE("graph") {
       CHECK(l.part_names[0] == (side == Side::left ? "left" : "right"));
       CHECK(l.num_groups() == 17);
       CHECK(s.graph.num_components() == 1);
-      // Region shapes from REFERENCE §2, in the documented order.
+      // Region shapes of the reference implementation (E-Kovtun/tactile,
+      // tactile_ssl/data/deco_geometry.py), in the documented order.
       const std::vector<std::tuple<std::string, int, int>> shapes = {
           {"little_tip", 3, 3}, {"little_nail", 12, 8}, {"little_pad", 10, 8},
           {"ring_tip", 3, 3},   {"ring_nail", 12, 8},   {"ring_pad", 10, 8},

@@ -674,7 +674,7 @@ TEST_SUITE("nn") {
     CHECK_THROWS_AS(Encoder(ps, EncoderConfig{10, 10, 1, 3, 4.0, true, 1e-6}), ConfigError);
   }
 
-  TEST_CASE("init_params: REFERENCE §4 values - deterministic from the seed") {
+  TEST_CASE("init_params: the reference implementation's values - deterministic from the seed") {
     ParamSet<float> a, b;
     Encoder ea(a, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});
     Encoder eb(b, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});

@@ -257,7 +257,7 @@ TEST_SUITE("train") {
   TEST_CASE("two backward passes accumulate twice the gradient") {
     auto model = random_model(11, 1);
     const auto x = tiny_input(14);
-    JepaStep<double> step(model, JepaStepConfig{});
+    JepaStep<double> step(model, JepaStepConfig{.drop_path = 0.3});
     step.zero_grad();
     step.forward(x.data(), 2, tiny_masks(), 5);
     step.backward();
@@ -339,7 +339,7 @@ TEST_SUITE("train") {
     const auto x = tiny_input(33);
     AdamW<double> opt(model.trainable());
     const auto schedule = TrainingSchedule::reference(10, 4, 2);
-    JepaStep<double> step(model, JepaStepConfig{});
+    JepaStep<double> step(model, JepaStepConfig{.drop_path = 0.3});
     const auto context0 = model.context;
     const auto target0 = model.target;
     const auto st = step.train(opt, schedule, 5, x.data(), 2, tiny_masks(), 9);
@@ -367,7 +367,7 @@ TEST_SUITE("train") {
     x[7] = std::numeric_limits<double>::quiet_NaN();
     AdamW<double> opt(model.trainable());
     const auto schedule = TrainingSchedule::reference(10, 4, 2);
-    JepaStep<double> step(model, JepaStepConfig{});
+    JepaStep<double> step(model, JepaStepConfig{.drop_path = 0.3});
     const auto before = model;
     CHECK_THROWS_WITH_AS(step.train(opt, schedule, 0, x.data(), 2, tiny_masks(), 1),
                          doctest::Contains("JEPA step 0: the loss is nan"), NumericError);
@@ -380,7 +380,7 @@ TEST_SUITE("train") {
     bad.context[3] = 9;
     CHECK_THROWS_AS(step.forward(x.data(), 2, bad, 1), ShapeError);
     // backward needs a forward pass to differentiate.
-    JepaStep<double> fresh(model, JepaStepConfig{});
+    JepaStep<double> fresh(model, JepaStepConfig{.drop_path = 0.3});
     CHECK_THROWS_WITH_AS(fresh.backward(), doctest::Contains("no forward pass"), ConfigError);
   }
 
@@ -559,6 +559,26 @@ TEST_SUITE("train") {
     jt.save(jepa_ckpt.path);
     CHECK_THROWS_WITH_AS(resumed.resume(jepa_ckpt.path), doctest::Contains("a checkpoint of a 'jepa' run"), ConfigError);
     CHECK_THROWS_WITH_AS(jt.resume(ckpt.path), doctest::Contains("a checkpoint of a 'mae' run"), ConfigError);
+  }
+
+  TEST_CASE("one default per setting: TrainConfig's module keys default to the modules' configs") {
+    const TrainConfig tc;
+    const MaskConfig m = tc.masks(), m0;
+    CHECK(m.context_ratio.lo == m0.context_ratio.lo);
+    CHECK(m.context_ratio.hi == m0.context_ratio.hi);
+    CHECK(m.target_ratio.lo == m0.target_ratio.lo);
+    CHECK(m.target_ratio.hi == m0.target_ratio.hi);
+    CHECK(m.num_local == m0.num_local);
+    CHECK(m.num_global == m0.num_global);
+    CHECK(m.min_context_tokens == m0.min_context_tokens);
+    const JepaStepConfig s = tc.step(), s0;
+    CHECK(s.to_json() == s0.to_json());  // loss, target options, drop-path, clipping, precision
+    const AdamWConfig a = tc.adamw(), a0;
+    CHECK(a.beta1 == a0.beta1);
+    CHECK(a.beta2 == a0.beta2);
+    CHECK(a.eps == a0.eps);
+    // The reference's values come from TrainConfig::reference.
+    CHECK(TrainConfig::reference(10).drop_path == 0.3);
   }
 
   TEST_CASE("a checkpoint without a metadata version (version 1) is a JEPA run's and resumes") {

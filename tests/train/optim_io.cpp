@@ -82,7 +82,8 @@ std::string error_of(const fs::path& p) {
 
 TEST_SUITE("train") {
   TEST_CASE("schedules match their closed forms at chosen steps") {
-    // REFERENCE §5 at the Sparsh-skin scale: 500 epochs, 10 steps per epoch, 30 warm-up epochs.
+    // The paper's schedule (Sec. IV-D, training details) with Sparsh-skin's epochs: 500 epochs,
+    // 10 steps per epoch, 30 warm-up epochs.
     const auto s = tjepa::TrainingSchedule::reference(500, 10, 30);
     const double W = 300, T = 5000;
     CHECK(s.total_steps() == 5000);

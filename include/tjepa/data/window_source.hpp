@@ -212,7 +212,7 @@ void windows_to_tokens(const WindowBatch& batch, AlignedVector<T>& out) {
 
 // What a window source's windows are made of: every recording's values and the preprocessor's
 // statistics (FNV-1a, core/hash.hpp). Equal sources give equal fingerprints; the pre-training
-// cache (downstream/pretrain_cache.hpp) keys its entries by it.
+// cache (eval/pretrain_cache.hpp) keys its entries by it.
 inline std::uint64_t fingerprint(const WindowSource& source) {
   std::uint64_t h = fingerprint_seed;
   for (const Recording& r : source.recordings()) h = fingerprint(r.values(), h);

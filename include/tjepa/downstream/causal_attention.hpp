@@ -1,9 +1,9 @@
 #pragma once
-// Causal multi-head self-attention for the sequence head (REFERENCE §6): position l of a sequence
-// attends to positions 0..l only. Sequences are short (10–12 windows), so each query row is one
-// call of the fused kernel (kernels/attention.hpp) over the prefix of keys [0, l] — the mask is
-// the key range, nothing else changes. Names as timm's Attention: <name>.qkv [3d, d] (+ bias),
-// <name>.proj [d, d] (+ bias).
+// Causal multi-head self-attention for the sequence head (paper, Sec. IV-B): position l of a
+// sequence attends to positions 0..l only. Sequences are short (10–12 windows, Sec. IV-D), so
+// each query row is one call of the fused kernel (kernels/attention.hpp) over the prefix of keys
+// [0, l] — the mask is the key range, nothing else changes. Names as timm's Attention:
+// <name>.qkv [3d, d] (+ bias), <name>.proj [d, d] (+ bias).
 //
 //   qkv = x · Wqkvᵀ + b                       x [B·L, d] → [B·L, 3d] (columns q | k | v)
 //   att[b, l] = softmax(q_l k_{0..l}ᵀ / √Dh) v_{0..l}     per head             [B·L, d]

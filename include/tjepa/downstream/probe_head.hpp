@@ -1,8 +1,8 @@
 #pragma once
-// General attentive-probe heads of the evaluation protocol (REFERENCE §6): one AttentiveProbe on
-// a window's token embeddings with R regression outputs and/or C class logits, trained with early
-// stopping (downstream/early_stopping.hpp) on frozen embeddings (FrozenFeatures) or end to end
-// with the encoder (EncoderFeatures).
+// General attentive-probe heads of the evaluation protocol (paper, Sec. IV-B, window-level
+// head): one AttentiveProbe on a window's token embeddings with R regression outputs and/or C
+// class logits, trained with early stopping (downstream/early_stopping.hpp) on frozen embeddings
+// (FrozenFeatures) or end to end with the encoder (EncoderFeatures).
 //
 //   y [B, R + C] = probe(x [B, L, d])
 //   y[:, 0:R]  regress standardized targets (v − mean) / std (ColumnScaler, fitted on the
@@ -10,7 +10,8 @@
 //   y[:, R:]   logits, loss = softmax cross-entropy (downstream/cross_entropy.hpp)
 //   loss = L_regression + class_weight · L_class         (the validation loss is the same)
 // Tasks of the protocol: force (R = 3, C = 0), object class (R = 0, C = objects), both at once
-// (the demo's ForceIndenterProbe: R = 3, C = 4).
+// (head_targets of ProbeLabels, downstream/probe_labels.hpp: R = 3 force axes, C = the indenter
+// classes).
 #include <algorithm>
 #include <array>
 #include <cmath>

@@ -1,7 +1,7 @@
 #pragma once
-// The sequence head (REFERENCE §6, in-hand pose): each of L consecutive windows is pooled by the
-// attentive probe's pooling, a 1-layer causal transformer runs over the L pooled vectors, and a
-// linear layer predicts the pose after each window. Legend: B sequences, L windows per sequence
+// The sequence head (paper, Sec. IV-B, in-hand pose): each of L consecutive windows is pooled by
+// the attentive probe's pooling, a 1-layer causal transformer runs over the L pooled vectors, and
+// a linear layer predicts the pose after each window. Legend: B sequences, L windows per sequence
 // (default 10), N tokens per window, d width, H heads, P outputs (pose x, y, θ: 3).
 //
 //   p   = pool(x)                    x [B·L, N, d] → [B·L, d]   (AttentiveProbe::pool, "pool.*")
@@ -10,8 +10,9 @@
 //   h₂  = h₁ + Mlp(norm2(h₁))                         blocks.0.norm2, blocks.0.mlp.{fc1,fc2}
 //   y   = head(norm(h₂))             y [B·L, P]       norm, head (a Linear)
 // Position l sees windows 0..l: the prediction after window l never depends on later windows.
-// With pooling.kind = taxel (model/taxel_pooling.hpp; not the paper's, docs/evaluation.md says
-// why it exists) pool(x) is the per-taxel read-out that keeps where on the skin each feature sits.
+// With pooling.kind = taxel (model/taxel_pooling.hpp; not the paper's; why it exists:
+// docs/history/evaluation-log.md, "A sequence head that keeps where the contact is") pool(x) is
+// the per-taxel read-out that keeps where on the skin each feature sits.
 #include <algorithm>
 #include <cstdint>
 #include <span>

@@ -6,19 +6,22 @@
 //            pre-training recording, a labelled training and a labelled test recording, each of
 //            its own episodes; magnetic preprocessing fitted on the baseline and the pre-training
 //            recording; optional drift tracking through the session in recording order
-//   tasks    object / force / pose (downstream/grasp_tasks.hpp) on the labelled recordings
+//   tasks    object / force / pose (eval/grasp_tasks.hpp; paper, Sec. IV-B) on the labelled
+//            recordings
 //   rows     constant; ridge on hand-crafted features; the random initial encoder, frozen; the same
 //            encoder trained end to end with each head; MAE pre-trained on the same windows with the
-//            same budget, frozen; Tactile-JEPA, frozen (the target encoder)
+//            same budget, frozen; Tactile-JEPA, frozen (the target encoder). End to end and MAE are
+//            two of the paper's baselines (Sec. IV-C)
 //   linear   the linear read-outs of each frozen encoder of the main rows (ridge on its pad-mean
 //            embeddings and on its token components, score_linear_readouts; one per pre-training
 //            seed), beside the ridge row: what the embeddings hold linearly, apart from what the
 //            heads learn to find
-//   ablation Tactile-JEPA with the masks of the paper's Table 4: 2L+2G (the default), 4L, 4G,
-//            4 I-JEPA blocks, and 2L+2G with a local (connected) context
-//   protocol for each pre-training seed s in `seeds`: pre-train, then `head_seeds` heads per task
-//            (head seed s·1000 + h); the table (downstream/eval_table.hpp) averages the heads per
-//            seed, reports mean ± sd over seeds, and Welch-tests the best two rows
+//   ablation Tactile-JEPA with the masks of the paper's ablation (Sec. V, Table 4): 2L+2G (the
+//            default), 4L, 4G, 4 I-JEPA blocks, and 2L+2G with a local (connected) context
+//   protocol (paper, Sec. IV-D, evaluation protocol) for each pre-training seed s in `seeds`:
+//            pre-train, then `head_seeds` heads per task (head seed s·1000 + h); the table
+//            (eval/eval_table.hpp) averages the heads per seed, reports mean ± sd over seeds, and
+//            Welch-tests the best two rows
 //
 // Everything is a function of the config: the same config gives the same table (at the same
 // thread count).
@@ -78,9 +81,9 @@ struct GraspEvalConfig {
   bool ridge = true, random = true, end_to_end = true, mae = true, jepa = true, ablation = true;
   bool linear_readout = true;  // the linear read-out table of the frozen main rows
   int readout_components = 3;  // k of its token components (as many numbers per taxel as its 3 axes)
-  // Directory of pre-trained encoders kept between runs (downstream/pretrain_cache.hpp; empty:
-  // none): a row and seed found there is read instead of pre-trained, with the same weights. It
-  // changes no result, so to_json leaves it out.
+  // Directory of pre-trained encoders kept between runs (eval/pretrain_cache.hpp; empty: none):
+  // a row and seed found there is read instead of pre-trained, with the same weights. It changes
+  // no result, so to_json leaves it out.
   std::string pretrain_cache;
 
   void validate() const {

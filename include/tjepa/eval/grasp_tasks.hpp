@@ -1,7 +1,7 @@
 #pragma once
-// The paper's three Sparsh-skin tasks on a labelled recording of the simulated grasping hand
-// (sim/grasping_hand.hpp), and the scores of a method on them. A window's label is the GraspLabel
-// of its last frame.
+// The paper's three Sparsh-skin tasks (Sec. IV-B) on a labelled recording of the simulated
+// grasping hand (sim/grasping_hand.hpp), and the scores of a method on them. A window's label is
+// the GraspLabel of its last frame.
 //
 //   object  windows with an object in the hand (label.object >= 0) and a pad in contact;
 //           C = num_grasp_objects() classes; attentive probe; top-1 accuracy
@@ -9,7 +9,7 @@
 //           (shear u, shear v, normal) in N; attentive probe on one window; RMSE per axis and of
 //           the force vector
 //   pose    sequences of L consecutive windows during all of which the object is held, the pose
-//           (x cm, y cm, θ degrees) after each window; the sequence head (REFERENCE §6); x, y, θ
+//           (x cm, y cm, θ degrees) after each window; the sequence head (Sec. IV-B); x, y, θ
 //           RMSE over every position and sequence, the fraction of predictions within 2 cm
 //           (distance in x, y) and within 5 degrees
 //
@@ -43,7 +43,7 @@ namespace tjepa {
 
 struct GraspTaskConfig {
   int label_pad = 3;           // the pad whose force the labels carry (GraspSimConfig::label_pad)
-  int sequence_length = 10;    // L windows per pose sequence (REFERENCE §6: 10–12)
+  int sequence_length = 10;    // L windows per pose sequence (paper, Sec. IV-D: 10 on Sparsh-skin)
   int sequence_stride = 2;     // windows between the starts of consecutive pose sequences
   // At most this many samples per task (evenly spaced picks from the task's candidates, which
   // come in recording order); 0: all.
@@ -234,20 +234,21 @@ void score_pose(GraspScores& s, const T* pred, std::size_t ld, const GraspTasks&
 // Heads of the protocol: the attentive probe (object, force) and the sequence head (pose), each
 // trained with early stopping on a validation split of the training samples.
 struct GraspHeadConfig {
-  int probe_heads = 3;  // attention heads of the probe's pooling (REFERENCE §6: 3)
+  int probe_heads = 3;  // attention heads of the probe's pooling (paper, Sec. IV-B: 3)
   // Every head validates on whole episodes, stratified by object (the tasks' SampleGroups): 20 % of
   // each object's training episodes. Windows of one grasp are alike and pose sequences of one
   // episode overlap, so a split of windows or sequences puts near-copies on both sides and early
   // stopping follows the fit; contiguous blocks hold a few of the 16 objects only.
   // The heads' validation loss sits on a plateau for 10-20 epochs before it falls (the pooling has
   // to become selective first): patience 20 waits it out, and the probes' limit of 200 epochs
-  // leaves room for a slow fall after it (docs/evaluation.md, fifteenth session).
+  // leaves room for a slow fall after it (docs/history/evaluation-log.md, "Probes trained past
+  // their plateau" and "A three times longer labelled recording").
   HeadTrainConfig probe{.max_epochs = 200, .patience = 20, .batch = 64, .lr = 1e-3};
   HeadTrainConfig sequence{.max_epochs = 100, .patience = 20, .batch = 16, .lr = 1e-3};
   // End to end (the encoder trains with the head): the heads' limits, capped by these (every step
-  // runs the encoder forward and backward: about 40 min per head seed for the three tasks on 2
-  // cores at the grasp protocol's size). A cap below the heads' own is named in the row
-  // (end_to_end_name): a few epochs end on the heads' plateau, before they learn.
+  // runs the encoder forward and backward, so an epoch costs far more than a frozen head's). A cap
+  // below the heads' own is named in the row (end_to_end_name): a few epochs end on the heads'
+  // plateau, before they learn.
   int end_to_end_max_epochs = 200, end_to_end_patience = 20;
   double end_to_end_drop_path = 0.0;
   // Frozen rows, if set: the heads read the embeddings standardized per channel
@@ -257,7 +258,8 @@ struct GraspHeadConfig {
   // How the probes and the sequence head pool a window: the paper's attentive pooling, or the
   // taxel pooling (model/taxel_pooling.hpp) that keeps where a feature sits. Their `tokens` are
   // set from the features. The sequence head uses the taxel pooling: with the attentive one it
-  // learns no pose on this data for any encoder (docs/evaluation.md, eleventh session).
+  // learns no pose on this data for any encoder (docs/history/evaluation-log.md, "A sequence head
+  // that keeps where the contact is").
   PoolingConfig probe_pooling;
   PoolingConfig sequence_pooling{.kind = PoolingKind::taxel};
 };

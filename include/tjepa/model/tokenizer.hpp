@@ -5,7 +5,7 @@
 //     PyTorch: patch_embed.proj.{weight [d, m, τ], bias [d]}, patch_embed.norm.{weight, bias}.
 //     The reference's patch_embed.proj is a Conv1d with weight [d, m, τ], registered with that
 //     shape so a strict load_state_dict accepts it: flattened, its column index is axis·τ + frame,
-//     so rows must hold a taxel's window axis-major (train/trainer.hpp's windows_to_tokens) to load
+//     so rows must hold a taxel's window axis-major (data/window_source.hpp's windows_to_tokens) to load
 //     it 1:1 (assuming no temporal padding in that Conv1d; its PatchEmbed1d source was not available).
 //   grouped (DECO-50): one map and one LayerNorm per group size n (4 and 5), W = n_max·k with
 //     k = τ·m values per taxel; a group of size n uses the first n·k values of its row (the rest

@@ -1,5 +1,9 @@
 #pragma once
 // TrainConfig: everything that defines a pre-training run, in one flat struct with one JSON form.
+// It is the flat view of the modules' configs: masks() gives the MaskConfig, step() the
+// JepaStepConfig, adamw() the AdamWConfig, schedule() the TrainingSchedule, model() the
+// JepaConfig. Each setting that a module's config has takes its default from there (one default
+// per setting); the others are the run's own (data, model size, schedule, seed).
 // The Trainer, `tjepa pretrain`, `tjepa demo` and checkpoints all use it: a checkpoint stores it
 // under "train" in its config metadata, and Trainer::resume continues only a run with an equal one.
 //
@@ -8,7 +12,7 @@
 //   c.validate();                                          // every bad value named by its key
 //
 // The defaults are a short run on one machine (a peak rate above the reference's 1e-4, which is
-// set for 500 epochs); TrainConfig::reference gives REFERENCE §5's numbers for a data set size.
+// set for 500 epochs); TrainConfig::reference gives the paper's training setup (Sec. IV-D) for a data set size.
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -48,22 +52,26 @@ struct TrainConfig {
   int position_eigenvectors = 0;
   double position_scale = 1.0;
   // Masks (MaskConfig).
-  std::array<double, 2> context_ratio{0.5, 0.9}, target_ratio{0.10, 0.18};
-  int local_targets = 2, global_targets = 2;
-  int min_context_tokens = 32;
+  std::array<double, 2> context_ratio{MaskConfig{}.context_ratio.lo, MaskConfig{}.context_ratio.hi};
+  std::array<double, 2> target_ratio{MaskConfig{}.target_ratio.lo, MaskConfig{}.target_ratio.hi};
+  int local_targets = MaskConfig{}.num_local, global_targets = MaskConfig{}.num_global;
+  int min_context_tokens = MaskConfig{}.min_context_tokens;
   // Objective (JepaStepConfig).
-  std::string loss = "mse";  // "mse" (the reference) or "smooth_l1" (I-JEPA)
-  bool normalize_targets = false, standardize_targets = false, predictor_pos_from_context = false;
-  double drop_path = 0.0;
-  bool target_drop_path = true;
-  double clip_grad_norm = 10.0;
-  std::string precision = "fp32";  // of the products: "fp32" or "bf16" (JepaStepConfig::precision)
+  std::string loss = to_string(JepaStepConfig{}.loss);  // "mse" (the reference) or "smooth_l1" (I-JEPA)
+  bool normalize_targets = JepaStepConfig{}.normalize_targets;
+  bool standardize_targets = JepaStepConfig{}.standardize_targets;
+  bool predictor_pos_from_context = JepaStepConfig{}.predictor_pos_from_context;
+  double drop_path = JepaStepConfig{}.drop_path;
+  bool target_drop_path = JepaStepConfig{}.target_drop_path;
+  double clip_grad_norm = JepaStepConfig{}.clip_grad_norm;
+  // Of the products: "fp32" or "bf16" (JepaStepConfig::precision).
+  std::string precision = precision_name(JepaStepConfig{}.precision);
   // Optimizer and schedules (in optimizer steps).
   std::int64_t steps = 600, warmup_steps = 60;
   int batch = 32;
   double lr = 1e-3, start_lr = 1e-4, final_lr = 1e-5;  // warm-up start_lr → lr, then cosine to final_lr
   double wd_start = 0.04, wd_end = 0.4;                // cosine-increasing weight decay
-  double beta1 = 0.9, beta2 = 0.999, eps = 1e-8;       // AdamW
+  double beta1 = AdamWConfig{}.beta1, beta2 = AdamWConfig{}.beta2, eps = AdamWConfig{}.eps;  // AdamW
   double ema_start = 0.99, ema_end = 1.0;              // the target encoder's EMA momentum, linear
   std::uint64_t seed = 0;                              // init, data order, masks, drop-path noise
 
@@ -132,7 +140,7 @@ struct TrainConfig {
     return c;
   }
 
-  // REFERENCE §5 for a data set of steps_per_epoch batches of 256: 500 epochs, 30 of warm-up,
+  // The paper's training setup (Sec. IV-D) for a data set of steps_per_epoch batches of 256: 500 epochs, 30 of warm-up,
   // lr 1e-5 → 1e-4 → 1e-6, EMA 0.994 → 1, drop-path 0.3, ViT-Tiny with a 4-block predictor.
   static TrainConfig reference(std::int64_t steps_per_epoch) {
     require<ConfigError>(steps_per_epoch > 0, "TrainConfig::reference: steps_per_epoch = ", steps_per_epoch,

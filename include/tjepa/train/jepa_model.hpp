@@ -2,7 +2,7 @@
 // JepaModel: the three parameter sets of Tactile-JEPA and the modules that read them.
 //
 //   context    tokenizer + encoder (position table, blocks, final norm): trained
-//   target     the same layout, the EMA copy of `context` (REFERENCE §5): never gets gradients
+//   target     the same layout, the EMA copy of `context` (paper, Sec. III-B): never gets gradients
 //   predictor  the predictor: trained
 // Checkpoint prefixes are the reference module's attribute names: "context_encoder.",
 // "target_encoder.", "predictor." (tensor names inside follow the reference PyTorch model).
@@ -144,7 +144,8 @@ void validate_as(const C& c, const std::string& where) {
 struct JepaConfig : ContextEncoderConfig {
   PredictorConfig predictor;    // in_dim = encoder.dim; dim = encoder.dim (position rows are shared)
 
-  // The reference (REFERENCE §4): ViT-Tiny encoder, 4-block predictor of width 192.
+  // The paper's model (Sec. IV-D, architecture details): ViT-Tiny encoder, 4-block predictor of
+  // width 192.
   static JepaConfig reference(int num_tokens, int in_dim, int axes = 1) {
     return reference_for<JepaConfig>(num_tokens, in_dim, axes);
   }
@@ -190,8 +191,9 @@ void add_context_encoder(ParamSet<T>& ps, const ContextEncoderConfig& c, Tokeniz
   encoder = Encoder(ps, c.encoder);
 }
 
-// Initializes an allocated context encoder as REFERENCE §4 (seeded), then the tokenizer's bias
-// with c.tokenizer_bias_std: the same seed gives JepaModel and MaeModel the same encoder.
+// Initializes an allocated context encoder as the reference implementation does (init_params,
+// model/init.hpp; seeded), then the tokenizer's bias with c.tokenizer_bias_std: the same seed
+// gives JepaModel and MaeModel the same encoder.
 template <class T>
 void init_context_encoder(ParamSet<T>& ps, const Tokenizer& tokenizer, const ContextEncoderConfig& c,
                           std::uint64_t seed) {
@@ -223,8 +225,8 @@ class JepaModel {
   Encoder encoder;
   Predictor predictor;
 
-  // Builds the modules, initializes context and predictor as REFERENCE §4 (seeded), and copies
-  // the context encoder into the target encoder.
+  // Builds the modules, initializes context and predictor as the reference implementation does
+  // (init_params, model/init.hpp; seeded), and copies the context encoder into the target encoder.
   JepaModel(const JepaConfig& c, std::uint64_t seed) : config(c) {
     c.validate();
     add_context_encoder(context, c, tokenizer, encoder);

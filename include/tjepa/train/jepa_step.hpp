@@ -1,5 +1,6 @@
 #pragma once
-// The JEPA training step (REFERENCE §5) as verbs, the way llm.c reads:
+// The JEPA training step (paper, Sec. III-B; training details in Sec. IV-D) as verbs, the way
+// llm.c reads:
 //
 //   JepaStep<float> step(model, cfg);          // loss: cfg.loss, or any JepaLoss callable
 //   step.zero_grad();
@@ -53,7 +54,9 @@ struct JepaStepConfig {
   // is removed, and what is left is what the samples differ in. Not in the reference. Needs B ≥ 2.
   bool standardize_targets = false;
   bool predictor_pos_from_context = false;  // reference: the target encoder's position table
-  double drop_path = 0.3;                 // the reference's stochastic depth in every block
+  // Stochastic depth in every block: off by default, as a short run (TrainConfig's default reads
+  // this one); the reference's 0.3 is TrainConfig::reference()'s.
+  double drop_path = 0.0;
   bool target_drop_path = true;           // the reference's target encoder runs in train mode too
   double clip_grad_norm = 10.0;
   // The products' arithmetic in every forward and backward of the step (Workspace::precision):

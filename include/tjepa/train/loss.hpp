@@ -1,6 +1,6 @@
 #pragma once
 // The JEPA regression loss between the predictor's output and the target encoder's embeddings
-// at the same tokens (REFERENCE §5), forward and gradient together.
+// at the same tokens (paper, Sec. III-B, the SSL objective), forward and gradient together.
 //
 //   mse (default, the reference's nn.MSELoss):   ℓ(e) = e²
 //   smooth_l1 (I-JEPA, β = 1):                   ℓ(e) = ½e² if |e| < 1, else |e| − ½

@@ -1,8 +1,9 @@
 #pragma once
-// MAE, the Sparsh-skin baseline of the paper's evaluation: the same encoder as Tactile-JEPA's
-// context encoder (tokenizer, position table, ViT blocks, final norm: JepaModel::context's
-// layout, built by the same add_context_encoder), pre-trained by masked reconstruction of the
-// tokenizer's input (the preprocessed taxel windows) instead of predicting embeddings.
+// MAE, the Sparsh-skin baseline of the paper's evaluation (Sec. IV-C): the same encoder as
+// Tactile-JEPA's context encoder (tokenizer, position table, ViT blocks, final norm:
+// JepaModel::context's layout, built by the same add_context_encoder), pre-trained by masked
+// reconstruction of the tokenizer's input (the preprocessed taxel windows) instead of predicting
+// embeddings.
 //
 // Legend: B samples, N tokens, K visible tokens, M = N − K masked tokens, d the encoder's width,
 // pd the decoder's width, W = m·τ values per token row (the token width).
@@ -21,8 +22,9 @@
 // table, as in Tactile-JEPA's predictor), its blocks have no biases, and it returns the masked
 // rows only (MAE computes all rows and keeps the loss on the masked ones; the same loss). Its
 // position table is its own, learned (MAE: fixed sin-cos), as a skin has no pixel grid.
-// Sparsh-skin also concatenates taxel coordinates to the input; here the encoder's position
-// table alone says where a token is, so that the encoder is exactly Tactile-JEPA's.
+// Sparsh-skin also concatenates taxel coordinates to the input (paper, Sec. IV-C); here the
+// encoder's position table alone says where a token is, so that the encoder is exactly
+// Tactile-JEPA's.
 //
 // Parameter names: the encoder's are JepaModel::context's ("context_encoder." + patch_embed.*,
 // pos_embed, blocks.*, norm.*), so the probe and checkpoint code read either model's encoder; the
@@ -72,8 +74,8 @@ struct MaeConfig : ContextEncoderConfig {
   // 1e-6). Off by default: on a skin most taxels are idle in a window, and standardizing an idle
   // taxel's row blows its sensor noise up to unit variance, which no context predicts.
   bool norm_targets = false;
-  // Stochastic depth in the encoder's blocks. MAE pre-trains without it (Tactile-JEPA's
-  // reference uses 0.3); the decoder has none.
+  // Stochastic depth in the encoder's blocks. MAE pre-trains without it (the reference
+  // implementation, E-Kovtun/tactile, trains Tactile-JEPA with 0.3); the decoder has none.
   double drop_path = 0.0;
   double clip_grad_norm = 10.0;  // as the JEPA step, for the same budget
   // The decoder's position rows at the masked tokens: its own learned table (decoder.pos_embed
@@ -82,7 +84,7 @@ struct MaeConfig : ContextEncoderConfig {
   // the visible embeddings were built in; an own table must first learn to agree with them.
   bool decoder_pos_from_encoder = false;
 
-  // Tactile-JEPA's reference encoder (ViT-Tiny) with the default decoder and masking.
+  // The paper's encoder (ViT-Tiny, Sec. IV-D) with the default decoder and masking.
   static MaeConfig reference(int num_tokens, int in_dim, int axes = 1) {
     return reference_for<MaeConfig>(num_tokens, in_dim, axes);
   }
@@ -132,7 +134,7 @@ class MaeModel {
   Predictor decoder;
   PositionTable decoder_pos;  // decoder_params' pos_embed [1, N, pd]; none with decoder_pos_from_encoder
 
-  // Builds the modules and initializes them as REFERENCE §4 (seeded). The encoder's values are
+  // Builds the modules and initializes them as the reference implementation does (init_params, model/init.hpp) (seeded). The encoder's values are
   // those of JepaModel(c, seed).context for the same encoder config and seed: both methods start
   // from the same encoder.
   MaeModel(const MaeConfig& c, std::uint64_t seed) : config(c) {
