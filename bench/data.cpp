@@ -33,7 +33,7 @@ void BM_SimulatedWindows(benchmark::State& state) {
 BENCHMARK(BM_SimulatedWindows)->Arg(1000)->Unit(benchmark::kMillisecond);
 
 struct Fixture {
-  tjepa::Preprocessor pre{tjepa::PreprocessConfig::magnetic()};
+  tjepa::Preprocessor pre{tjepa::PreprocessConfig::xela_counts()};
   tjepa::SimRecording data;
   Fixture() {
     const auto hand = tjepa::layouts::allegro_xela();

@@ -55,7 +55,7 @@ int main(int argc, char** argv) {
   const Skin skin = layouts::grid_skin();  // a 16 x 12 skin in 4 x 4 pads
   SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, 1);
   const Recording rec = sim.record(1000).recording;  // unlabelled windows of 10 frames
-  Preprocessor pre(PreprocessConfig::magnetic());
+  Preprocessor pre(PreprocessConfig::xela_counts());
   pre.fit_baseline(sim.record_baseline(200));
   pre.fit(std::span<const Recording>(&rec, 1));
   const WindowSource source(rec, WindowSpec{10}, {}, pre);

@@ -30,7 +30,7 @@ int main(int argc, char** argv) {
   SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, 1);
   const Recording baseline = sim.record_baseline(200);
   const Recording rec = sim.record(2000).recording;
-  Preprocessor pre(PreprocessConfig::magnetic());
+  Preprocessor pre(PreprocessConfig::xela_counts());
   pre.fit_baseline(baseline);
   pre.fit(std::span<const Recording>(&rec, 1));
   TrainConfig cfg;

@@ -300,7 +300,7 @@ int main(int argc, char** argv) {
       tau = lm.config.tau;
     } else {
       model = std::make_unique<JepaModel<float>>(TrainConfig{}.model(N, m), 0);
-      pre = cli::fit_preprocessor("magnetic", &baseline, std::span<const Recording>(&stream.recording, 1));
+      pre = cli::fit_preprocessor("xela", &baseline, std::span<const Recording>(&stream.recording, 1));
       drift = DriftTracker(DriftTrackerConfig::magnetic());
       drift->fit(baseline);
     }

@@ -31,7 +31,8 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string(tjepa::version_string));
   app.require_subcommand(1);
   int threads = 0;
-  app.add_option("--threads", threads, "OpenMP threads (0: all cores)");
+  app.add_option("--threads", threads, "OpenMP threads (0: all cores); before or after the subcommand");
+  app.fallthrough();
 
   LayoutOptions lo;
   auto* layout = app.add_subcommand("layout", "Draw a layout, its graph, groups or sampled masks; print a summary");
@@ -40,24 +41,31 @@ int main(int argc, char** argv) {
   layout->add_option("--draw", lo.draw, "graph | groups | parts | masks")->capture_default_str();
   layout->add_option("--mask-seed", lo.seed, "seed of the drawn masks");
   layout->add_flag("--json", lo.json, "machine-readable summary on stdout");
-  layout->add_flag("--force", lo.force, "overwrite the SVG");
+  layout->add_flag("--force", lo.force, "overwrite the SVG / exported files");
+  layout->add_option("--edges", lo.edges, "edges CSV of a layout CSV (src,dst[,weight]); default: inferred");
+  layout->add_option("--layout-columns", lo.columns, "the layout CSV's column names, e.g. x=visual_x,y=visual_y");
+  layout->add_option("--bridges", lo.bridges, "inferred graphs: connect | near | none")->capture_default_str();
+  layout->add_option("--order", lo.order, "recordings' taxel order: xserver | reference (allegro) | id,column CSV");
+  layout->add_option("--export", lo.export_csv, "write the layout as CSV (order included), its edges to *.edges.csv");
+  layout->add_flag("--strict", lo.strict, "warnings about the graph are errors");
 
   PretrainOptions po;
   auto* pretrain = app.add_subcommand("pretrain", "Pre-train Tactile-JEPA: checkpoint, CSV log, loss-curve SVG");
   pretrain->add_option("--config", po.config, "JSON run configuration (keys as in the checkpoint's config.run)");
   add_run_overrides(pretrain, po.overrides);
   pretrain->add_option("--data", po.data, "recordings (.npy [T, N, m] or CSV); default: simulated data");
-  pretrain->add_option("--baseline", po.baseline, "no-contact recording (for magnetic preprocessing)");
-  pretrain->add_option("--preprocess", po.preprocess, "magnetic | standardize | none");
-  pretrain->add_option("--axes", po.axes, "axes per taxel of text recordings")->capture_default_str();
+  pretrain->add_option("--baseline", po.baseline, "no-contact recording (preprocessing xela or baseline)");
+  pretrain->add_option("--preprocess", po.preprocess, "auto | xela | baseline | standardize | none")->capture_default_str();
+  add_data_format(pretrain, po.format);
   pretrain->add_option("--simulate", po.simulate_frames, "frames of simulated data")->capture_default_str();
   pretrain->add_option("--simulate-contacts", po.simulate_contacts, "indenters touching at once in simulated data")
       ->capture_default_str();
-  pretrain->add_option("--out", po.out, "output directory")->capture_default_str();
+  pretrain->add_option("--out", po.out, "output directory (default: runs/pretrain; a resumed run's own folder)");
   pretrain->add_flag("--force", po.force, "overwrite an existing checkpoint");
   pretrain->add_flag("--quiet", po.quiet, "no progress line");
   pretrain->add_option("--resume", po.resume, "continue the run of this checkpoint (same data and config)");
   pretrain->add_option("--stop-after", po.stop_after, "stop and save after this many steps of the schedule");
+  pretrain->add_flag("--strict", po.strict, "warnings about the layout's graph are errors");
 
   ProbeOptions pb;
   auto* probe = app.add_subcommand("probe", "Train and evaluate an attentive probe (force, indenter) on a frozen checkpoint");
@@ -82,6 +90,7 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   probe->add_option("--lr", pb.probe.lr, "probe learning rate")->capture_default_str();
+  add_data_format(probe, pb.format);
   probe->add_option("--out", pb.out, "write the results as JSON here");
   probe->add_flag("--force", pb.force, "overwrite --out");
   probe->add_flag("--quiet", pb.quiet, "no progress line");
@@ -95,7 +104,7 @@ int main(int argc, char** argv) {
   embed->add_option("--out", eo.out, "output .npy")->required();
   embed->add_option("--encoder", eo.encoder, "target | context")->capture_default_str();
   embed->add_option("--stride", eo.stride, "frames between windows (0: tau)")->capture_default_str();
-  embed->add_option("--axes", eo.axes, "axes per taxel of text recordings")->capture_default_str();
+  add_data_format(embed, eo.format);
   embed->add_flag("--force", eo.force, "overwrite --out");
   embed->add_flag("--quiet", eo.quiet, "no progress line");
 

@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <memory>
 #include <ostream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -38,6 +39,12 @@ namespace tjepa::cli {
 
 struct LayoutOptions {
   std::string layout = "allegro";  // built-in name or CSV path
+  std::string edges;               // edges CSV of a CSV layout ("": inferred)
+  std::string columns;             // the layout CSV's column names, "x=visual_x,y=visual_y"
+  std::string bridges = "connect"; // inferred graphs: connect | near | none
+  std::string order;               // taxel column order: "", xserver, reference, or an id,column CSV
+  std::string export_csv;          // write the layout (order included) here, its edges beside it
+  bool strict = false;             // graph warnings are errors
   std::string svg;                 // output SVG ("" = none)
   std::string draw = "graph";      // graph | groups | parts | masks
   std::uint64_t seed = 0;          // masks: which batch to draw
@@ -46,7 +53,9 @@ struct LayoutOptions {
 };
 
 inline int run_layout(const LayoutOptions& o, std::ostream& out) {
-  const Skin skin = load_skin(o.layout);
+  std::ostringstream warnings;
+  const Skin skin = load_skin({o.layout, o.edges, o.columns, o.bridges, o.order, o.strict}, &warnings);
+  out << warnings.str();
   const TaxelGraph& g = skin.graph;
   int bridges = 0;
   for (const Edge& e : g.edges()) bridges += skin.layout.group[e.src] != skin.layout.group[e.dst];
@@ -79,12 +88,25 @@ inline int run_layout(const LayoutOptions& o, std::ostream& out) {
   } else {
     require<ConfigError>(o.draw == "graph", "--draw '", o.draw, "', expected graph, groups, parts or masks");
   }
-  if (!o.svg.empty()) {
+  const std::string export_edges =
+      o.export_csv.empty() ? std::string() : (std::filesystem::path(o.export_csv).replace_extension(".edges.csv")).string();
+  if (!o.svg.empty() || !o.export_csv.empty()) {
     OutputFiles files;
-    OutputFiles::check_new(o.svg, o.force);
-    write_file_atomic(files.add(o.svg), svg_string(skin, svg));
+    if (!o.svg.empty()) {
+      OutputFiles::check_new(o.svg, o.force);
+      write_file_atomic(files.add(o.svg), svg_string(skin, svg));
+      j["svg"] = o.svg;
+    }
+    if (!o.export_csv.empty()) {
+      require<ConfigError>(std::filesystem::path(o.export_csv).extension() == ".csv", "--export '", o.export_csv,
+                           "', expected a .csv file name");
+      OutputFiles::check_new(o.export_csv, o.force);
+      OutputFiles::check_new(export_edges, o.force);
+      write_layout_csv(files.add(o.export_csv), skin.layout);
+      write_edges_csv(files.add(export_edges), skin.layout, skin.graph);
+      j["export"] = {{"layout", o.export_csv}, {"edges", export_edges}};
+    }
     files.commit();
-    j["svg"] = o.svg;
   }
   if (o.json) {
     out << j.dump(2) << '\n';
@@ -99,6 +121,9 @@ inline int run_layout(const LayoutOptions& o, std::ostream& out) {
     out << '\n';
   }
   if (!o.svg.empty()) out << "wrote " << o.svg << '\n';
+  if (!o.export_csv.empty())
+    out << "wrote " << o.export_csv << " and " << export_edges << " (read them back with --layout " << o.export_csv
+        << " --edges " << export_edges << ")\n";
   return 0;
 }
 
@@ -109,16 +134,17 @@ struct PretrainOptions {
   std::string config;                 // JSON file with TrainConfig keys ("" = defaults)
   nlohmann::json overrides = nlohmann::json::object();  // command-line overrides of TrainConfig keys
   std::vector<std::string> data;      // recordings (.npy [T, N, m] or text); empty: simulated
-  std::string baseline;               // no-contact recording (preprocessing "magnetic")
-  std::string preprocess = "";        // magnetic | standardize | none ("" = magnetic if a baseline, else standardize)
-  int axes = 3;
+  std::string baseline;               // no-contact recording (preprocessing xela or baseline)
+  std::string preprocess = "auto";    // auto | xela | baseline | standardize | none (setup.hpp)
+  DataFormat format;                  // how recordings are read (axes, columns, header, NaN)
   int simulate_frames = 20000;        // simulated data: frames of the pre-training recording
   int simulate_contacts = 1;          // simulated data: indenters touching at once (SimulatedSkin::record)
-  std::string out = "runs/pretrain";
+  std::string out;                    // "": the resumed checkpoint's folder, else runs/pretrain
   bool force = false;
   bool quiet = false;
   std::string resume;                 // continue the run of this checkpoint (its config, then overrides)
   std::int64_t stop_after = -1;       // stop (and save) after this many steps of the schedule (< 0: at its end)
+  bool strict = false;                // warnings about the layout's graph are errors
   DataParallel<float> parallel;       // under mpirun: this rank's share of each batch (rank 0 prints and writes)
 };
 
@@ -130,8 +156,15 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
                     : !o.resume.empty() ? load_trained_model(o.resume).config
                                         : TrainConfig{};
   run.update(o.overrides, "command line");
+  if (run.warmup_steps > run.steps && !o.overrides.contains("warmup_steps")) {
+    out << "note: " << run.steps << " steps are fewer than the default warm-up of " << run.warmup_steps
+        << "; warming up for " << run.steps / 10 << " steps (--warmup sets it)\n";
+    run.warmup_steps = run.steps / 10;
+  }
   run.validate();
-  const Skin skin = load_skin(run.layout);
+  SkinSpec spec = SkinSpec::of(run);
+  spec.strict = o.strict;
+  const Skin skin = load_skin(spec, &out);
   std::vector<Recording> recs;
   std::optional<Recording> baseline;
   std::string mode = o.preprocess;
@@ -140,30 +173,38 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
     SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, run.seed);
     baseline = sim.record_baseline(300);
     recs.push_back(sim.record(o.simulate_frames, o.simulate_contacts).recording);
-    if (mode.empty()) mode = "magnetic";
+    if (mode == "auto") mode = "xela";  // the simulated skin reports Xela counts
   } else {
     // Data parallel: each rank maps the recordings, so training reads only the pages of its
     // shards' windows; fitting the preprocessing (and the drift tracker, which writes a private
     // copy) still reads every recording once on every rank.
     const bool map = o.parallel.active();
-    for (const auto& p : o.data) recs.push_back(read_recording(p, o.axes, map));
-    if (!o.baseline.empty()) baseline = read_recording(o.baseline, o.axes, map);
-    if (mode.empty()) mode = baseline ? "magnetic" : "standardize";
+    for (const auto& p : o.data) recs.push_back(in_layout_order(read_recording(p, o.format, map), skin, p));
+    if (!o.baseline.empty()) baseline = in_layout_order(read_recording(o.baseline, o.format, map), skin, o.baseline);
   }
   for (std::size_t r = 0; r < recs.size(); ++r)
     require<ShapeError>(recs[r].taxels() == skin.size(), o.data.empty() ? "simulated" : o.data[r], ": ",
                         recs[r].taxels(), " taxels, the layout '", run.layout, "' has ", skin.size());
   std::vector<Recording*> rec_ptrs;
   for (auto& r : recs) rec_ptrs.push_back(&r);
+  const PreprocessChoice picked = choose_preprocessing(mode, recs);
+  if (mode != picked.mode) out << "preprocessing: " << picked.mode << " (" << picked.reason << ")\n";
+  if ((picked.mode == "xela" || picked.mode == "baseline") && !baseline && !o.data.empty())
+    out << "note: no --baseline recording: each taxel's no-contact mean is taken over " << o.data[0] << "\n";
   const std::optional<DriftTracker> drift =
-      mode == "magnetic" && baseline ? track_drift(run, *baseline, rec_ptrs) : std::nullopt;
-  const Preprocessor pre = fit_preprocessor(mode, baseline ? &*baseline : nullptr, recs);
+      picked.mode == "xela" && baseline ? track_drift(run, *baseline, rec_ptrs) : std::nullopt;
+  const Preprocessor pre = fit_preprocessor(picked.mode, baseline ? &*baseline : nullptr, recs);
   const int axes = recs[0].axes();
   const WindowSource src(recs, WindowSpec{run.tau}, {}, pre);
 
   OutputFiles files;
-  const std::filesystem::path dir = o.out;
-  OutputFiles::check_new(dir / "checkpoint.safetensors", o.force);
+  // A resumed run writes into its own folder unless told otherwise, and continues its log there.
+  const std::filesystem::path dir =
+      !o.out.empty() ? std::filesystem::path(o.out)
+                     : !o.resume.empty() ? std::filesystem::path(o.resume).parent_path() : std::filesystem::path("runs/pretrain");
+  const bool own_folder = !o.resume.empty() && std::filesystem::exists(dir) &&
+                          std::filesystem::equivalent(std::filesystem::absolute(o.resume).parent_path(), dir);
+  OutputFiles::check_new(dir / "checkpoint.safetensors", o.force || own_folder);
   if (lead) files.make_dir(dir);
   const auto owned = make_jepa_model(run, skin.graph, axes, run.seed);
   JepaModel<float>& model = *owned;
@@ -179,11 +220,21 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
       << (o.parallel.active() ? " on " + std::to_string(o.parallel.ranks) + " MPI ranks" : std::string()) << "\n";
   const PretrainOutcome r = pretrain(trainer, o.quiet || !lead, o.stop_after);
   if (!lead) return 0;
-  write_pretrain_outputs(dir, trainer, r, files);
+  write_pretrain_outputs(dir, trainer, r, files,
+                         own_folder ? earlier_log_rows(dir / "log.csv", r.log.rows.empty() ? 0 : static_cast<std::int64_t>(r.log.rows.front()[0]))
+                                    : CsvTable{});
   files.commit();
   out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "
       << r.log.rows.back()[6] << " (over samples " << r.log.rows.back()[9] << "), " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
       << "\nwrote " << (dir / "checkpoint.safetensors").string() << ", log.csv, loss.svg\n";
+  // Collapse: the target embeddings barely differ between windows, though they vary inside one.
+  const double within = r.log.rows.back()[6], across = r.log.rows.back()[9];
+  if (std::isfinite(within) && std::isfinite(across) && across < 0.1 * within)
+    out << "warning: the target embeddings hardly differ between windows (std over windows " << across
+        << ", inside a window " << within << "): the inputs may be dominated by fixed per-taxel offsets"
+        << (picked.mode == "baseline" || picked.mode == "xela" ? std::string()
+                                                               : "; try --preprocess baseline (with --baseline REST)")
+        << ", or train longer\n";
   return 0;
 }
 
@@ -373,7 +424,7 @@ struct ProbeOptions {
   std::string encoder = "target";          // target | context
   // Labelled data: files, or simulated (the layout's simulated skin) when empty.
   std::string train_data, train_labels, test_data, test_labels;
-  int axes = 3;
+  DataFormat format;                  // how recordings are read (axes, columns, header, NaN)
   std::uint64_t simulate_seed = 1;
   int simulate_train_frames = 20000, simulate_test_frames = 10000;  // the demo's (8000 + 4000 gave noisy results)
   int min_contact = 5;                     // frames in contact for a window to count
@@ -395,11 +446,11 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   JepaModel<float>& model = *m.model;
   Recording train_rec, test_rec;
   std::vector<FrameLabel> train_lab, test_lab;
+  const Skin skin = load_skin(SkinSpec::of(m.config));
   if (o.train_data.empty()) {
     require<ConfigError>(o.test_data.empty(), "--test-data needs --train-data too");
     // The sensor the checkpoint was pre-trained on (seeded by its run's seed: the same offsets and
     // gains, so its baseline applies), with new events from --simulate-seed.
-    const Skin skin = load_skin(m.config.layout);
     SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, m.config.seed);
     sim.reseed(o.simulate_seed);
     auto a = sim.record(o.simulate_train_frames);
@@ -411,9 +462,9 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   } else {
     require<ConfigError>(!o.train_labels.empty() && !o.test_data.empty() && !o.test_labels.empty(),
                          "--train-data needs --train-labels, --test-data and --test-labels");
-    train_rec = read_recording(o.train_data, o.axes);
+    train_rec = in_layout_order(read_recording(o.train_data, o.format), skin, o.train_data);
     train_lab = read_frame_labels(o.train_labels, train_rec.frames());
-    test_rec = read_recording(o.test_data, o.axes);
+    test_rec = in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data);
     test_lab = read_frame_labels(o.test_labels, test_rec.frames());
   }
   for (const Recording* r : {&train_rec, &test_rec})
@@ -453,7 +504,7 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
 struct EmbedOptions {
   std::string checkpoint, data, out;
   std::string encoder = "target";
-  int axes = 3;
+  DataFormat format;                  // how recordings are read (axes, columns, header, NaN)
   int stride = 0;  // frames between windows (0 = tau)
   bool force = false;
   bool quiet = false;
@@ -467,7 +518,7 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
   OutputFiles::check_new(o.out, o.force);
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
-  Recording rec = read_recording(o.data, o.axes);
+  Recording rec = in_layout_order(read_recording(o.data, o.format), load_skin(SkinSpec::of(m.config)), o.data);
   require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.config.tau == model.config.in_dim, o.data,
                       ": ", rec.taxels(), " taxels x ", rec.axes(), " axes; the checkpoint expects ", model.num_tokens(),
                       " taxels x ", model.config.in_dim / m.config.tau, " axes");

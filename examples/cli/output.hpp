@@ -26,8 +26,10 @@ struct NullStream : std::ostream {
 };
 
 // The files (and directories) one command creates. Unless commit() is called, the destructor
-// removes them again, so a command that fails leaves nothing half-done behind. Each file itself
-// is written atomically (write_file_atomic or the library's writers).
+// removes them again, so a command that fails leaves nothing half-done behind. A file that existed
+// before (--force, or a resumed run writing into its own folder) is never removed: it holds either
+// its old or its new contents. Each file itself is written atomically (write_file_atomic or the
+// library's writers).
 class OutputFiles {
  public:
   OutputFiles() = default;
@@ -55,8 +57,8 @@ class OutputFiles {
   }
   // Registers a file about to be written (call before writing it).
   std::filesystem::path add(const std::filesystem::path& file) {
-    files_.push_back(file);
-    return files_.back();
+    if (!std::filesystem::exists(file)) files_.push_back(file);
+    return file;
   }
   // Checks that a file does not exist yet unless overwriting is allowed.
   static void check_new(const std::filesystem::path& file, bool overwrite) {

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "eval.hpp"
+#include "setup.hpp"
 
 namespace tjepa::cli {
 
@@ -18,8 +19,23 @@ void run_override(CLI::App* app, const std::string& flag, const std::string& key
   app->add_option_function<T>(flag, [&j, key](const T& v) { j[key] = v; }, help);
 }
 
+// The options of how recordings are read (DataFormat).
+inline void add_data_format(CLI::App* app, DataFormat& f) {
+  app->add_option("--axes", f.axes, "axes per taxel of text recordings")->capture_default_str();
+  app->add_option("--columns", f.columns, "text recordings: the columns of the taxels' values, e.g. 0:60 (end exclusive)");
+  app->add_option("--skip-rows", f.skip_rows, "text recordings: header lines to skip (-1: detect one)")->capture_default_str();
+  app->add_option("--non-finite", f.non_finite, "NaN/Inf readings: error | hold (last finite value) | zero")
+      ->capture_default_str();
+}
+
 inline void add_run_overrides(CLI::App* app, nlohmann::json& j) {
   run_override<std::string>(app, "--layout", "layout", j, "built-in layout (allegro, grid, two-part) or layout CSV");
+  run_override<std::string>(app, "--edges", "layout_edges", j, "edges CSV of a layout CSV (default: inferred)");
+  run_override<std::string>(app, "--layout-columns", "layout_columns", j,
+                            "the layout CSV's column names, e.g. x=visual_x,y=visual_y");
+  run_override<std::string>(app, "--bridges", "bridges", j, "inferred graphs: connect | near | none");
+  run_override<std::string>(app, "--order", "taxel_order", j,
+                            "recordings' taxel order: xserver | reference (allegro) | id,column CSV");
   run_override<int>(app, "--tau", "tau", j, "frames per window");
   run_override<int>(app, "--dim", "dim", j, "encoder width d");
   run_override<int>(app, "--depth", "depth", j, "encoder blocks");

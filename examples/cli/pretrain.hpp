@@ -4,7 +4,10 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 
 #include <tjepa/tjepa.hpp>
@@ -18,6 +21,10 @@ struct PretrainOutcome {
   double seconds = 0;
   double windows_per_second = 0;
 };
+
+// The rows of an earlier log.csv with step < before (the steps a resumed run keeps), or none when
+// the file is missing or not a pre-training log.
+inline CsvTable earlier_log_rows(const std::filesystem::path& path, std::int64_t before);
 
 inline const std::vector<std::string>& pretrain_log_columns() {
   static const std::vector<std::string> c{"step", "loss", "lr", "weight_decay", "momentum", "grad_norm",
@@ -50,17 +57,40 @@ inline PretrainOutcome pretrain(JepaTrainer<float>& trainer, bool quiet, std::in
   return out;
 }
 
-// Writes checkpoint.safetensors (the trainer's), log.csv and loss.svg into dir (registered with files).
+// Writes checkpoint.safetensors (the trainer's), log.csv and loss.svg into dir (registered with
+// files). earlier: the log of the steps before a resume, which the new rows continue.
 inline void write_pretrain_outputs(const std::filesystem::path& dir, JepaTrainer<float>& trainer,
-                                   const PretrainOutcome& outcome, OutputFiles& files) {
+                                   const PretrainOutcome& outcome, OutputFiles& files, const CsvTable& earlier = {}) {
   trainer.save(files.add(dir / "checkpoint.safetensors"));
-  write_file_atomic(files.add(dir / "log.csv"), outcome.log.str());
-  const std::vector<double> x = outcome.log.column(0);
+  CsvTable log = earlier;
+  log.header = outcome.log.header;
+  log.rows.insert(log.rows.end(), outcome.log.rows.begin(), outcome.log.rows.end());
+  write_file_atomic(files.add(dir / "log.csv"), log.str());
+  const std::vector<double> x = log.column(0);
   write_file_atomic(files.add(dir / "loss.svg"),
                     curve_svg(x,
-                              {{"JEPA loss", outcome.log.column(1), "#1f77b4"},
-                               {"target std", outcome.log.column(6), "#ff7f0e"}},
+                              {{"JEPA loss", log.column(1), "#1f77b4"},
+                               {"target std", log.column(6), "#ff7f0e"}},
                               "Tactile-JEPA pre-training", "step"));
+}
+
+inline CsvTable earlier_log_rows(const std::filesystem::path& path, std::int64_t before) {
+  CsvTable t;
+  t.header = pretrain_log_columns();
+  std::ifstream in(path);
+  std::string line;
+  if (!in || !std::getline(in, line)) return t;
+  std::string want;
+  for (const auto& c : t.header) want += (want.empty() ? "" : ",") + c;
+  if (line != want) return t;
+  while (std::getline(in, line)) {
+    std::vector<double> row;
+    std::istringstream fields(line);
+    for (std::string f; std::getline(fields, f, ',');) row.push_back(std::strtod(f.c_str(), nullptr));
+    if (row.size() != t.header.size() || row[0] >= static_cast<double>(before)) continue;
+    t.rows.push_back(std::move(row));
+  }
+  return t;
 }
 
 }  // namespace tjepa::cli

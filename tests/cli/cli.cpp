@@ -299,7 +299,7 @@ TEST_CASE("resume across programs: tjepa pretrain to a user Trainer and back giv
   SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, cfg.seed);
   const Recording baseline = sim.record_baseline(300);
   const Recording rec = sim.record(300, 1).recording;
-  Preprocessor pre(PreprocessConfig::magnetic());
+  Preprocessor pre(PreprocessConfig::xela_counts());
   pre.fit_baseline(baseline);
   pre.fit(std::span<const Recording>(&rec, 1));
   const WindowSource src(rec, WindowSpec{cfg.tau}, {}, pre);

@@ -236,7 +236,7 @@ TEST_CASE("end to end: the encoder trains with the probe / embeddings match the 
   SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, 3);
   const Recording base = sim.record_baseline(100);
   SimRecording rec = sim.record(600);
-  Preprocessor pre(PreprocessConfig::magnetic());
+  Preprocessor pre(PreprocessConfig::xela_counts());
   pre.fit_baseline(base);
   pre.fit(rec.recording);
   const WindowSource src(rec.recording, WindowSpec{5}, rec.labels, pre);

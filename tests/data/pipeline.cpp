@@ -292,7 +292,7 @@ TEST_SUITE("data") {
     CHECK(frac > 0.5 * 2e-3 * 3);
     CHECK(frac < 1.5 * 2e-3 * 3);
     // The magnetic preprocessing maps them (and nothing else) to 0 and removes the offsets.
-    tjepa::Preprocessor pre(tjepa::PreprocessConfig::magnetic());
+    tjepa::Preprocessor pre(tjepa::PreprocessConfig::xela_counts());
     pre.fit_baseline(sim.record_baseline(500));
     auto noisy = sim.record(2000);
     pre.fit(noisy.recording);
@@ -364,7 +364,7 @@ TEST_SUITE("data") {
     tjepa::Recording train(3, 2, 2, tjepa::AlignedVector<float>{30010, 31020, 40030, 41040,  //
                                                                 100, 100, 40060, 41080,      //
                                                                 30040, nan, 0, 0});
-    tjepa::PreprocessConfig cfg = tjepa::PreprocessConfig::magnetic();
+    tjepa::PreprocessConfig cfg = tjepa::PreprocessConfig::xela_counts();
     tjepa::Preprocessor pre(cfg);
     CHECK_FALSE(pre.ready());
     CHECK_THROWS_WITH_AS(pre.fit(train), doctest::Contains("fit_baseline"), tjepa::ConfigError);
@@ -399,7 +399,7 @@ TEST_SUITE("data") {
     // Shape mismatch.
     tjepa::Recording other(3, 5, 2);
     CHECK_THROWS_AS(pre.apply(other), tjepa::ShapeError);
-    CHECK_THROWS_AS(tjepa::Preprocessor(tjepa::PreprocessConfig::magnetic()).apply(other), tjepa::ConfigError);
+    CHECK_THROWS_AS(tjepa::Preprocessor(tjepa::PreprocessConfig::xela_counts()).apply(other), tjepa::ConfigError);
   }
 
   TEST_CASE("preprocessor: scalar standardization and fixed per-part maxima") {
@@ -585,7 +585,7 @@ TEST_SUITE("data") {
     CHECK_THROWS_AS(tjepa::window_starts(9, {0, 0}), tjepa::ConfigError);
 
     tjepa::SimulatedSkin sim(test_geometry(), tjepa::SimConfig{}, 21);
-    tjepa::Preprocessor pre(tjepa::PreprocessConfig::magnetic());
+    tjepa::Preprocessor pre(tjepa::PreprocessConfig::xela_counts());
     pre.fit_baseline(sim.record_baseline(300));
     auto data = sim.record(1000);
     pre.fit(data.recording);

@@ -41,7 +41,7 @@ int main(int argc, char** argv) {
     SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, 3);
     const Recording baseline = sim.record_baseline(200);
     const Recording rec = sim.record(1200).recording;
-    Preprocessor pre(PreprocessConfig::magnetic());
+    Preprocessor pre(PreprocessConfig::xela_counts());
     pre.fit_baseline(baseline);
     pre.fit(std::span<const Recording>(&rec, 1));
     TrainConfig cfg;

@@ -686,7 +686,7 @@ TEST_CASE("train_head end to end: the encoder trains and is restored to its best
   SimulatedSkin sim(SkinGeometry::from_layout(
                         layouts::grid_skin({.rows = 4, .cols = 4, .pitch = 4.0, .group_rows = 2, .group_cols = 2}).layout),
                     SimConfig{}, 3);
-  Preprocessor pre(PreprocessConfig::magnetic());
+  Preprocessor pre(PreprocessConfig::xela_counts());
   pre.fit_baseline(sim.record_baseline(100));
   SimRecording rec = sim.record(600);
   pre.fit(rec.recording);
@@ -916,7 +916,7 @@ struct GraspSplit {
 GraspSplit grasp_split(int frames, std::uint64_t seed) {
   const Skin hand = layouts::allegro_xela();
   SimulatedHand sim(hand.layout, GraspSimConfig{}, seed);
-  Preprocessor pre(PreprocessConfig::magnetic());
+  Preprocessor pre(PreprocessConfig::xela_counts());
   pre.fit_baseline(sim.record_baseline(200));
   GraspRecording r = sim.record(frames);
   pre.fit(r.recording);

@@ -327,7 +327,7 @@ TEST_SUITE("sim") {
 
   TEST_CASE("grasping hand: the magnetic preprocessing takes its data with a baseline") {
     tjepa::SimulatedHand sim(hand_layout(), {}, 11);
-    tjepa::Preprocessor pre(tjepa::PreprocessConfig::magnetic());
+    tjepa::Preprocessor pre(tjepa::PreprocessConfig::xela_counts());
     pre.fit_baseline(sim.record_baseline(500));
     const tjepa::GraspRecording r = sim.record(4000);
     pre.fit(r.recording);

@@ -40,7 +40,7 @@ struct DriftTrackerConfig {
   float valid_min = -std::numeric_limits<float>::infinity();  // readings outside are drop-outs
   float valid_max = std::numeric_limits<float>::infinity();
 
-  // Xela uSkin counts: drop-outs outside [20000, 60000], as PreprocessConfig::magnetic().
+  // Xela uSkin counts: drop-outs outside [20000, 60000], as PreprocessConfig::xela_counts().
   static DriftTrackerConfig magnetic() {
     DriftTrackerConfig c;
     c.valid_min = 20000.0f;

@@ -46,10 +46,18 @@ struct PreprocessConfig {
   std::vector<int> taxel_part;     // [N] part of each taxel, for Scaling::part_max
   float min_std = 1e-6f;
 
-  // Magnetic (Xela uSkin): drop-outs outside [20000, 60000], baseline, per-axis standardization.
-  static PreprocessConfig magnetic() {
+  // Xela uSkin counts: drop-outs outside [20000, 60000], baseline, per-axis standardization.
+  static PreprocessConfig xela_counts() {
     PreprocessConfig c;
     c.clip_dropouts = true;
+    c.subtract_baseline = true;
+    c.scaling = Scaling::per_axis;
+    return c;
+  }
+  // Magnetometer skins (AnySkin) and others whose taxels sit at different offsets: each taxel's
+  // no-contact mean subtracted, then per-axis standardization. No drop-out range.
+  static PreprocessConfig baseline_standardization() {
+    PreprocessConfig c;
     c.subtract_baseline = true;
     c.scaling = Scaling::per_axis;
     return c;

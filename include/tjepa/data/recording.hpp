@@ -14,6 +14,7 @@
 #include <span>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
@@ -98,6 +99,23 @@ class Recording {
   std::string source_;
 };
 
+// The recording with its taxels taken from the given slots: taxel i of the result is taxel
+// slots[i] of rec (a layout's column order, or a subset). Frames and axes are kept.
+inline Recording select_taxels(const Recording& rec, std::span<const int> slots) {
+  require<ShapeError>(!slots.empty(), "select_taxels: no taxel slots given");
+  for (std::size_t i = 0; i < slots.size(); ++i)
+    require<ShapeError>(slots[i] >= 0 && slots[i] < rec.taxels(), "select_taxels: ",
+                        rec.source().empty() ? std::string("recording") : rec.source(), " has ", rec.taxels(),
+                        " taxels, but taxel ", i, " reads column ", slots[i]);
+  const int T = rec.frames(), N = static_cast<int>(slots.size()), m = rec.axes();
+  AlignedVector<float> v(static_cast<std::size_t>(T) * N * m);
+  for (int t = 0; t < T; ++t)
+    for (int i = 0; i < N; ++i)
+      std::memcpy(v.data() + (static_cast<std::size_t>(t) * N + i) * m, rec.frame(t) + static_cast<std::size_t>(slots[i]) * m,
+                  sizeof(float) * static_cast<std::size_t>(m));
+  return Recording(T, N, m, std::move(v), rec.source());
+}
+
 // Index of the first NaN/Inf in values, or size() when all are finite. Blocks are screened with an
 // integer test on the exponent bits (vectorizes), then searched only if one holds a bad value.
 inline std::size_t find_non_finite(std::span<const float> values) {
@@ -117,6 +135,21 @@ inline std::size_t find_non_finite(std::span<const float> values) {
   return values.size();
 }
 
+// What to do with NaN/Inf readings: stop (an error naming where), hold the taxel-axis's last finite
+// reading (0 before the first), or write 0.
+enum class NonFinite { error, hold, zero };
+
+inline NonFinite parse_non_finite(const std::string& s) {
+  if (s == "hold") return NonFinite::hold;
+  if (s == "zero") return NonFinite::zero;
+  require<ConfigError>(s == "error", "non-finite policy '", s, "', expected error, hold or zero");
+  return NonFinite::error;
+}
+
+// Applies the policy; returns how many readings it replaced (error: throws at the first, with
+// require_finite's message).
+inline std::size_t replace_non_finite(Recording& rec, NonFinite policy, const std::string& where);
+
 // Throws DataError naming the frame, taxel and axis of the first NaN/Inf: `where` says which step
 // wanted finite data ("WindowSource", "read_npy", ...).
 inline void require_finite(const Recording& rec, const std::string& where) {
@@ -127,6 +160,26 @@ inline void require_finite(const Recording& rec, const std::string& where) {
   fail<DataError>(where, ": ", rec.source().empty() ? std::string("recording") : rec.source(), " holds ", v,
                   " at frame ", i / per, ", taxel ", (i % per) / rec.axes(), ", axis ", i % rec.axes(),
                   " (value index ", i, "), expected finite values");
+}
+
+inline std::size_t replace_non_finite(Recording& rec, NonFinite policy, const std::string& where) {
+  if (find_non_finite(rec.values()) == rec.size()) return 0;
+  if (policy == NonFinite::error) require_finite(rec, where);
+  const std::size_t per = static_cast<std::size_t>(rec.taxels()) * rec.axes();
+  std::vector<float> last(per, 0.0f);
+  float* v = rec.mutable_data();
+  std::size_t replaced = 0;
+  for (int t = 0; t < rec.frames(); ++t)
+    for (std::size_t k = 0; k < per; ++k) {
+      float& x = v[static_cast<std::size_t>(t) * per + k];
+      if (std::isfinite(x)) {
+        last[k] = x;
+      } else {
+        x = policy == NonFinite::hold ? last[k] : 0.0f;
+        ++replaced;
+      }
+    }
+  return replaced;
 }
 
 }  // namespace tjepa

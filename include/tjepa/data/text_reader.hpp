@@ -1,7 +1,8 @@
 #pragma once
 // Text recordings: one frame per line, one column per (taxel, axis), separated by whitespace or by
 // commas (CSV). Lines that are empty or start with '#' are skipped; `skip_rows` header lines are
-// skipped first. A column map says which column holds value (n, a): columns[n·m + a]; without one
+// skipped first (-1: the first data line is skipped when one of its fields is not a number, a
+// header row naming the columns). A column map says which column holds value (n, a): columns[n·m + a]; without one
 // the columns are taken in order, taxel-major with the axis fastest.
 //
 // The file is streamed line by line straight into the recording's buffer, so it is never held
@@ -27,7 +28,7 @@ struct TextFormat {
   int taxels = 0;            // N; 0: from the column map, or columns / axes
   std::vector<int> columns;  // [N·m] source column (0-based) of value (n, a); empty: in order
   char delimiter = 0;        // ',' or ' ' (any whitespace); 0: ',' if the first data line has one
-  int skip_rows = 0;         // header lines to skip before the data
+  int skip_rows = 0;         // header lines to skip before the data; -1: detect one header row
   bool require_finite = false;  // NaN/Inf (and "nan"/"inf" text) are errors
 };
 
@@ -72,8 +73,9 @@ inline bool parse_float(std::string_view s, float& v) {
 inline Recording read_text_recording(const std::filesystem::path& path, const TextFormat& fmt = {}) {
   const std::string file = path.string();
   require<ConfigError>(fmt.axes > 0, "read_text_recording(", file, "): axes = ", fmt.axes, ", expected > 0");
-  require<ConfigError>(fmt.skip_rows >= 0, "read_text_recording(", file, "): skip_rows = ", fmt.skip_rows,
-                       ", expected >= 0");
+  require<ConfigError>(fmt.skip_rows >= -1, "read_text_recording(", file, "): skip_rows = ", fmt.skip_rows,
+                       ", expected >= 0 (or -1: detect a header row)");
+  bool detect_header = fmt.skip_rows < 0;
   require<ConfigError>(fmt.delimiter == 0 || fmt.delimiter == ',' || fmt.delimiter == ' ',
                        "read_text_recording(", file, "): delimiter '", fmt.delimiter, "', expected ',', ' ' or 0 (auto)");
   int taxels = fmt.taxels;
@@ -111,11 +113,20 @@ inline Recording read_text_recording(const std::filesystem::path& path, const Te
     if (first == std::string_view::npos || sv[first] == '#') continue;
     if (delim == 0) delim = sv.find(',') != std::string_view::npos ? ',' : ' ';
     detail::split_fields(sv, delim, fields);
+    if (detect_header) {
+      detect_header = false;
+      float v;
+      const bool numeric = std::all_of(fields.begin(), fields.end(), [&](std::string_view f) {
+        return detail::parse_float(f, v) || f == "nan" || f == "NaN" || f == "inf" || f == "-inf";
+      });
+      if (!numeric) continue;  // a header row
+    }
     if (ncols == 0) {
       ncols = fields.size();
       if (fmt.columns.empty()) {
         require<FileError>(ncols % static_cast<std::size_t>(fmt.axes) == 0, file, ":", lineno, ": ", ncols,
-                           " columns, expected a multiple of axes = ", fmt.axes);
+                           " columns, expected a multiple of axes = ", fmt.axes,
+                           " (other columns too, such as time or motors? give the taxels' columns)");
         if (taxels == 0) taxels = static_cast<int>(ncols) / fmt.axes;
         require<FileError>(ncols == static_cast<std::size_t>(taxels) * fmt.axes, file, ":", lineno, ": ", ncols,
                            " columns, expected taxels*axes = ", taxels, "*", fmt.axes, " = ",

@@ -166,7 +166,7 @@ inline std::optional<DriftTracker> track_drift(const TrainConfig& run, const Rec
 
 inline GraspEvalData simulate_grasp_eval_data(const GraspEvalConfig& c) {
   c.validate();
-  GraspEvalData d{layouts::allegro_xela(), Preprocessor(PreprocessConfig::magnetic()), {}, {}, {}, {}, {}, {}, {}};
+  GraspEvalData d{layouts::allegro_xela(), Preprocessor(PreprocessConfig::xela_counts()), {}, {}, {}, {}, {}, {}, {}};
   SimulatedHand sim(d.skin.layout, c.sim, c.data_seed);
   Recording baseline = sim.record_baseline(c.baseline_frames);
   GraspRecording pre = sim.record(c.pretrain_frames);

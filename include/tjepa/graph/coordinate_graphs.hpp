@@ -2,13 +2,21 @@
 // Graphs from coordinates, for skins known only by where their taxels are:
 //   knn_edges:    each taxel joined to its k nearest taxels (the union, so symmetric: a taxel may
 //                 end up with more than k neighbours);
-//   radius_edges: every pair of taxels closer than a radius.
-// Both stay inside a part unless across_parts is set (two hands must not be joined by accident),
+//   radius_edges: every pair of taxels closer than a radius;
+//   relative_neighbour_edges: the relative neighbourhood graph, taxels i and j joined unless a
+//                 third taxel k is nearer to both (max(d_ik, d_jk) < (1 - tolerance)·d_ij). It needs
+//                 no spacing: on a grid of any pitch, square or not, it gives the 4-neighbour
+//                 edges (the diagonal has a closer witness), on a hexagonal sheet the 6-neighbour
+//                 ones (the tolerance keeps the equilateral triangles' edges against rounding), and
+//                 an isolated taxel joins only its nearest neighbours. Candidates are each taxel's
+//                 `candidates` nearest; a witness is always nearer, so it is exact for them.
+// All stay inside a part unless across_parts is set (two hands must not be joined by accident),
 // weigh each edge by its length (mm), and break distance ties on the lower index. Brute force,
 // O(N^2): meant for building a layout once, not for a hot loop.
 #include <algorithm>
 #include <cmath>
 #include <set>
+#include <span>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -57,6 +65,39 @@ inline std::vector<Edge> radius_edges(const TaxelLayout& l, double radius, bool 
         const double d = l.distance(i, j);
         if (d <= radius) out.push_back({i, j, d});
       }
+  return out;
+}
+
+// Relative neighbourhood edges among `members` (indices into l), which must hold distinct points.
+inline std::vector<Edge> relative_neighbour_edges(const TaxelLayout& l, std::span<const int> members,
+                                                  double tolerance = 0.05, int candidates = 16) {
+  require<ConfigError>(l.has_coords(), "relative_neighbour_edges: the layout has no coordinates");
+  require<ConfigError>(tolerance >= 0 && tolerance < 1, "relative_neighbour_edges: tolerance ", tolerance,
+                       ", expected in [0, 1)");
+  require<ConfigError>(candidates >= 1, "relative_neighbour_edges: candidates ", candidates, ", expected >= 1");
+  const int m = static_cast<int>(members.size());
+  std::set<std::pair<int, int>> pairs;
+  std::vector<std::pair<double, int>> near;  // (distance, position in members), nearest first
+  for (int a = 0; a < m; ++a) {
+    near.clear();
+    for (int b = 0; b < m; ++b)
+      if (b != a) near.emplace_back(l.distance(members[a], members[b]), b);
+    const int c = std::min<int>(candidates, static_cast<int>(near.size()));
+    std::partial_sort(near.begin(), near.begin() + c, near.end());
+    for (int t = 0; t < c; ++t) {
+      const auto [dab, b] = near[t];
+      bool witness = false;
+      // A witness k has d_ak < d_ab, so it is one of the nearer candidates.
+      for (int u = 0; u < t && !witness; ++u) {
+        const int k = near[u].second;
+        witness = std::max(near[u].first, l.distance(members[b], members[k])) < (1.0 - tolerance) * dab;
+      }
+      if (!witness) pairs.emplace(std::min(members[a], members[b]), std::max(members[a], members[b]));
+    }
+  }
+  std::vector<Edge> out;
+  out.reserve(pairs.size());
+  for (const auto& [i, j] : pairs) out.push_back({i, j, l.distance(i, j)});
   return out;
 }
 

@@ -2,7 +2,7 @@
 // TaxelLayout: the N taxels of a skin in a fixed order (the order of the data's taxel axis). Each
 // taxel has an id (as the user's files name it), a part (a connected piece of the embodiment: a
 // hand, a foot), a group (its pad or region), optionally its (row, col) inside the group, and
-// optionally 2-D or 3-D coordinates.
+// optionally 2-D or 3-D coordinates, and optionally the recording's column it is read from.
 //
 // Units: coordinates are in MILLIMETRES everywhere in tjepa (built-in layouts, builders, CSV files),
 // so edge weights derived from them are distances in mm. The reference code uses metres; scaling
@@ -28,12 +28,16 @@ struct TaxelLayout {
   std::vector<std::string> part_names;   // [P]
   std::vector<std::string> group_names;  // [G]
   std::vector<int> group_part;           // [G] the part each group lies in
+  // [N] the taxel slot of a recording that taxel i reads (a permutation of 0..N-1): a sensor's
+  // driver may write its taxels in another order than the layout's. Empty: slot i.
+  std::vector<int> column;
 
   int size() const { return static_cast<int>(part.size()); }
   int num_parts() const { return static_cast<int>(part_names.size()); }
   int num_groups() const { return static_cast<int>(group_names.size()); }
   bool has_coords() const { return dim > 0; }
   bool has_cells() const { return !row.empty(); }
+  bool has_columns() const { return !column.empty(); }
 
   // Coordinate a (0 = x, 1 = y, 2 = z) of taxel i; 0 beyond dim.
   double coord(int i, int a) const {
@@ -82,6 +86,17 @@ struct TaxelLayout {
                         " entries, expected 0 or ", n);
     require<ShapeError>(group_part.size() == group_names.size(), "TaxelLayout: group_part has ",
                         group_part.size(), " entries, expected one per group (", group_names.size(), ")");
+    require<ShapeError>(column.empty() || static_cast<int>(column.size()) == n, "TaxelLayout: column has ",
+                        column.size(), " entries, expected 0 or ", n);
+    std::vector<int> reader(column.empty() ? 0 : static_cast<std::size_t>(n), -1);
+    for (int i = 0; i < static_cast<int>(column.size()); ++i) {
+      const int c = column[i];
+      require<DataError>(c >= 0 && c < n, "TaxelLayout: taxel ", ids[i], " reads column ", c,
+                         ", expected a column in [0, ", n, ")");
+      require<DataError>(reader[c] < 0, "TaxelLayout: taxels ", ids[reader[c] < 0 ? 0 : reader[c]], " and ", ids[i],
+                         " both read column ", c, ", expected each column once");
+      reader[c] = i;
+    }
     std::unordered_set<int> seen;
     seen.reserve(static_cast<std::size_t>(n) * 2);
     for (int i = 0; i < n; ++i)

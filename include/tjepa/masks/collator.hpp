@@ -2,8 +2,8 @@
 // MaskCollator: a batch's context and target masks, as dense index tensors.
 //
 // Per batch (Rng(seed, batch_index)), in this order:
-//   c   = ⌊N·U(context_ratio)⌋
-//   t_k = ⌊n_k·U(target_ratio)⌋ for each size slot k: one slot (n = N) for a one-part sensor,
+//   c   = max(1, ⌊N·U(context_ratio)⌋)
+//   t_k = max(1, ⌊n_k·U(target_ratio)⌋) for each size slot k: one slot (n = N) for a one-part sensor,
 //         one per part (n = the part's size) with per-part targets;
 //   I-JEPA blocks: the target block shape, then the context block shape.
 // Per sample i (its own stream Rng(seed ^ kSampleSalt, batch_index·B + i), so the result does not
@@ -138,7 +138,9 @@ class MaskCollator {
   const MaskConfig& config() const { return cfg_; }
   int num_tokens() const { return graph_.num_nodes(); }
   int num_targets() const { return static_cast<int>(specs_.size()); }
-  // The fewest tokens a context may keep: max(min_context_tokens, ⌈min_context_ratio·N⌉).
+  // The fewest tokens a context may keep: max(min_context_tokens, ⌈min_context_ratio·N⌉, 1), where
+  // min_context_tokens -1 (the default) is min(32, ⌊⌊N·context_ratio.lo⌋/2⌋): 32 from 128 tokens
+  // on, and half the smallest context draw on a small skin, which leaves room for its targets.
   int min_context() const { return min_context_; }
   bool per_part() const { return per_part_; }
   const MaskDomain& domain(int part) const { return domains_[part + 1]; }  // -1: whole sensor
@@ -153,10 +155,10 @@ class MaskCollator {
       s.context_block = blocks_.sample_shape(cfg_.blocks.context_scale, cfg_.blocks.context_aspect, rng);
       return s;
     }
-    s.context = size_from_ratio(n, cfg_.context_ratio, rng);
+    s.context = std::max(1, size_from_ratio(n, cfg_.context_ratio, rng));
     std::vector<int> slot_size(slot_domain_.size());
     for (std::size_t k = 0; k < slot_domain_.size(); ++k)
-      slot_size[k] = size_from_ratio(domains_[slot_domain_[k]].size(), cfg_.target_ratio, rng);
+      slot_size[k] = std::max(1, size_from_ratio(domains_[slot_domain_[k]].size(), cfg_.target_ratio, rng));
     for (std::size_t j = 0; j < specs_.size(); ++j) s.target[j] = slot_size[specs_[j].slot];
     return s;
   }
@@ -288,9 +290,9 @@ class MaskCollator {
 
   [[noreturn]] void fail_context(int i, int best, int union_size, const std::string& drawn) const {
     fail<ConfigError>("MaskCollator: sample ", i, ": the context kept at most ", best, " of the ",
-                      min_context_, " tokens it needs (max(min_context_tokens = ",
-                      cfg_.min_context_tokens, ", ceil(min_context_ratio = ", cfg_.min_context_ratio,
-                      " * N = ", num_tokens(), "))) after ", cfg_.max_tries, " x ", cfg_.max_tries,
+                      min_context_, " tokens it needs (min_context() from min_context_tokens = ",
+                      cfg_.min_context_tokens, ", min_context_ratio = ", cfg_.min_context_ratio,
+                      ", N = ", num_tokens(), ") after ", cfg_.max_tries, " x ", cfg_.max_tries,
                       " tries (context drawn: ", drawn, "; last union of targets: ", union_size,
                       " tokens); lower target_ratio or the number of targets, raise context_ratio, "
                       "or lower the context minimum");
@@ -381,14 +383,18 @@ class MaskCollator {
     require<ConfigError>(c.max_tries >= 1, "MaskConfig: max_tries = ", c.max_tries, ", expected >= 1");
     require<ConfigError>(c.num_threads >= 0, "MaskConfig: num_threads = ", c.num_threads,
                          ", expected >= 0 (0: OpenMP's default)");
-    require<ConfigError>(c.min_context_tokens >= 0, "MaskConfig: min_context_tokens = ",
-                         c.min_context_tokens, ", expected >= 0");
+    require<ConfigError>(c.min_context_tokens >= -1, "MaskConfig: min_context_tokens = ",
+                         c.min_context_tokens, ", expected >= 0 (or -1: automatic)");
     require<ConfigError>(c.min_context_ratio >= 0.0 && c.min_context_ratio < 1.0,
                          "MaskConfig: min_context_ratio = ", c.min_context_ratio, ", expected in [0, 1)");
-    min_context_ = std::max(c.min_context_tokens, static_cast<int>(std::ceil(c.min_context_ratio * n - 1e-9)));
-    require<ConfigError>(min_context_ >= 1 && min_context_ <= n, "MaskConfig: the context minimum max(",
-                         c.min_context_tokens, ", ceil(", c.min_context_ratio, " * ", n, ")) = ",
-                         min_context_, ", expected in [1, N = ", n, "]");
+    // Automatic (-1): 32, capped at half the smallest context draw so that a small skin keeps room
+    // for its targets.
+    const bool ratio_ok = c.context_ratio.lo > 0 && c.context_ratio.lo < 1;  // checked below
+    const int automatic = ratio_ok ? std::min(32, static_cast<int>(std::floor(n * c.context_ratio.lo)) / 2) : 32;
+    const int tokens = c.min_context_tokens >= 0 ? c.min_context_tokens : automatic;
+    min_context_ = std::max({tokens, static_cast<int>(std::ceil(c.min_context_ratio * n - 1e-9)), 1});
+    require<ConfigError>(min_context_ <= n, "MaskConfig: the context minimum max(", tokens, ", ceil(",
+                         c.min_context_ratio, " * ", n, ")) = ", min_context_, ", expected in [1, N = ", n, "]");
 
     if (c.scheme == TargetScheme::ijepa_blocks) {
       require<ConfigError>(has_grid, "MaskCollator: scheme ijepa_blocks needs a grid placement of the ",
@@ -428,12 +434,7 @@ class MaskCollator {
 
     for (std::size_t k = 0; k < slot_domain_.size(); ++k) {
       const MaskDomain& d = domains_[slot_domain_[k]];
-      const int tmin = static_cast<int>(std::floor(d.size() * c.target_ratio.lo));
-      const int tmax = static_cast<int>(std::floor(d.size() * c.target_ratio.hi));
-      require<ConfigError>(tmin >= 1, "MaskConfig: target size t = floor(", d.size(), " * target_ratio.lo = ",
-                           c.target_ratio.lo, ") = ", tmin, " for ",
-                           domain_name(d),
-                           ", expected t >= 1; raise target_ratio.lo");
+      const int tmax = std::max(1, static_cast<int>(std::floor(d.size() * c.target_ratio.hi)));
       if (nl > 0)
         require<ConfigError>(d.largest_piece() >= tmax, "MaskConfig: local targets of up to t = ", tmax,
                              " tokens, but the largest connected piece of ",

@@ -69,8 +69,9 @@ struct MaskConfig {
   ContextSampling context_sampling = ContextSampling::uniform;
   TargetScheme scheme = TargetScheme::graph;
   BlockMaskConfig blocks{};
-  // The context keeps at least max(min_context_tokens, ⌈min_context_ratio·N⌉) tokens.
-  int min_context_tokens = 32;
+  // The context keeps at least max(min_context_tokens, ⌈min_context_ratio·N⌉) tokens; -1: 32, or
+  // half the smallest context ⌊⌊N·context_ratio.lo⌋/2⌋ when that is less (MaskCollator::min_context).
+  int min_context_tokens = -1;
   double min_context_ratio = 0.15;
   // Resampling: targets and then the context are redrawn up to max_tries times each.
   int max_tries = 32;

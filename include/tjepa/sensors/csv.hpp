@@ -11,7 +11,9 @@
 //
 // Node columns (names configurable): id (default: line order 0..N-1), x, y, z (mm, optional;
 // x and y go together), part and group (names, optional: one part "skin", one group per part),
-// row and col (optional; empty or -1: none). Parts are numbered in order of first appearance,
+// row and col (optional; empty or -1: none), column (optional: the recording's taxel slot this
+// taxel reads, when the sensor's driver writes another order than the file's; TaxelLayout::column).
+// Taxels of one part at the same coordinates are an error naming both lines. Parts are numbered in order of first appearance,
 // groups by (part, name) in order of first appearance. Without a header row, fields are read in
 // the writer's order: id,x,y[,z],part,group[,row,col] (5 to 8 fields). Errors name the file, the
 // line and what was wrong. The writers emit exactly what the readers read back.
@@ -33,12 +35,47 @@
 namespace tjepa {
 
 struct NodeCsvColumns {
-  std::string id = "id", x = "x", y = "y", z = "z", part = "part", group = "group", row = "row", col = "col";
+  std::string id = "id", x = "x", y = "y", z = "z", part = "part", group = "group", row = "row", col = "col",
+              column = "column";
 };
 
 struct EdgeCsvColumns {
   std::string src = "src", dst = "dst", weight = "weight";
 };
+
+// The column names of a layout CSV and its edges CSV.
+struct LayoutCsvColumns {
+  NodeCsvColumns nodes;
+  EdgeCsvColumns edges;
+};
+
+// Column names from "key=name,..." (node keys id, x, y, z, part, group, row, col, column; edge
+// keys src, dst, weight), e.g. for the reference's socks files "id=global_node_id,x=visual_x,
+// y=visual_y,part=side,src=src_global_node_id,dst=dst_global_node_id,weight=visual_distance".
+// Empty: the defaults.
+inline LayoutCsvColumns parse_csv_columns(const std::string& spec) {
+  LayoutCsvColumns c;
+  NodeCsvColumns& n = c.nodes;
+  EdgeCsvColumns& e = c.edges;
+  std::size_t at = 0;
+  while (at < spec.size()) {
+    const std::size_t end = std::min(spec.find(',', at), spec.size());
+    const std::string item = spec.substr(at, end - at);
+    const std::size_t eq = item.find('=');
+    require<ConfigError>(eq != std::string::npos && eq > 0 && eq + 1 < item.size(), "layout columns '", spec,
+                         "': '", item, "' is not key=name");
+    const std::string key = item.substr(0, eq), name = item.substr(eq + 1);
+    std::string* field = key == "id" ? &n.id : key == "x" ? &n.x : key == "y" ? &n.y : key == "z" ? &n.z
+                       : key == "part" ? &n.part : key == "group" ? &n.group : key == "row" ? &n.row
+                       : key == "col" ? &n.col : key == "column" ? &n.column : key == "src" ? &e.src
+                       : key == "dst" ? &e.dst : key == "weight" ? &e.weight : nullptr;
+    require<ConfigError>(field != nullptr, "layout columns '", spec, "': unknown key '", key,
+                         "', expected id, x, y, z, part, group, row, col, column, src, dst or weight");
+    *field = name;
+    at = end + 1;
+  }
+  return c;
+}
 
 namespace detail {
 
@@ -72,13 +109,14 @@ inline TaxelLayout read_layout_csv(const std::filesystem::path& path, const Node
     default: break;
   }
   std::map<std::string, int> col;
-  const bool header = detail::csv_columns(rows, {c.id, c.x, c.y, c.z, c.part, c.group, c.row, c.col}, fallback, col);
+  const bool header =
+      detail::csv_columns(rows, {c.id, c.x, c.y, c.z, c.part, c.group, c.row, c.col, c.column}, fallback, col);
   require<FileError>(header || !fallback.empty(), detail::where(path, rows[0].line), "no header row naming the columns (",
                      c.id, ", ", c.x, ", ", c.y, ", ", c.part, ", ", c.group, ", ...), and ", rows[0].fields.size(),
                      " fields where a header-less file has 5 to 8 (id,x,y[,z],part,group[,row,col])");
   auto find = [&](const std::string& n) { return col.count(n) ? col.at(n) : -1; };
   const int ci = find(c.id), cx = find(c.x), cy = find(c.y), cz = find(c.z), cp = find(c.part), cg = find(c.group),
-            cr = find(c.row), cc = find(c.col);
+            cr = find(c.row), cc = find(c.col), cn = find(c.column);
   require<FileError>((cx < 0) == (cy < 0), path.string(), ": has column '", cx < 0 ? c.y : c.x, "' but not '",
                      cx < 0 ? c.x : c.y, "'");
   require<FileError>(cz < 0 || cx >= 0, path.string(), ": has column '", c.z, "' but no '", c.x, "' and '", c.y, "'");
@@ -90,6 +128,7 @@ inline TaxelLayout read_layout_csv(const std::filesystem::path& path, const Node
   std::map<std::string, int> part_of;
   std::map<std::pair<int, std::string>, int> group_of;
   std::unordered_map<long long, int> id_line;
+  std::map<std::pair<int, std::vector<double>>, std::pair<long long, int>> place;  // (part, x) -> (id, line)
   const std::size_t width = header ? rows[0].fields.size() : fallback.size();
   for (std::size_t r = header ? 1 : 0; r < rows.size(); ++r) {
     const auto& row = rows[r];
@@ -123,6 +162,17 @@ inline TaxelLayout read_layout_csv(const std::filesystem::path& path, const Node
     }
     l.part.push_back(p);
     l.group.push_back(git->second);
+    if (l.dim > 0) {
+      std::vector<double> x(l.coords.end() - l.dim, l.coords.end());
+      const auto [same, fresh_place] = place.emplace(std::pair{p, std::move(x)}, std::pair{id, row.line});
+      require<FileError>(fresh_place, at, "taxel ", id, " has the same coordinates as taxel ", same->second.first,
+                         " (line ", same->second.second, ") in part '", part_name, "'");
+    }
+    if (cn >= 0) {
+      const long long v = detail::parse_integer(path, row.line, c.column, f[cn]);
+      require<FileError>(v >= 0 && v < 1000000000LL, at, "column '", c.column, "': ", v, " is not a column index");
+      l.column.push_back(static_cast<int>(v));
+    }
     if (cr >= 0) {
       auto cell = [&](int k, const std::string& name) {
         if (f[k].empty()) return -1;
@@ -135,7 +185,11 @@ inline TaxelLayout read_layout_csv(const std::filesystem::path& path, const Node
     }
   }
   require<FileError>(l.size() > 0, path.string(), ": no taxels (empty layout)");
-  l.validate();
+  try {
+    l.validate();
+  } catch (const Error& e) {
+    fail<FileError>(path.string(), ": ", e.what());
+  }
   return l;
 }
 
@@ -183,6 +237,44 @@ inline std::vector<Edge> read_edges_csv(const std::filesystem::path& path, const
   return edges;
 }
 
+// An order CSV: for each taxel id of `layout`, the recording's column it is read from ("id,column"
+// rows, a header optional). Every id once, every column in [0, N) once. Returns TaxelLayout::column.
+inline std::vector<int> read_taxel_order_csv(const std::filesystem::path& path, const TaxelLayout& layout) {
+  const auto rows = detail::read_csv_rows(path);
+  require<FileError>(!rows.empty(), path.string(), ": empty order file, expected id,column rows");
+  const bool header = rows[0].fields.size() == 2 && rows[0].fields[0] == "id" && rows[0].fields[1] == "column";
+  std::unordered_map<long long, int> index;
+  for (int i = 0; i < layout.size(); ++i) index.emplace(layout.ids[i], i);
+  const int n = layout.size();
+  std::vector<int> column(static_cast<std::size_t>(n), -1), line_of_column(static_cast<std::size_t>(n), 0);
+  for (std::size_t r = header ? 1 : 0; r < rows.size(); ++r) {
+    const auto& row = rows[r];
+    const auto at = detail::where(path, row.line);
+    require<FileError>(row.fields.size() == 2, at, row.fields.size(), " fields, expected 2 (id,column)");
+    const long long id = detail::parse_integer(path, row.line, "id", row.fields[0]);
+    const long long c = detail::parse_integer(path, row.line, "column", row.fields[1]);
+    require<FileError>(index.count(id), at, "taxel id ", id, " is not in the layout");
+    require<FileError>(c >= 0 && c < n, at, "column ", c, ", expected in [0, ", n, ")");
+    const int i = index.at(id);
+    require<FileError>(column[static_cast<std::size_t>(i)] < 0, at, "taxel id ", id, " is given twice");
+    require<FileError>(line_of_column[static_cast<std::size_t>(c)] == 0, at, "column ", c, " is already read by line ",
+                       line_of_column[static_cast<std::size_t>(c)]);
+    column[static_cast<std::size_t>(i)] = static_cast<int>(c);
+    line_of_column[static_cast<std::size_t>(c)] = row.line;
+  }
+  for (int i = 0; i < n; ++i)
+    require<FileError>(column[static_cast<std::size_t>(i)] >= 0, path.string(), ": no column for taxel id ", layout.ids[i],
+                       " (the order file must name all ", n, " taxels)");
+  return column;
+}
+
+inline std::string taxel_order_csv_string(const TaxelLayout& l) {
+  std::string out = "id,column\n";
+  for (int i = 0; i < l.size(); ++i)
+    out += std::to_string(l.ids[i]) + "," + std::to_string(l.has_columns() ? l.column[i] : i) + "\n";
+  return out;
+}
+
 inline Skin read_skin_csv(const std::filesystem::path& nodes, const std::filesystem::path& edges,
                           const NodeCsvColumns& nc = {}, const EdgeCsvColumns& ec = {}) {
   TaxelLayout l = read_layout_csv(nodes, nc);
@@ -197,12 +289,14 @@ inline std::string layout_csv_string(const TaxelLayout& l) {
   if (l.dim == 3) out += ",z";
   out += ",part,group";
   if (l.has_cells()) out += ",row,col";
+  if (l.has_columns()) out += ",column";
   out += "\n";
   for (int i = 0; i < l.size(); ++i) {
     out += std::to_string(l.ids[i]);
     for (int a = 0; a < l.dim; ++a) out += "," + detail::format_real(l.coord(i, a));
     out += "," + detail::csv_field(l.part_names[l.part[i]]) + "," + detail::csv_field(l.group_names[l.group[i]]);
     if (l.has_cells()) out += "," + std::to_string(l.row[i]) + "," + std::to_string(l.col[i]);
+    if (l.has_columns()) out += "," + std::to_string(l.column[i]);
     out += "\n";
   }
   return out;

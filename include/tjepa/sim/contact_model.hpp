@@ -415,7 +415,7 @@ class SkinSensor {
   }
 
   // Starts new drop-outs and zeroes every taxel in one (all axes) in frame f [N, axes]. 0 lies
-  // outside the valid Xela range, so PreprocessConfig::magnetic() treats it as a drop-out.
+  // outside the valid Xela range, so PreprocessConfig::xela_counts() treats it as a drop-out.
   void apply_dropouts(Rng& rng, float* f) {
     const int n = taxels_;
     // New drop-outs starting in this frame.

@@ -14,7 +14,7 @@
 //     in proportion to each contact's normal force; moving contacts add 0.5·μ·F_k along their
 //     motion; the shear lags its target and never exceeds μ·F_k.
 //   * Each contact renders through the contact model shared with SimulatedSkin (contact_model.hpp)
-//     into raw Xela-like counts, so PreprocessConfig::magnetic() with a baseline applies.
+//     into raw Xela-like counts, so PreprocessConfig::xela_counts() with a baseline applies.
 // Labels per frame (GraspLabel): episode, object, grasp, phase, held, pose, the 3-axis force on
 // one pad (GraspSimConfig::label_pad, the FrameLabel convention) and the 18-bit contact mask.
 //

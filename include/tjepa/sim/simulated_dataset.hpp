@@ -40,7 +40,7 @@ inline SimulatedDataset simulate_dataset(const TaxelLayout& layout, const Simula
   SimulatedSkin sim(layout, opt.sim, seed);
   PreprocessConfig cfg;
   if (opt.sim.raw_counts) {
-    cfg = PreprocessConfig::magnetic();
+    cfg = PreprocessConfig::xela_counts();
   } else {
     cfg.scaling = Scaling::per_axis;  // no offsets to remove
   }

@@ -31,7 +31,7 @@
 //     draws, Irwin–Hall, for speed), slow drift (Ornstein–Uhlenbeck, std drift_std, correlation
 //     time drift_time), and drop-outs: a taxel reads exactly 0 on all axes for 1..dropout_frames_max
 //     frames, starting at dropout_rate per taxel per frame (0 lies outside the valid Xela range, so
-//     PreprocessConfig::magnetic() treats it as a drop-out).
+//     PreprocessConfig::xela_counts() treats it as a drop-out).
 //
 // Axes: x, y along the pad's plane (e_u, e_v), z along its normal (SimConfig::axes = 1 keeps only z,
 // like a piezoresistive skin); the pad frame comes from a

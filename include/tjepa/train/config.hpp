@@ -39,7 +39,13 @@ namespace tjepa {
 
 struct TrainConfig {
   // Data.
-  std::string layout = "allegro";  // the skin: a built-in layout's name or a layout CSV (recorded, not read here)
+  // The skin (recorded, not read here; the `tjepa` command reads it): a built-in layout's name or
+  // a layout CSV; its edges CSV ("": built in, or inferred from the coordinates by the bridge rule
+  // connect | near | none); the CSV's column names ("x=visual_x,y=visual_y"; "": the defaults);
+  // the order of the recordings' taxel columns ("": the layout's own; "xserver" or "reference" for
+  // the Allegro hand; or an order CSV of id,column).
+  std::string layout = "allegro";
+  std::string layout_edges, layout_columns, bridges = "connect", taxel_order;
   int tau = 10;                    // frames per window
   // DriftTracker's time constant in frames for recordings with a no-contact baseline; 0 = off
   // (the reference's one fixed baseline).
@@ -79,7 +85,8 @@ struct TrainConfig {
   // and the unknown-key check.
   template <class Self, class F>
   static void for_each_field(Self& c, F&& f) {
-    f("layout", c.layout), f("tau", c.tau), f("drift_time_constant", c.drift_time_constant);
+    f("layout", c.layout), f("layout_edges", c.layout_edges), f("layout_columns", c.layout_columns);
+    f("bridges", c.bridges), f("taxel_order", c.taxel_order), f("tau", c.tau), f("drift_time_constant", c.drift_time_constant);
     f("dim", c.dim), f("depth", c.depth), f("heads", c.heads), f("predictor_depth", c.predictor_depth);
     f("tokenizer_bias_std", c.tokenizer_bias_std), f("position_eigenvectors", c.position_eigenvectors);
     f("position_scale", c.position_scale);
@@ -176,7 +183,10 @@ struct TrainConfig {
     check(local_targets >= 0 && global_targets >= 0 && local_targets + global_targets > 0, "local_targets",
           std::array<int, 2>{local_targets, global_targets},
           "local_targets and global_targets >= 0 and at least one target");
-    check(min_context_tokens >= 1, "min_context_tokens", min_context_tokens, ">= 1");
+    check(min_context_tokens >= 1 || min_context_tokens == -1, "min_context_tokens", min_context_tokens,
+          ">= 1, or -1 (automatic: 32, or half the smallest context on a small skin)");
+    check(bridges == "connect" || bridges == "near" || bridges == "none", "bridges", bridges,
+          "'connect', 'near' or 'none'");
     check(loss == "mse" || loss == "smooth_l1", "loss", loss, "'mse' or 'smooth_l1'");
     check(drop_path >= 0 && drop_path < 1, "drop_path", drop_path, "in [0, 1)");
     check(precision == "fp32" || precision == "bf16", "precision", precision, "'fp32' or 'bf16'");
