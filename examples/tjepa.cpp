@@ -68,11 +68,14 @@ int main(int argc, char** argv) {
   pretrain->add_flag("--strict", po.strict, "warnings about the layout's graph are errors");
 
   ProbeOptions pb;
-  auto* probe = app.add_subcommand("probe", "Train and evaluate an attentive probe (force, indenter) on a frozen checkpoint");
+  auto* probe = app.add_subcommand("probe", "Train and evaluate probes on a frozen checkpoint: force and indenter, or your own labels (--task)");
   probe->add_option("--checkpoint", pb.checkpoint, "checkpoint of `tjepa pretrain`")->required();
   probe->add_option("--encoder", pb.encoder, "target | context")->capture_default_str();
   probe->add_option("--train-data", pb.train_data, "labelled training recording (default: simulated)");
-  probe->add_option("--train-labels", pb.train_labels, "[T, 4] .npy: force u, v, normal (N), indenter class or -1");
+  probe->add_option("--train-labels", pb.train_labels,
+                    "labels per frame: [T, 4] .npy (force u, v, normal, indenter class or -1), or with --task your own");
+  probe->add_option("--task", pb.task, "your own labels: regression (any number of columns) | classification (class ids)");
+  probe->add_option("--label-columns", pb.label_columns, "text label files: the label columns, e.g. 1:3");
   probe->add_option("--test-data", pb.test_data, "held-out recording");
   probe->add_option("--test-labels", pb.test_labels, "held-out labels");
   probe->add_option("--simulate-seed", pb.simulate_seed, "seed of the simulated labelled data")->capture_default_str();

@@ -28,6 +28,7 @@
 #include <tjepa/downstream/probe_labels.hpp>
 #include <tjepa/eval.hpp>
 
+#include "label_probe.hpp"
 #include "output.hpp"
 #include "pretrain.hpp"
 #include "setup.hpp"
@@ -432,16 +433,67 @@ struct ProbeOptions {
   HeadTrainConfig probe{.max_epochs = 60, .batch = 32, .lr = 1e-3};  // early-stopped on a validation split
   int repeats = 1;                         // probes with seeds seed, seed + 1, ... averaged
   bool center_tokens = false;              // center_token_embeddings before the probe
+  std::string task;                        // "": force + indenter labels; regression | classification: the user's
+  std::string label_columns;               // the label files' columns (text), "a:b,..."
   std::string out;                         // results JSON ("" = none)
   bool force = false;
   bool quiet = false;
 };
+
+// tjepa probe --task: the user's own labels (label_probe.hpp).
+inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
+  const LabelTask task = parse_label_task(o.task);
+  require<ConfigError>(!o.train_data.empty() && !o.train_labels.empty() && !o.test_data.empty() && !o.test_labels.empty(),
+                       "--task needs --train-data, --train-labels, --test-data and --test-labels");
+  TrainedModel m = load_trained_model(o.checkpoint);
+  const JepaModel<float>& model = *m.model;
+  const Skin skin = load_skin(SkinSpec::of(m.config));
+  Recording train_rec = in_layout_order(read_recording(o.train_data, o.format), skin, o.train_data);
+  Recording test_rec = in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data);
+  for (const Recording* r : {&train_rec, &test_rec})
+    require<ShapeError>(r->axes() * m.config.tau == model.config.in_dim, r->source(), ": ", r->axes(),
+                        " axes; the checkpoint expects ", model.config.in_dim / m.config.tau);
+  const Recording train_frames = read_label_frames(o.train_labels, o.label_columns, train_rec.frames());
+  const Recording test_frames = read_label_frames(o.test_labels, o.label_columns, test_rec.frames());
+  require<ShapeError>(train_frames.taxels() == test_frames.taxels(), o.test_labels, ": ", test_frames.taxels(),
+                      " label columns, ", o.train_labels, " has ", train_frames.taxels());
+  int classes = 0;
+  if (task == LabelTask::classification)
+    for (const Recording* f : {&train_frames, &test_frames})
+      for (float c : f->values()) classes = std::max(classes, static_cast<int>(c) + 1);
+  require<DataError>(task == LabelTask::regression || classes >= 2, o.train_labels, " and ", o.test_labels,
+                     ": class ids up to ", classes - 1, ", expected at least two classes");
+  m.track(train_rec);
+  m.track(test_rec);
+  const WindowSource train_src(train_rec, WindowSpec{m.config.tau}, {}, m.pre);
+  const WindowSource test_src(test_rec, WindowSpec{m.config.tau}, {}, m.pre);
+  const WindowLabels train = window_labels(train_src, train_frames, task, classes, o.train_labels);
+  const WindowLabels test = window_labels(test_src, test_frames, task, classes, o.test_labels);
+  out << "probe for " << o.task << " labels on " << o.checkpoint << ": " << train.window.size() << " training and "
+      << test.window.size() << " held-out windows\n";
+  const std::vector<LabelProbeRow> rows = label_probe_rows(
+      m, o.encoder == "target" ? model.target : model.context, o.encoder, train_src, train, test_src, test, skin,
+      o.probe, o.quiet);
+  out << label_probe_markdown(rows, test.targets, static_cast<int>(train.window.size()));
+  if (!o.out.empty()) {
+    OutputFiles files;
+    write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint},
+                                                       {"task", o.task},
+                                                       {"train_windows", train.window.size()},
+                                                       {"test_windows", test.window.size()},
+                                                       {"results", label_probe_json(rows)}}
+                                            .dump(2));
+    files.commit();
+  }
+  return 0;
+}
 
 inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   require<ConfigError>(!o.checkpoint.empty(), "--checkpoint is required");
   require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
                        "', expected target or context");
   if (!o.out.empty()) OutputFiles::check_new(o.out, o.force);
+  if (!o.task.empty()) return run_label_probe(o, out);
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
   Recording train_rec, test_rec;

@@ -265,3 +265,119 @@ TEST_CASE("traps: a baseline of the wrong size is named / a resumed run continue
 }
 
 }
+
+TEST_SUITE("cli") {
+
+TEST_CASE("docs/formats.md lists every run configuration key with its default") {
+  // TJEPA_UPDATE_DOCS=1 rewrites the table between the markers; otherwise it must match.
+  const fs::path doc = fs::path(TJEPA_SOURCE_DIR) / "docs" / "formats.md";
+  const std::string text = read_file(doc);
+  const std::string begin = "<!-- config keys: TJEPA_UPDATE_DOCS=1 regenerates this table -->\n";
+  const std::string end = "<!-- end of config keys -->";
+  const auto b = text.find(begin), e = text.find(end);
+  REQUIRE(b != std::string::npos);
+  REQUIRE(e != std::string::npos);
+  std::string table = "| key | default |\n|---|---|\n";
+  const tjepa::TrainConfig defaults;
+  tjepa::TrainConfig::for_each_field(defaults, [&](const char* key, const auto& v) {
+    table += std::string("| `") + key + "` | `" + nlohmann::json(v).dump() + "` |\n";
+  });
+  const std::string want = text.substr(0, b + begin.size()) + table + text.substr(e);
+  if (std::getenv("TJEPA_UPDATE_DOCS")) std::ofstream(doc, std::ios::binary) << want;
+  CHECK(read_file(doc) == want);
+}
+
+}
+
+TEST_SUITE("cli") {
+
+TEST_CASE("probe --task: the user's own labels / constant / ridge / random and checkpoint rows / flags") {
+  using namespace tjepa;
+  using namespace tjepa::cli;
+  TempDir t("real_files");
+  write_board_layout(t / "anyskin.csv");
+  auto rows = magnetometer_rows(400);
+  for (auto& r : rows) r.resize(30);
+  write_rows(t / "train.txt", std::vector<std::vector<double>>(rows.begin(), rows.begin() + 300));
+  write_rows(t / "test.txt", std::vector<std::vector<double>>(rows.begin() + 300, rows.end()));
+  // Labels per frame: a time column, then the press on magnetometer 0 (x axis) and on 5 (y axis).
+  auto labels = [&](int from, int to, const fs::path& p, bool one_class) {
+    std::ofstream f(p);
+    f << "time,press0,press5,board\n";
+    for (int i = from; i < to; ++i) {
+      const auto& r = rows[static_cast<std::size_t>(i)];
+      const double p0 = r[0] - 150.0 * std::sin(0.4), p5 = r[16] - 150.0 * std::sin(1.7 * 5 + 2.3 + 0.4);
+      const int pressed = (i / 7) % 10;
+      f << 0.01 * i << ',' << p0 << ',' << p5 << ',' << (one_class ? 0 : pressed / 5) << '\n';
+    }
+  };
+  labels(0, 300, t / "train_labels.csv", false);
+  labels(300, 400, t / "test_labels.csv", false);
+  labels(0, 300, t / "one_class.csv", true);
+  PretrainOptions po;
+  po.overrides = small_model();
+  po.overrides["layout"] = (t / "anyskin.csv").string();
+  po.overrides["steps"] = 3;
+  po.overrides["warmup_steps"] = 1;
+  po.data = {(t / "train.txt").string()};
+  po.out = (t / "run").string();
+  po.quiet = true;
+  std::ostringstream log;
+  REQUIRE(run_pretrain(po, log) == 0);
+
+  ProbeOptions pb;
+  pb.checkpoint = (t / "run" / "checkpoint.safetensors").string();
+  pb.train_data = (t / "train.txt").string();
+  pb.test_data = (t / "test.txt").string();
+  pb.train_labels = (t / "train_labels.csv").string();
+  pb.test_labels = (t / "test_labels.csv").string();
+  pb.task = "regression";
+  pb.label_columns = "1:3";
+  pb.probe.max_epochs = 3;
+  pb.quiet = true;
+  pb.out = (t / "probe.json").string();
+  std::ostringstream out;
+  REQUIRE(run_probe(pb, out) == 0);
+  CHECK(out.str().find("| constant (train mean / majority) |") != std::string::npos);
+  CHECK(out.str().find("| ridge on raw windows |") != std::string::npos);
+  const auto j = nlohmann::json::parse(read_file(t / "probe.json"));
+  REQUIRE(j["results"].size() == 4u);
+  CHECK(j["results"][2]["row"] == "random encoder (frozen)");
+  CHECK(j["results"][3]["row"] == "target encoder (frozen)");
+  CHECK(j["train_windows"] == 30);
+  CHECK(j["test_windows"] == 10);
+  for (const auto& r : j["results"]) {
+    REQUIRE(r["rmse"].size() == 2u);
+    for (int a = 0; a < 2; ++a) CHECK(std::isfinite(r["rmse"][a].get<double>()));
+  }
+  for (int r = 2; r < 4; ++r) CHECK(j["results"][r].contains("validation_loss"));
+
+  // Classification by board, and a training split that holds one class: flagged.
+  pb.task = "classification";
+  pb.label_columns = "3";
+  pb.force = true;
+  REQUIRE(run_probe(pb, out) == 0);
+  const auto c = nlohmann::json::parse(read_file(t / "probe.json"));
+  CHECK(c["results"][0].contains("accuracy"));
+  CHECK(c["results"][0]["flag"] == "");
+  pb.train_labels = (t / "one_class.csv").string();
+  REQUIRE(run_probe(pb, out) == 0);
+  const auto one = nlohmann::json::parse(read_file(t / "probe.json"));
+  for (const auto& r : one["results"]) CHECK(r["flag"].get<std::string>().find("the training windows hold one class") != std::string::npos);
+
+  // Labels that do not fit the recording, and a class id that is not one.
+  pb.train_labels = (t / "test_labels.csv").string();
+  CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("test_labels.csv: labels for 100 frames, the recording has 300"),
+                       ShapeError);
+  pb.train_labels = (t / "train_labels.csv").string();
+  pb.label_columns = "1";
+  CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("expected an integer id"), DataError);
+  pb.task = "ranking";
+  CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("expected regression or classification"), ConfigError);
+  // The flag of a head against the constant on its validation split.
+  CHECK(head_flag(1.2, 1.0).starts_with("no better than the constant"));
+  CHECK(head_flag(0.4, 1.0).empty());
+  CHECK(head_flag(std::nan(""), 1.0).starts_with("diverged"));
+}
+
+}

@@ -337,4 +337,67 @@ TEST_SUITE("graph") {
     CHECK_THROWS_WITH_AS(tjepa::parse_csv_columns("x=visual_x,colour=red"), doctest::Contains("unknown key 'colour'"),
                          tjepa::ConfigError);
   }
+
+  TEST_CASE("a glove's grid with holes: 4-neighbour edges / one piece per hand") {
+    // The live cells of one hand of a knitted glove (9 x 11 cells, '#' live), both hands as parts.
+    const std::vector<std::string> mask = {"......###..", "#########..", "###########", "###########",
+                                           "###########", "###########", "###########", "#########..",
+                                           "#########.."};
+    tjepa::TaxelLayout l;
+    l.dim = 2;
+    l.part_names = {"left", "right"};
+    l.group_names = {"left", "right"};
+    l.group_part = {0, 1};
+    int live = 0;
+    for (int hand = 0; hand < 2; ++hand)
+      for (int r = 0; r < 9; ++r)
+        for (int c = 0; c < 11; ++c)
+          if (mask[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)] == '#') {
+            l.ids.push_back(static_cast<int>(l.ids.size()));
+            l.coords.insert(l.coords.end(), {c * 10.0, r * 10.0});  // the hands drawn over each other
+            l.part.push_back(hand);
+            l.group.push_back(hand);
+            live += hand == 0;
+          }
+    const tjepa::InferredSkin s = tjepa::skin_from_coordinates(l);
+    CHECK(s.warnings.empty());
+    CHECK(s.skin.graph.num_components() == 2);
+    std::size_t grid = 0;
+    for (int r = 0; r < 9; ++r)
+      for (int c = 0; c < 11; ++c) {
+        auto on = [&](int rr, int cc) {
+          return rr < 9 && cc < 11 && mask[static_cast<std::size_t>(rr)][static_cast<std::size_t>(cc)] == '#';
+        };
+        if (on(r, c)) grid += on(r, c + 1) + on(r + 1, c);
+      }
+    CHECK(live == 85);
+    CHECK(s.skin.graph.num_edges() == 2 * grid);
+  }
+
+  TEST_CASE("SVG: coordinates in cm stay readable / parts drawn over each other are laid out side by side") {
+    tjepa::TaxelLayout l;
+    l.dim = 2;
+    l.part_names = {"left", "right"};
+    l.group_names = {"left", "right"};
+    l.group_part = {0, 1};
+    for (int p = 0; p < 2; ++p)
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) {  // two 3 x 3 feet at 0.5 (cm) pitch, in one frame
+          l.ids.push_back(static_cast<int>(l.ids.size()));
+          l.coords.insert(l.coords.end(), {0.5 * c, 0.5 * r});
+          l.part.push_back(p);
+          l.group.push_back(p);
+        }
+    const auto pos = tjepa::drawing_positions(l);
+    double right0 = -1e9, left1 = 1e9;
+    for (int i = 0; i < 9; ++i) right0 = std::max(right0, pos[2 * i]);
+    for (int i = 9; i < 18; ++i) left1 = std::min(left1, pos[2 * i]);
+    CHECK(left1 > right0);
+    const tjepa::InferredSkin s = tjepa::skin_from_coordinates(l);
+    const std::string svg = tjepa::svg_string(s.skin, tjepa::SvgOptions{});
+    const auto at = svg.find("<circle");
+    REQUIRE(at != std::string::npos);
+    const auto rpos = svg.find(" r=\"", at);
+    CHECK(std::stod(svg.substr(rpos + 4)) >= 4.0);  // radius in px
+  }
 }

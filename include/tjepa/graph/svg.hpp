@@ -16,6 +16,7 @@
 // Layouts without coordinates are drawn from (row, col) with groups side by side, or, without
 // cells, as one square block of taxels per group.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -51,7 +52,8 @@ struct SvgOptions {
   bool draw_edges = true;
   bool group_labels = false;       // write each group's name at its centroid
   std::string title;
-  double px_per_mm = 4.0;          // drawing scale (coordinates are in mm)
+  double px_per_mm = 0.0;          // drawing scale (coordinates are in mm); 0: 4, or what keeps a
+                                   // taxel radius at least 4 px and the drawing at most 2000 px wide
   double radius = 0.0;             // taxel radius in mm; 0: 0.4 x the shortest edge
 };
 
@@ -91,6 +93,31 @@ inline std::vector<double> drawing_positions(const TaxelLayout& l) {
       pos[2 * i] = l.coord(i, 0);
       pos[2 * i + 1] = l.coord(i, 1);
     }
+    // Parts drawn in one frame (two feet, two hands over each other) are laid out side by side:
+    // a part whose box overlaps an earlier part's moves right of them all.
+    const int P = l.num_parts();
+    std::vector<std::array<double, 4>> box(static_cast<std::size_t>(P), {1e300, 1e300, -1e300, -1e300});
+    for (int i = 0; i < n; ++i) {
+      auto& b = box[static_cast<std::size_t>(l.part[i])];
+      b = {std::min(b[0], pos[2 * i]), std::min(b[1], pos[2 * i + 1]), std::max(b[2], pos[2 * i]),
+           std::max(b[3], pos[2 * i + 1])};
+    }
+    double right = -1e300;
+    bool overlap = false;
+    for (int p = 1; p < P && !overlap; ++p)
+      for (int q = 0; q < p && !overlap; ++q) {
+        const auto &a = box[static_cast<std::size_t>(p)], &b = box[static_cast<std::size_t>(q)];
+        overlap = a[0] <= b[2] && b[0] <= a[2] && a[1] <= b[3] && b[1] <= a[3];
+      }
+    if (!overlap) return pos;
+    std::vector<double> shift(static_cast<std::size_t>(P), 0.0);
+    for (int p = 0; p < P; ++p) {
+      const auto& b = box[static_cast<std::size_t>(p)];
+      const double width = b[2] - b[0];
+      if (p > 0) shift[static_cast<std::size_t>(p)] = right + 0.15 * std::max(width, 1e-9) - b[0];
+      right = b[2] + shift[static_cast<std::size_t>(p)];
+    }
+    for (int i = 0; i < n; ++i) pos[2 * i] += shift[static_cast<std::size_t>(l.part[i])];
     return pos;
   }
   double x0 = 0;
@@ -121,8 +148,8 @@ inline std::string svg_string(const TaxelLayout& l, const TaxelGraph* graph, con
                       o.fill.size(), " colours, expected one per taxel (", n, ")");
   require<ShapeError>(o.value.empty() || static_cast<int>(o.value.size()) == n, "svg_string: value has ",
                       o.value.size(), " entries, expected one per taxel (", n, ")");
-  require<ConfigError>(o.px_per_mm > 0 && std::isfinite(o.px_per_mm), "svg_string: px_per_mm ", o.px_per_mm,
-                       ", expected > 0");
+  require<ConfigError>(o.px_per_mm >= 0 && std::isfinite(o.px_per_mm), "svg_string: px_per_mm ", o.px_per_mm,
+                       ", expected > 0 (or 0: automatic)");
   for (const auto& h : o.highlights)
     for (int i : h.taxels)
       require<DataError>(i >= 0 && i < n, "svg_string: highlight '", h.label, "' names taxel ", i,
@@ -151,7 +178,14 @@ inline std::string svg_string(const TaxelLayout& l, const TaxelGraph* graph, con
     ymin = std::min(ymin, pos[2 * i + 1]);
     ymax = std::max(ymax, pos[2 * i + 1]);
   }
-  const double s = o.px_per_mm, margin = 20.0 + 2 * r * s, title_h = o.title.empty() ? 0.0 : 28.0;
+  double s = o.px_per_mm;
+  if (s <= 0) {  // automatic: coordinates in cm or m stay readable, a large sheet fits a screen
+    s = 4.0;
+    if (r * s < 4.0) s = 4.0 / r;
+    const double extent = std::max(xmax - xmin, ymax - ymin);
+    if (extent * s > 2000.0) s = 2000.0 / std::max(extent, 1e-12);
+  }
+  const double margin = 20.0 + 2 * r * s, title_h = o.title.empty() ? 0.0 : 28.0;
 
   // Fill colours and the legend entries that explain them.
   std::vector<std::string> fill(n);

@@ -292,12 +292,17 @@ inline std::string layout_csv_string(const TaxelLayout& l) {
   if (l.has_columns()) out += ",column";
   out += "\n";
   for (int i = 0; i < l.size(); ++i) {
+    auto field = [&out](const std::string& f) {
+      out += ',';
+      out += f;
+    };
     out += std::to_string(l.ids[i]);
-    for (int a = 0; a < l.dim; ++a) out += "," + detail::format_real(l.coord(i, a));
-    out += "," + detail::csv_field(l.part_names[l.part[i]]) + "," + detail::csv_field(l.group_names[l.group[i]]);
-    if (l.has_cells()) out += "," + std::to_string(l.row[i]) + "," + std::to_string(l.col[i]);
-    if (l.has_columns()) out += "," + std::to_string(l.column[i]);
-    out += "\n";
+    for (int a = 0; a < l.dim; ++a) field(detail::format_real(l.coord(i, a)));
+    field(detail::csv_field(l.part_names[l.part[i]]));
+    field(detail::csv_field(l.group_names[l.group[i]]));
+    if (l.has_cells()) field(std::to_string(l.row[i])), field(std::to_string(l.col[i]));
+    if (l.has_columns()) field(std::to_string(l.column[i]));
+    out += '\n';
   }
   return out;
 }

@@ -1,0 +1,312 @@
+#pragma once
+// `tjepa probe --task regression|classification`: probes for the user's own labels (motor
+// positions, object ids, anything per frame), on the user's recordings.
+//
+// Labels: one row per frame of the recording (a .npy [T] or [T, K], or text with a header
+// detected and --label-columns), a window's label is its last frame's. Regression: K outputs, every
+// value finite. Classification: one column of class ids; a negative id marks a frame without a
+// class and its windows are left out.
+// Rows, each scored on the held-out recording:
+//   constant               the training mean / the majority class;
+//   ridge on raw windows   closed-form ridge on pad sums and taxel means (downstream/ridge.hpp);
+//   random encoder         the checkpoint's architecture at a random initialization, frozen;
+//   this checkpoint        its target (or context) encoder, frozen.
+// Heads are attentive probes trained with early stopping on a validation split of the training
+// windows (train_head). A head whose best validation loss is no lower than the constant's on the
+// same split is flagged (it learned nothing), as is a split whose windows hold one class.
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <limits>
+#include <ostream>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <tjepa/downstream/embed.hpp>
+#include <tjepa/downstream/ridge.hpp>
+#include <tjepa/tjepa.hpp>
+
+#include "output.hpp"
+#include "setup.hpp"
+
+namespace tjepa::cli {
+
+enum class LabelTask { regression, classification };
+
+inline LabelTask parse_label_task(const std::string& s) {
+  if (s == "regression") return LabelTask::regression;
+  require<ConfigError>(s == "classification", "--task '", s, "', expected regression or classification");
+  return LabelTask::classification;
+}
+
+// Frame labels [T, K] from a file, checked against the recording's frame count.
+inline Recording read_label_frames(const std::filesystem::path& path, const std::string& columns, int frames) {
+  DataFormat f;
+  f.axes = 1;
+  f.columns = columns;
+  Recording r = read_recording(path, f);
+  if (path.extension() == ".npy" && r.axes() > 1) {  // [T, K, m] read as is: flatten to [T, K·m]
+    r = Recording(r.frames(), r.taxels() * r.axes(), 1, AlignedVector<float>(r.values().begin(), r.values().end()),
+                  r.source());
+  }
+  require<ShapeError>(r.frames() == frames, path.string(), ": labels for ", r.frames(), " frames, the recording has ",
+                      frames, " (one label row per frame)");
+  return r;
+}
+
+// The labelled windows of a source: ids, and their targets for a head.
+struct WindowLabels {
+  std::vector<std::int64_t> window;
+  HeadTargets targets;
+};
+
+inline WindowLabels window_labels(const WindowSource& src, const Recording& frames, LabelTask task, int classes,
+                                  const std::string& file) {
+  WindowLabels w;
+  const int K = frames.taxels();
+  if (task == LabelTask::classification)
+    require<ShapeError>(K == 1, file, ": ", K, " label columns, a classification takes one (the class id; choose it ",
+                        "with --label-columns)");
+  w.targets.regression = task == LabelTask::regression ? K : 0;
+  w.targets.classes = task == LabelTask::classification ? classes : 0;
+  for (std::int64_t i = 0; i < src.size(); ++i) {
+    const int last = src.start_of(i) + src.length() - 1;
+    if (task == LabelTask::classification) {
+      const float c = frames(last, 0, 0);
+      require<DataError>(c == std::floor(c), file, ": frame ", last, " has class ", c, ", expected an integer id");
+      if (c < 0) continue;
+      w.window.push_back(i);
+      w.targets.label.push_back(static_cast<int>(c));
+    } else {
+      w.window.push_back(i);
+      for (int k = 0; k < K; ++k) w.targets.value.push_back(frames(last, k, 0));
+    }
+  }
+  require<DataError>(w.window.size() >= 4, file, ": ", w.window.size(), " labelled windows, expected at least 4");
+  return w;
+}
+
+struct LabelProbeRow {
+  std::string name;
+  std::vector<double> rmse;         // regression: per output
+  double accuracy = std::numeric_limits<double>::quiet_NaN();
+  double validation = std::numeric_limits<double>::quiet_NaN();  // heads: best validation loss
+  int best_epoch = -1, epochs = 0;
+  std::string flag;                 // why the row says little ("" = nothing to say)
+  double seconds = 0;
+};
+
+// The constant's validation loss on the split a head sees: the fit split's mean (0 in the head's
+// standardized units) and the fit split's class frequencies as logits.
+inline double constant_validation_loss(const HeadTargets& t, const HeadTrainConfig& cfg) {
+  const ValidationSplit split = validation_split(t.size(), cfg, t.groups);
+  const int R = t.regression, C = t.classes;
+  const ColumnScaler s = R > 0 ? ColumnScaler::fit(t.value, R, split.fit) : ColumnScaler{};
+  std::vector<double> p(static_cast<std::size_t>(C), 1.0);  // add-one counts
+  if (C > 0)
+    for (std::int64_t i : split.fit) p[static_cast<std::size_t>(t.label[static_cast<std::size_t>(i)])] += 1;
+  const int B = static_cast<int>(split.validation.size()), out = R + C;
+  std::vector<double> y(static_cast<std::size_t>(B) * out, 0.0), z(static_cast<std::size_t>(B) * R);
+  std::vector<int> lab(static_cast<std::size_t>(C > 0 ? B : 0));
+  for (int b = 0; b < B; ++b) {
+    const auto i = static_cast<std::size_t>(split.validation[static_cast<std::size_t>(b)]);
+    for (int a = 0; a < R; ++a) z[static_cast<std::size_t>(b) * R + a] = s.standardize(t.value[i * R + a], a);
+    for (int c = 0; c < C; ++c) y[static_cast<std::size_t>(b) * out + R + c] = std::log(p[static_cast<std::size_t>(c)]);
+    if (C > 0) lab[static_cast<std::size_t>(b)] = t.label[i];
+  }
+  const auto [f, ce] = detail::head_loss<double, double>(y.data(), static_cast<std::size_t>(out), z.data(), lab.data(), B,
+                                                          R, C, cfg.class_weight, nullptr);
+  return f + cfg.class_weight * ce;
+}
+
+// The flag of a head: no better than the constant on its own validation split.
+inline std::string head_flag(double validation, double constant) {
+  if (!std::isfinite(validation)) return "diverged (validation loss not finite)";
+  if (validation >= constant)
+    return "no better than the constant on validation (" + std::to_string(validation) + " >= " +
+           std::to_string(constant) + ")";
+  return "";
+}
+
+inline int distinct_classes(std::span<const int> labels) {
+  std::vector<int> seen;
+  for (int c : labels)
+    if (std::find(seen.begin(), seen.end(), c) == seen.end()) seen.push_back(c);
+  return static_cast<int>(seen.size());
+}
+
+inline void score_row(LabelProbeRow& row, const std::vector<double>& pred_value, const std::vector<int>& pred_class,
+                      const HeadTargets& test) {
+  const int S = test.size(), R = test.regression;
+  if (R > 0) {
+    row.rmse.assign(static_cast<std::size_t>(R), 0.0);
+    for (int s = 0; s < S; ++s)
+      for (int a = 0; a < R; ++a) {
+        const double e = pred_value[static_cast<std::size_t>(s) * R + a] - test.value[static_cast<std::size_t>(s) * R + a];
+        row.rmse[static_cast<std::size_t>(a)] += e * e;
+      }
+    for (double& v : row.rmse) v = std::sqrt(v / S);
+  }
+  if (test.classes > 0) {
+    int right = 0;
+    for (int s = 0; s < S; ++s) right += pred_class[static_cast<std::size_t>(s)] == test.label[static_cast<std::size_t>(s)];
+    row.accuracy = static_cast<double>(right) / S;
+  }
+}
+
+// The rows of a label probe (see the top). encoder: the checkpoint's encoder to probe.
+inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const ParamSet<float>& encoder_params,
+                                                   const std::string& encoder_name, const WindowSource& train_src,
+                                                   const WindowLabels& train, const WindowSource& test_src,
+                                                   const WindowLabels& test, const Skin& skin,
+                                                   const HeadTrainConfig& cfg, bool quiet) {
+  const TaxelLayout& layout = skin.layout;
+  const HeadTargets& tr = train.targets;
+  const HeadTargets& te = test.targets;
+  const int R = tr.regression, C = tr.classes;
+  std::vector<LabelProbeRow> rows;
+  const std::string one_class =
+      C > 0 && distinct_classes(tr.label) < 2 ? "the training windows hold one class" : "";
+  const std::string one_class_test =
+      C > 0 && distinct_classes(te.label) < 2 ? "the held-out windows hold one class" : "";
+  auto join = [](std::string a, const std::string& b) { return a.empty() ? b : b.empty() ? a : a + "; " + b; };
+  // constant
+  {
+    LabelProbeRow row{"constant (train mean / majority)", {}, {}, {}, -1, 0, join(one_class, one_class_test), 0};
+    std::vector<std::int64_t> all(static_cast<std::size_t>(tr.size()));
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::int64_t>(i);
+    std::vector<double> v;
+    std::vector<int> c;
+    if (R > 0) {
+      const ColumnScaler s = ColumnScaler::fit(tr.value, R, all);
+      for (int i = 0; i < te.size(); ++i) v.insert(v.end(), s.mean.begin(), s.mean.end());
+    }
+    if (C > 0) {
+      std::vector<int> count(static_cast<std::size_t>(C), 0);
+      for (int l : tr.label) ++count[static_cast<std::size_t>(l)];
+      c.assign(static_cast<std::size_t>(te.size()),
+               static_cast<int>(std::max_element(count.begin(), count.end()) - count.begin()));
+    }
+    score_row(row, v, c, te);
+    row.validation = constant_validation_loss(tr, cfg);
+    rows.push_back(row);
+  }
+  const double constant = rows.front().validation;
+  // ridge on raw windows
+  {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto features = [&](const WindowSource& src, const std::vector<std::int64_t>& ids) {
+      WindowBatch wb;
+      src.gather(ids, wb);
+      return window_features(wb, layout.group, layout.num_groups());
+    };
+    const Eigen::MatrixXd Xtr = features(train_src, train.window), Xte = features(test_src, test.window);
+    static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
+    LabelProbeRow row{"ridge on raw windows", {}, {}, {}, -1, 0, one_class, 0};
+    std::vector<double> v;
+    std::vector<int> c;
+    if (R > 0) {
+      Eigen::MatrixXd Y(tr.size(), R);
+      for (int s = 0; s < tr.size(); ++s)
+        for (int a = 0; a < R; ++a) Y(s, a) = tr.value[static_cast<std::size_t>(s) * R + a];
+      const RidgeModel rm = fit_ridge(Xtr, Y, lambdas, cfg.validation_fraction, cfg.seed);
+      const Eigen::MatrixXd P = predict(rm, Xte);
+      for (int s = 0; s < te.size(); ++s)
+        for (int a = 0; a < R; ++a) v.push_back(P(s, a));
+    }
+    if (C > 0) {
+      const RidgeModel rm = fit_ridge_classifier(Xtr, tr.label, C, lambdas, cfg.validation_fraction, cfg.seed);
+      c = predict_class(rm, Xte);
+    }
+    score_row(row, v, c, te);
+    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    rows.push_back(row);
+  }
+  // frozen encoders: a random initialization of the same architecture, and the checkpoint's
+  auto head_row = [&](const std::string& name, const ParamSet<float>& params) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const JepaModel<float>& model = *m.model;
+    ProgressLine bar("  embed " + name, tr.size() + te.size(), quiet);
+    auto etr = embed_windows(params, model.tokenizer, model.encoder, train_src, train.window, 32,
+                             [&](std::int64_t d, std::int64_t) { bar.update(d, d, ""); });
+    auto ete = embed_windows(params, model.tokenizer, model.encoder, test_src, test.window, 32,
+                             [&](std::int64_t d, std::int64_t) { bar.update(tr.size() + d, tr.size() + d, ""); });
+    FrozenFeatures<float> ftr(std::move(etr), model.num_tokens(), model.dim());
+    FrozenFeatures<float> fte(std::move(ete), model.num_tokens(), model.dim());
+    ProbeHead<float> head(model.dim(), m.config.heads, R, C, cfg.seed);
+    const HeadTrainResult fit = train_head(head, ftr, tr, cfg);
+    LabelProbeRow row{name, {}, {}, fit.best_validation, fit.best_epoch, fit.epochs(), "", 0};
+    const std::vector<float> y = predict_head(head, fte, te.size());
+    std::vector<double> v;
+    std::vector<int> c;
+    const int out = R + C;
+    for (int s = 0; s < te.size(); ++s) {
+      const float* r = y.data() + static_cast<std::size_t>(s) * out;
+      for (int a = 0; a < R; ++a) v.push_back(r[a]);
+      if (C > 0) c.push_back(static_cast<int>(std::max_element(r + R, r + out) - (r + R)));
+    }
+    score_row(row, v, c, te);
+    row.flag = join(one_class, head_flag(row.validation, constant));
+    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return row;
+  };
+  const auto random = make_jepa_model(m.config, skin.graph, m.model->config.in_dim / m.config.tau,
+                                      m.config.seed ^ 0x72616e646f6dull);  // "random"
+  rows.push_back(head_row("random encoder (frozen)", random->target));
+  rows.push_back(head_row(encoder_name + " encoder (frozen)", encoder_params));
+  return rows;
+}
+
+inline std::string label_probe_markdown(const std::vector<LabelProbeRow>& rows, const HeadTargets& test, int train_windows) {
+  const int R = test.regression, C = test.classes;
+  std::string s = "### Probe: " + std::string(R > 0 ? std::to_string(R) + " regression output(s)" : "") +
+                  (R > 0 && C > 0 ? " and " : "") + (C > 0 ? std::to_string(C) + " classes" : "") + ", " +
+                  std::to_string(train_windows) + " training / " + std::to_string(test.size()) + " held-out windows\n\n";
+  s += "| row |";
+  for (int a = 0; a < R; ++a) s += " RMSE " + std::to_string(a) + " ↓ |";
+  if (R > 1) s += " mean RMSE ↓ |";
+  if (C > 0) s += " top-1 (%) ↑ |";
+  s += " best epoch | note |\n|---|";
+  for (int a = 0; a < R + (R > 1 ? 1 : 0) + (C > 0 ? 1 : 0) + 2; ++a) s += "---|";
+  s += "\n";
+  char buf[64];
+  for (const auto& r : rows) {
+    s += "| " + r.name + " |";
+    double mean = 0;
+    for (double v : r.rmse) {
+      std::snprintf(buf, sizeof buf, " %.4g |", v);
+      s += buf;
+      mean += v / static_cast<double>(r.rmse.size());
+    }
+    if (R > 1) {
+      std::snprintf(buf, sizeof buf, " %.4g |", mean);
+      s += buf;
+    }
+    if (C > 0) {
+      std::snprintf(buf, sizeof buf, " %.1f |", 100 * r.accuracy);
+      s += buf;
+    }
+    s += r.best_epoch >= 0 ? " " + std::to_string(r.best_epoch + 1) + " of " + std::to_string(r.epochs) + " |" : " - |";
+    s += " " + (r.flag.empty() ? std::string() : "**" + r.flag + "**") + " |\n";
+  }
+  return s;
+}
+
+inline nlohmann::json label_probe_json(const std::vector<LabelProbeRow>& rows) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& r : rows) {
+    nlohmann::json j = {{"row", r.name}, {"flag", r.flag}, {"seconds", r.seconds}};
+    if (!r.rmse.empty()) j["rmse"] = r.rmse;
+    if (std::isfinite(r.accuracy)) j["accuracy"] = r.accuracy;
+    if (std::isfinite(r.validation)) j["validation_loss"] = r.validation;
+    if (r.best_epoch >= 0) j["best_epoch"] = r.best_epoch + 1, j["epochs"] = r.epochs;
+    a.push_back(std::move(j));
+  }
+  return a;
+}
+
+}  // namespace tjepa::cli
