@@ -76,6 +76,10 @@ int main(int argc, char** argv) {
                     "labels per frame: [T, 4] .npy (force u, v, normal, indenter class or -1), or with --task your own");
   probe->add_option("--task", pb.task, "your own labels: regression (any number of columns) | classification (class ids)");
   probe->add_option("--label-columns", pb.label_columns, "text label files: the label columns, e.g. 1:3");
+  probe->add_option("--data", pb.data, "with --task: one recording, split in time (--test-fraction)");
+  probe->add_option("--labels", pb.labels, "with --task and --data: its labels, one row per frame");
+  probe->add_option("--test-fraction", pb.test_fraction, "with --data: the last fraction of frames held out")
+      ->capture_default_str();
   probe->add_option("--test-data", pb.test_data, "held-out recording");
   probe->add_option("--test-labels", pb.test_labels, "held-out labels");
   probe->add_option("--simulate-seed", pb.simulate_seed, "seed of the simulated labelled data")->capture_default_str();

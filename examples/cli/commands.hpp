@@ -435,6 +435,8 @@ struct ProbeOptions {
   bool center_tokens = false;              // center_token_embeddings before the probe
   std::string task;                        // "": force + indenter labels; regression | classification: the user's
   std::string label_columns;               // the label files' columns (text), "a:b,..."
+  std::string data, labels;                // --task: one recording and its labels, split in time instead of
+  double test_fraction = 0.2;              //   train/test files: the last test_fraction of the frames is held out
   std::string out;                         // results JSON ("" = none)
   bool force = false;
   bool quiet = false;
@@ -443,32 +445,52 @@ struct ProbeOptions {
 // tjepa probe --task: the user's own labels (label_probe.hpp).
 inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
   const LabelTask task = parse_label_task(o.task);
-  require<ConfigError>(!o.train_data.empty() && !o.train_labels.empty() && !o.test_data.empty() && !o.test_labels.empty(),
-                       "--task needs --train-data, --train-labels, --test-data and --test-labels");
+  const bool one_file = !o.data.empty() || !o.labels.empty();
+  require<ConfigError>(one_file ? !o.data.empty() && !o.labels.empty() && o.train_data.empty() && o.test_data.empty()
+                                : !o.train_data.empty() && !o.train_labels.empty() && !o.test_data.empty() &&
+                                      !o.test_labels.empty(),
+                       "--task needs --data and --labels (split in time by --test-fraction), or --train-data, "
+                       "--train-labels, --test-data and --test-labels");
+  require<ConfigError>(o.test_fraction > 0 && o.test_fraction < 1, "--test-fraction ", o.test_fraction,
+                       ", expected in (0, 1)");
   TrainedModel m = load_trained_model(o.checkpoint);
   const JepaModel<float>& model = *m.model;
   const Skin skin = load_skin(SkinSpec::of(m.config));
-  Recording train_rec = in_layout_order(read_recording(o.train_data, o.format), skin, o.train_data);
-  Recording test_rec = in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data);
+  Recording train_rec, test_rec, train_frames, test_frames;
+  std::string train_labels = o.train_labels, test_labels = o.test_labels;
+  if (one_file) {
+    // One session: the first frames train, the last test_fraction are held out (no window crosses).
+    const Recording rec = in_layout_order(read_recording(o.data, o.format), skin, o.data);
+    const Recording lab = read_label_frames(o.labels, o.label_columns, rec.frames());
+    const int cut = static_cast<int>(std::lround(rec.frames() * (1.0 - o.test_fraction)));
+    require<DataError>(cut >= 2 * m.config.tau && rec.frames() - cut >= 2 * m.config.tau, o.data, ": ", rec.frames(),
+                       " frames split at ", cut, " leave fewer than two windows of ", m.config.tau, " frames on a side");
+    train_rec = rec.frames_range(0, cut), test_rec = rec.frames_range(cut, rec.frames());
+    train_frames = lab.frames_range(0, cut), test_frames = lab.frames_range(cut, rec.frames());
+    train_labels = test_labels = o.labels;
+  } else {
+    train_rec = in_layout_order(read_recording(o.train_data, o.format), skin, o.train_data);
+    test_rec = in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data);
+    train_frames = read_label_frames(o.train_labels, o.label_columns, train_rec.frames());
+    test_frames = read_label_frames(o.test_labels, o.label_columns, test_rec.frames());
+  }
   for (const Recording* r : {&train_rec, &test_rec})
     require<ShapeError>(r->axes() * m.config.tau == model.config.in_dim, r->source(), ": ", r->axes(),
                         " axes; the checkpoint expects ", model.config.in_dim / m.config.tau);
-  const Recording train_frames = read_label_frames(o.train_labels, o.label_columns, train_rec.frames());
-  const Recording test_frames = read_label_frames(o.test_labels, o.label_columns, test_rec.frames());
-  require<ShapeError>(train_frames.taxels() == test_frames.taxels(), o.test_labels, ": ", test_frames.taxels(),
-                      " label columns, ", o.train_labels, " has ", train_frames.taxels());
+  require<ShapeError>(train_frames.taxels() == test_frames.taxels(), test_labels, ": ", test_frames.taxels(),
+                      " label columns, ", train_labels, " has ", train_frames.taxels());
   int classes = 0;
   if (task == LabelTask::classification)
     for (const Recording* f : {&train_frames, &test_frames})
       for (float c : f->values()) classes = std::max(classes, static_cast<int>(c) + 1);
-  require<DataError>(task == LabelTask::regression || classes >= 2, o.train_labels, " and ", o.test_labels,
+  require<DataError>(task == LabelTask::regression || classes >= 2, train_labels, " and ", test_labels,
                      ": class ids up to ", classes - 1, ", expected at least two classes");
   m.track(train_rec);
   m.track(test_rec);
   const WindowSource train_src(train_rec, WindowSpec{m.config.tau}, {}, m.pre);
   const WindowSource test_src(test_rec, WindowSpec{m.config.tau}, {}, m.pre);
-  const WindowLabels train = window_labels(train_src, train_frames, task, classes, o.train_labels);
-  const WindowLabels test = window_labels(test_src, test_frames, task, classes, o.test_labels);
+  const WindowLabels train = window_labels(train_src, train_frames, task, classes, train_labels);
+  const WindowLabels test = window_labels(test_src, test_frames, task, classes, test_labels);
   out << "probe for " << o.task << " labels on " << o.checkpoint << ": " << train.window.size() << " training and "
       << test.window.size() << " held-out windows\n";
   const std::vector<LabelProbeRow> rows = label_probe_rows(

@@ -200,7 +200,7 @@ inline Preprocessor fit_preprocessor(const std::string& mode, const Recording* b
 // How recordings are read: axes per taxel (text files and [T, N·m] .npy), which columns of a
 // text file hold the taxels' values ("0:60" or "0:30,60:90", end exclusive, in the file's order,
 // taxel-major with the axis fastest; "": all), header rows (-1: detect one), and what a NaN/Inf
-// reading means (error, hold the last finite value, zero).
+// reading means (error, hold the last finite value, interpolate, zero).
 struct DataFormat {
   int axes = 3;
   std::string columns;

@@ -162,12 +162,16 @@ TEST_CASE("non-finite readings: an error at the file's line before any statistic
   CHECK(held.frames() == 4);
   CHECK(held(2, 0, 1) == 2.5f);
   CHECK(held(3, 1, 0) == 5.0f);
+  f.non_finite = "interpolate";
+  const Recording between = read_recording(t / "gaps.csv", f);
+  CHECK(between(2, 0, 1) == 2.75f);  // 2.5 and 3 around it
+  CHECK(between(3, 1, 0) == 5.0f);   // the last frame: the nearest finite reading
   f.non_finite = "zero";
   const Recording zeroed = read_recording(t / "gaps.csv", f);
   CHECK(zeroed(2, 0, 1) == 0.0f);
   CHECK(zeroed(3, 1, 0) == 0.0f);
   f.non_finite = "skip";
-  CHECK_THROWS_WITH_AS(read_recording(t / "gaps.csv", f), doctest::Contains("expected error, hold or zero"), ConfigError);
+  CHECK_THROWS_WITH_AS(read_recording(t / "gaps.csv", f), doctest::Contains("expected error, hold, interpolate or zero"), ConfigError);
   // A .npy with an Inf: named by frame, taxel and axis as the file holds it.
   Recording r(5, 2, 3, 1.0f);
   r.at(3, 1, 2) = std::numeric_limits<float>::infinity();
@@ -365,6 +369,26 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
   const auto one = nlohmann::json::parse(read_file(t / "probe.json"));
   for (const auto& r : one["results"]) CHECK(r["flag"].get<std::string>().find("the training windows hold one class") != std::string::npos);
 
+  // One session and its labels, split in time: the first 80 % train, the last 20 % are held out.
+  {
+    std::ofstream all(t / "all_labels.csv");
+    all << read_file(t / "train_labels.csv");
+    const std::string test_rows = read_file(t / "test_labels.csv");
+    all << test_rows.substr(test_rows.find('\n') + 1);
+  }
+  write_rows(t / "all.txt", rows);
+  ProbeOptions session = pb;
+  session.train_data.clear(), session.test_data.clear(), session.train_labels.clear(), session.test_labels.clear();
+  session.data = (t / "all.txt").string();
+  session.labels = (t / "all_labels.csv").string();
+  session.task = "regression";
+  session.label_columns = "1:3";
+  REQUIRE(run_probe(session, out) == 0);
+  const auto split = nlohmann::json::parse(read_file(t / "probe.json"));
+  CHECK(split["train_windows"] == 32);
+  CHECK(split["test_windows"] == 8);
+  session.test_fraction = 0.99;
+  CHECK_THROWS_WITH_AS(run_probe(session, out), doctest::Contains("leave fewer than two windows"), DataError);
   // Labels that do not fit the recording, and a class id that is not one.
   pb.train_labels = (t / "test_labels.csv").string();
   CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("test_labels.csv: labels for 100 frames, the recording has 300"),

@@ -330,6 +330,11 @@ TEST_SUITE("graph") {
     CHECK(socks.graph.num_edges() == 24u);
     CHECK(socks.graph.num_components() == 2);  // one per sock
     CHECK(tjepa::component_warnings(socks).empty());
+    // The same files read with their own names recognized, no column names given.
+    const tjepa::Skin plain = tjepa::read_skin_csv(t / "sensor_map.csv", t / "edges.csv");
+    CHECK(plain.graph.edges() == socks.graph.edges());
+    CHECK(plain.layout.part_names == std::vector<std::string>{"left", "right"});
+    CHECK(plain.layout.coords == socks.layout.coords);
     // Without the edges file the graph is inferred: the same 4-neighbour grid per sock.
     const tjepa::InferredSkin inferred = tjepa::read_skin_coordinates_csv(t / "sensor_map.csv", nc);
     CHECK(inferred.skin.graph.num_edges() == 24u);

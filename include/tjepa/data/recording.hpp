@@ -136,13 +136,15 @@ inline std::size_t find_non_finite(std::span<const float> values) {
 }
 
 // What to do with NaN/Inf readings: stop (an error naming where), hold the taxel-axis's last finite
-// reading (0 before the first), or write 0.
-enum class NonFinite { error, hold, zero };
+// reading (0 before the first), interpolate linearly in time between the finite readings around
+// the gap (the nearest one at either end), or write 0.
+enum class NonFinite { error, hold, interpolate, zero };
 
 inline NonFinite parse_non_finite(const std::string& s) {
   if (s == "hold") return NonFinite::hold;
+  if (s == "interpolate") return NonFinite::interpolate;
   if (s == "zero") return NonFinite::zero;
-  require<ConfigError>(s == "error", "non-finite policy '", s, "', expected error, hold or zero");
+  require<ConfigError>(s == "error", "non-finite policy '", s, "', expected error, hold, interpolate or zero");
   return NonFinite::error;
 }
 
@@ -166,9 +168,30 @@ inline std::size_t replace_non_finite(Recording& rec, NonFinite policy, const st
   if (find_non_finite(rec.values()) == rec.size()) return 0;
   if (policy == NonFinite::error) require_finite(rec, where);
   const std::size_t per = static_cast<std::size_t>(rec.taxels()) * rec.axes();
-  std::vector<float> last(per, 0.0f);
   float* v = rec.mutable_data();
   std::size_t replaced = 0;
+  if (policy == NonFinite::interpolate) {
+    const int T = rec.frames();
+    for (std::size_t k = 0; k < per; ++k) {
+      auto at = [&](int t) -> float& { return v[static_cast<std::size_t>(t) * per + k]; };
+      int prev = -1;
+      for (int t = 0; t <= T; ++t) {
+        if (t < T && !std::isfinite(at(t))) continue;
+        // frames prev+1 .. t-1 are a gap between finite readings prev and t (either may be missing)
+        for (int g = prev + 1; g < t; ++g, ++replaced) {
+          if (prev < 0 && t == T)
+            fail<DataError>(where, ": ", rec.source().empty() ? std::string("recording") : rec.source(), " taxel ",
+                            k / rec.axes(), ", axis ", k % rec.axes(), " has no finite reading to interpolate from");
+          at(g) = prev < 0 ? at(t) : t == T ? at(prev)
+                                            : at(prev) + (at(t) - at(prev)) * static_cast<float>(g - prev) /
+                                                             static_cast<float>(t - prev);
+        }
+        prev = t;
+      }
+    }
+    return replaced;
+  }
+  std::vector<float> last(per, 0.0f);
   for (int t = 0; t < rec.frames(); ++t)
     for (std::size_t k = 0; k < per; ++k) {
       float& x = v[static_cast<std::size_t>(t) * per + k];

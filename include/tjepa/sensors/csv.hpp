@@ -13,11 +13,15 @@
 // x and y go together), part and group (names, optional: one part "skin", one group per part),
 // row and col (optional; empty or -1: none), column (optional: the recording's taxel slot this
 // taxel reads, when the sensor's driver writes another order than the file's; TaxelLayout::column).
-// Taxels of one part at the same coordinates are an error naming both lines. Parts are numbered in order of first appearance,
+// Taxels of one part at the same coordinates are an error naming both lines. A header without the
+// default names may use the reference's socks names (global_node_id, visual_x, visual_y, side,
+// section; src_global_node_id, dst_global_node_id, visual_distance: detail::node_column_aliases). Parts are numbered in order of first appearance,
 // groups by (part, name) in order of first appearance. Without a header row, fields are read in
 // the writer's order: id,x,y[,z],part,group[,row,col] (5 to 8 fields). Errors name the file, the
 // line and what was wrong. The writers emit exactly what the readers read back.
+#include <algorithm>
 #include <filesystem>
+#include <initializer_list>
 #include <map>
 #include <set>
 #include <string>
@@ -79,6 +83,37 @@ inline LayoutCsvColumns parse_csv_columns(const std::string& spec) {
 
 namespace detail {
 
+// Other files' names for a column, tried when the configured name is the default and the header
+// does not have it: the Tactile-JEPA reference's socks files (global_node_id, visual_x, visual_y,
+// side, section; src_global_node_id, dst_global_node_id, visual_distance) and common spellings.
+inline void apply_column_aliases(const std::vector<std::string>& header, std::string& name, const char* standard,
+                                 std::initializer_list<const char*> aliases) {
+  auto has = [&](const std::string& n) { return std::find(header.begin(), header.end(), n) != header.end(); };
+  if (name != standard || has(name)) return;
+  for (const char* a : aliases)
+    if (has(a)) {
+      name = a;
+      return;
+    }
+}
+
+inline NodeCsvColumns node_column_aliases(const std::vector<std::string>& header, NodeCsvColumns c) {
+  apply_column_aliases(header, c.id, "id", {"global_node_id", "node_id", "taxel_id"});
+  apply_column_aliases(header, c.x, "x", {"visual_x", "pos_x"});
+  apply_column_aliases(header, c.y, "y", {"visual_y", "pos_y"});
+  apply_column_aliases(header, c.z, "z", {"visual_z", "pos_z"});
+  apply_column_aliases(header, c.part, "part", {"side", "hand"});
+  apply_column_aliases(header, c.group, "group", {"section", "pad", "region"});
+  return c;
+}
+
+inline EdgeCsvColumns edge_column_aliases(const std::vector<std::string>& header, EdgeCsvColumns c) {
+  apply_column_aliases(header, c.src, "src", {"src_global_node_id", "source", "src_id"});
+  apply_column_aliases(header, c.dst, "dst", {"dst_global_node_id", "target", "dst_id"});
+  apply_column_aliases(header, c.weight, "weight", {"visual_distance", "distance", "length"});
+  return c;
+}
+
 // Column name -> field index, from the header row if the first row names any of `names`,
 // otherwise from `fallback` (positional). Returns whether a header was found.
 inline bool csv_columns(const std::vector<CsvRow>& rows, const std::vector<std::string>& names,
@@ -97,9 +132,10 @@ inline bool csv_columns(const std::vector<CsvRow>& rows, const std::vector<std::
 
 }  // namespace detail
 
-inline TaxelLayout read_layout_csv(const std::filesystem::path& path, const NodeCsvColumns& c = {}) {
+inline TaxelLayout read_layout_csv(const std::filesystem::path& path, const NodeCsvColumns& columns = {}) {
   const auto rows = detail::read_csv_rows(path);
   require<FileError>(!rows.empty(), path.string(), ": no taxels (empty layout)");
+  const NodeCsvColumns c = detail::node_column_aliases(rows[0].fields, columns);
   std::vector<std::string> fallback;
   switch (rows[0].fields.size()) {
     case 5: fallback = {c.id, c.x, c.y, c.part, c.group}; break;
@@ -195,10 +231,11 @@ inline TaxelLayout read_layout_csv(const std::filesystem::path& path, const Node
 
 // The edges of an edge CSV, as indices into `layout` (whose ids the file names).
 inline std::vector<Edge> read_edges_csv(const std::filesystem::path& path, const TaxelLayout& layout,
-                                        const EdgeCsvColumns& c = {}) {
+                                        const EdgeCsvColumns& columns = {}) {
   const auto rows = detail::read_csv_rows(path);
   std::vector<Edge> edges;
   if (rows.empty()) return edges;
+  const EdgeCsvColumns c = detail::edge_column_aliases(rows[0].fields, columns);
   std::map<std::string, int> col;
   const bool header = detail::csv_columns(rows, {c.src, c.dst, c.weight},
                                           rows[0].fields.size() >= 3 ? std::vector<std::string>{c.src, c.dst, c.weight}
