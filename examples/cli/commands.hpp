@@ -56,13 +56,16 @@ struct LayoutOptions {
 inline int run_layout(const LayoutOptions& o, std::ostream& out) {
   std::ostringstream warnings;
   const Skin skin = load_skin({o.layout, o.edges, o.columns, o.bridges, o.order, o.strict}, &warnings);
-  out << warnings.str();
+  if (!o.json) out << warnings.str();
   const TaxelGraph& g = skin.graph;
   int bridges = 0;
   for (const Edge& e : g.edges()) bridges += skin.layout.group[e.src] != skin.layout.group[e.dst];
   nlohmann::json j = {{"layout", o.layout},         {"taxels", g.num_nodes()},          {"edges", g.num_edges()},
                       {"bridges", bridges},         {"parts", skin.layout.num_parts()}, {"groups", skin.layout.num_groups()},
                       {"components", g.num_components()}};
+  j["warnings"] = nlohmann::json::array();
+  std::istringstream warning_lines(warnings.str());
+  for (std::string line; std::getline(warning_lines, line);) j["warnings"].push_back(line);
   SvgOptions svg;
   svg.title = o.layout + ": " + std::to_string(g.num_nodes()) + " taxels";
   if (o.draw == "groups") {
@@ -493,9 +496,23 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
   const WindowLabels test = window_labels(test_src, test_frames, task, classes, test_labels);
   out << "probe for " << o.task << " labels on " << o.checkpoint << ": " << train.window.size() << " training and "
       << test.window.size() << " held-out windows\n";
+  // The default epochs suit thousands of windows; on a few hundred an epoch is a handful of steps,
+  // so by default the heads get at least 3000 steps and 1000 steps of patience (an attentive
+  // probe can sit at the uniform guess for hundreds of steps before it starts to learn).
+  HeadTrainConfig cfg = o.probe;
+  const HeadTrainConfig defaults = ProbeOptions{}.probe;
+  if (cfg.max_epochs == defaults.max_epochs && cfg.patience == defaults.patience) {
+    const double fit = (1.0 - cfg.validation_fraction) * static_cast<double>(train.window.size());
+    const int per_epoch = std::max(1, static_cast<int>(std::ceil(fit / cfg.batch)));
+    cfg.max_epochs = std::max(cfg.max_epochs, (3000 + per_epoch - 1) / per_epoch);
+    cfg.patience = std::max(cfg.patience, (1000 + per_epoch - 1) / per_epoch);
+    if (cfg.max_epochs != defaults.max_epochs)
+      out << "note: " << per_epoch << " steps per epoch: heads train up to " << cfg.max_epochs
+          << " epochs with a patience of " << cfg.patience << " (--epochs and --patience set them)\n";
+  }
   const std::vector<LabelProbeRow> rows = label_probe_rows(
       m, o.encoder == "target" ? model.target : model.context, o.encoder, train_src, train, test_src, test, skin,
-      o.probe, o.quiet);
+      cfg, o.quiet);
   out << label_probe_markdown(rows, test.targets, static_cast<int>(train.window.size()));
   if (!o.out.empty()) {
     OutputFiles files;

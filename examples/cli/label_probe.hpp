@@ -12,8 +12,9 @@
 //   random encoder         the checkpoint's architecture at a random initialization, frozen;
 //   this checkpoint        its target (or context) encoder, frozen.
 // Heads are attentive probes trained with early stopping on a validation split of the training
-// windows (train_head). A head whose best validation loss is no lower than the constant's on the
-// same split is flagged (it learned nothing), as is a split whose windows hold one class.
+// windows (train_head). A head whose best validation loss is not 2 % below the constant's on the
+// same split is flagged (it learned nothing), as is a row no better than the constant on the
+// held-out windows and a split whose windows hold one class.
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -123,12 +124,26 @@ inline double constant_validation_loss(const HeadTargets& t, const HeadTrainConf
   return f + cfg.class_weight * ce;
 }
 
-// The flag of a head: no better than the constant on its own validation split.
+// The flag of a head: not clearly better than the constant (by 2 %) on its own validation split.
+// A head that predicts the uniform class distribution can edge out the constant's class
+// frequencies on a split whose frequencies differ; 2 % keeps it flagged.
 inline std::string head_flag(double validation, double constant) {
   if (!std::isfinite(validation)) return "diverged (validation loss not finite)";
-  if (validation >= constant)
-    return "no better than the constant on validation (" + std::to_string(validation) + " >= " +
+  if (validation > 0.98 * constant)
+    return "no better than the constant on validation (loss " + std::to_string(validation) + " against " +
            std::to_string(constant) + ")";
+  return "";
+}
+
+// The flag of any row against the constant row on the held-out windows.
+inline std::string held_out_flag(const LabelProbeRow& row, const LabelProbeRow& constant) {
+  if (std::isfinite(row.accuracy) && row.accuracy <= constant.accuracy)
+    return "held-out top-1 no better than the majority class";
+  if (!row.rmse.empty()) {
+    double a = 0, b = 0;
+    for (std::size_t k = 0; k < row.rmse.size(); ++k) a += row.rmse[k], b += constant.rmse[k];
+    if (!(a < b)) return "held-out RMSE no better than the constant";
+  }
   return "";
 }
 
@@ -176,7 +191,9 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
   auto join = [](std::string a, const std::string& b) { return a.empty() ? b : b.empty() ? a : a + "; " + b; };
   // constant
   {
-    LabelProbeRow row{"constant (train mean / majority)", {}, {}, {}, -1, 0, join(one_class, one_class_test), 0};
+    LabelProbeRow row;
+    row.name = "constant (train mean / majority)";
+    row.flag = join(one_class, one_class_test);
     std::vector<std::int64_t> all(static_cast<std::size_t>(tr.size()));
     for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::int64_t>(i);
     std::vector<double> v;
@@ -206,7 +223,9 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     };
     const Eigen::MatrixXd Xtr = features(train_src, train.window), Xte = features(test_src, test.window);
     static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
-    LabelProbeRow row{"ridge on raw windows", {}, {}, {}, -1, 0, one_class, 0};
+    LabelProbeRow row;
+    row.name = "ridge on raw windows";
+    row.flag = one_class;
     std::vector<double> v;
     std::vector<int> c;
     if (R > 0) {
@@ -223,6 +242,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
       c = predict_class(rm, Xte);
     }
     score_row(row, v, c, te);
+    row.flag = join(row.flag, held_out_flag(row, rows.front()));
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     rows.push_back(row);
   }
@@ -239,7 +259,11 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     FrozenFeatures<float> fte(std::move(ete), model.num_tokens(), model.dim());
     ProbeHead<float> head(model.dim(), m.config.heads, R, C, cfg.seed);
     const HeadTrainResult fit = train_head(head, ftr, tr, cfg);
-    LabelProbeRow row{name, {}, {}, fit.best_validation, fit.best_epoch, fit.epochs(), "", 0};
+    LabelProbeRow row;
+    row.name = name;
+    row.validation = fit.best_validation;
+    row.best_epoch = fit.best_epoch;
+    row.epochs = fit.epochs();
     const std::vector<float> y = predict_head(head, fte, te.size());
     std::vector<double> v;
     std::vector<int> c;
@@ -250,7 +274,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
       if (C > 0) c.push_back(static_cast<int>(std::max_element(r + R, r + out) - (r + R)));
     }
     score_row(row, v, c, te);
-    row.flag = join(one_class, head_flag(row.validation, constant));
+    row.flag = join(join(one_class, head_flag(row.validation, constant)), held_out_flag(row, rows.front()));
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return row;
   };

@@ -105,6 +105,7 @@ TEST_CASE("a 10-taxel magnetometer skin pre-trains with default masks from a tex
   std::ostringstream lj;
   REQUIRE(run_layout(lo, lj) == 0);
   const auto j = nlohmann::json::parse(lj.str());
+  CHECK(j["warnings"].empty());
   CHECK(j["taxels"] == 10);
   CHECK(j["components"] == 1);
   CHECK(j["masks"]["context"].get<int>() >= 2);
@@ -400,6 +401,7 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
   CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("expected regression or classification"), ConfigError);
   // The flag of a head against the constant on its validation split.
   CHECK(head_flag(1.2, 1.0).starts_with("no better than the constant"));
+  CHECK(head_flag(0.99, 1.0).starts_with("no better than the constant"));  // the uniform guess's margin
   CHECK(head_flag(0.4, 1.0).empty());
   CHECK(head_flag(std::nan(""), 1.0).starts_with("diverged"));
 }
