@@ -261,21 +261,31 @@ struct ProbeRow {
   std::vector<double> lr_objective;   // unused (kept for the JSON's schema)
   std::vector<ProbeRow> runs;         // the repeats averaged into metrics (empty: a single probe)
   ProbeMetrics spread;                // their sample standard deviation (0 for a single probe)
+  std::string flag;                   // why the row says little ("" = nothing to say)
 };
 
 // The mean (and sample standard deviation) of repeated probes: other probe seeds, and for a random
 // encoder other initializations. One probe on 600 labelled windows moves by as much as the
 // differences between encoders; the demo compares means.
+// A repeat whose head diverged is left out of the mean (and the row says so), unless all did.
 inline ProbeRow average_rows(std::string name, std::vector<ProbeRow> runs) {
   require<ConfigError>(!runs.empty(), "average_rows: no probes");
-  ProbeRow row{std::move(name), {}, 0, 0, {}, {}, {}};
-  const double n = static_cast<double>(runs.size());
+  ProbeRow row{std::move(name), {}, 0, 0, {}, {}, {}, {}};
+  std::vector<const ProbeRow*> kept;
+  for (const ProbeRow& r : runs)
+    if (r.flag.find("diverged") == std::string::npos) kept.push_back(&r);
+  if (kept.size() < runs.size())
+    row.flag = std::to_string(runs.size() - kept.size()) + " of " + std::to_string(runs.size()) + " repeats diverged" +
+               (kept.empty() ? "" : ", left out of the mean");
+  if (kept.empty())
+    for (const ProbeRow& r : runs) kept.push_back(&r);
+  const double n = static_cast<double>(kept.size());
   auto stat = [&](auto get, double& mean, double& sd) {
     double s = 0, s2 = 0;
-    for (const ProbeRow& r : runs) s += get(r.metrics);
+    for (const ProbeRow* r : kept) s += get(r->metrics);
     mean = s / n;
-    for (const ProbeRow& r : runs) s2 += (get(r.metrics) - mean) * (get(r.metrics) - mean);
-    sd = runs.size() > 1 ? std::sqrt(s2 / (n - 1)) : 0.0;
+    for (const ProbeRow* r : kept) s2 += (get(r->metrics) - mean) * (get(r->metrics) - mean);
+    sd = kept.size() > 1 ? std::sqrt(s2 / (n - 1)) : 0.0;
   };
   for (int a = 0; a < force_axes; ++a)
     stat([a](const ProbeMetrics& m) { return m.force_rmse[static_cast<std::size_t>(a)]; },
@@ -320,6 +330,8 @@ inline void print_probe_table(std::ostream& out, const std::vector<ProbeRow>& ro
                   cell(m.indenter_accuracy, r.spread.indenter_accuracy, true).c_str(), lrs.c_str());
     out << buf;
   }
+  for (const auto& r : rows)
+    if (!r.flag.empty()) out << "note: " << r.name << ": " << r.flag << '\n';
 }
 
 inline nlohmann::json probe_rows_json(const std::vector<ProbeRow>& rows) {
@@ -332,7 +344,8 @@ inline nlohmann::json probe_rows_json(const std::vector<ProbeRow>& rows) {
                         {"windows", r.metrics.windows},
                         {"probe_lr", r.lr},
                         {"probe_lr_validation_objective", r.lr_objective},
-                        {"seconds", r.seconds}};
+                        {"seconds", r.seconds},
+                        {"flag", r.flag}};
     if (!r.runs.empty()) {
       j["force_rmse_sd"] = r.spread.force_rmse;
       j["indenter_accuracy_sd"] = r.spread.indenter_accuracy;
@@ -357,7 +370,7 @@ inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& t
     for (int a = 0; a < force_axes; ++a) r[a] = static_cast<float>(s.mean[static_cast<std::size_t>(a)]);
     r[force_axes + major] = 1.0f;
   }
-  ProbeRow row{"constant (train mean / majority)", {}, 0, 0, {}, {}, {}};
+  ProbeRow row{"constant (train mean / majority)", {}, 0, 0, {}, {}, {}, {}};
   const auto rm = rmse_per_column(y.data(), static_cast<std::size_t>(force_axes + classes), test.force.data(),
                                   test.size(), force_axes);
   std::copy(rm.begin(), rm.end(), row.metrics.force_rmse.begin());
@@ -407,7 +420,8 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
       std::cerr << "  probe " << label << ": best epoch " << fit.best_epoch + 1 << " of " << fit.epochs()
                 << " (validation loss " << fit.best_validation << ")\n";
     const HeadMetrics hm = evaluate_head(head, ftest, test_targets);
-    ProbeRow row{label, {}, 0, c.lr, {}, {}, {}};
+    ProbeRow row{label, {}, 0, c.lr, {}, {}, {}, {}};
+    if (!std::isfinite(fit.best_validation)) row.flag = "diverged (validation loss not finite)";
     std::copy_n(hm.rmse.begin(), force_axes, row.metrics.force_rmse.begin());
     row.metrics.indenter_accuracy = hm.accuracy;
     row.metrics.majority_accuracy = hm.majority_accuracy;
@@ -580,6 +594,10 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
                              frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
                                           train_src, train, test_src, test, o.probe, m.config.heads, o.quiet,
                                           o.repeats, o.center_tokens)};
+  for (const auto& [labels, which] : {std::pair{&train, "training"}, std::pair{&test, "held-out"}})
+    if (distinct_classes(labels->indenter) < 2)
+      for (ProbeRow& r : rows)
+        r.flag += std::string(r.flag.empty() ? "" : "; ") + "the " + which + " windows hold one indenter class";
   print_probe_table(out, rows);
   if (!o.out.empty()) {
     OutputFiles files;

@@ -562,6 +562,16 @@ TEST_CASE("probe rows: repeats average to the mean with the sample standard devi
   CHECK(out.str().find("1e-03,2e-03,3e-03") != std::string::npos);
   const auto j = probe_rows_json({r});
   CHECK(j[0]["repeats"].size() == 3);
+  CHECK(j[0]["flag"] == "");
+  // A diverged repeat is left out of the mean and named, not averaged into "66.7 % ± 57.7".
+  runs[1].flag = "diverged (validation loss not finite)";
+  const ProbeRow d = average_rows("avg", runs);
+  CHECK(d.metrics.force_rmse[0] == doctest::Approx(2.5));
+  CHECK(d.metrics.indenter_accuracy == doctest::Approx(0.625));
+  CHECK(d.flag == "1 of 3 repeats diverged, left out of the mean");
+  std::ostringstream noted;
+  print_probe_table(noted, {d});
+  CHECK(noted.str().find("note: avg: 1 of 3 repeats diverged") != std::string::npos);
   CHECK(j[0]["force_rmse_sd"][0].get<double>() == doctest::Approx(std::sqrt(7.0 / 3)));
   CHECK_THROWS_WITH_AS(average_rows("none", {}), doctest::Contains("no probes"), ConfigError);
 }
