@@ -345,7 +345,7 @@ TEST_SUITE("train") {
     const auto st = step.train(opt, schedule, 5, x.data(), 2, tiny_masks(), 9);
     CHECK(st.step == 5);
     CHECK(st.lr == doctest::Approx(schedule.lr(6)).epsilon(1e-15));
-    CHECK(st.weight_decay == doctest::Approx(schedule.wd(6)).epsilon(1e-15));
+    CHECK(st.weight_decay == doctest::Approx(schedule.wd(5)).epsilon(1e-15));  // the reference timing: update s at wd(s)
     CHECK(st.momentum == doctest::Approx(schedule.momentum(5)).epsilon(1e-15));
     CHECK(st.grad_norm > 0);
     CHECK(st.target_std > 0);
@@ -594,13 +594,25 @@ TEST_SUITE("train") {
     nlohmann::json meta = nlohmann::json::parse(f.metadata.at("config"));
     meta.erase("version");
     meta.erase("objective");
+    // ... and before the run keys added later (checkpoint_legacy_defaults).
+    for (const auto& [key, value] : checkpoint_legacy_defaults().items()) meta["train"].erase(key);
     f.metadata["config"] = meta.dump();
     save_safetensors(ckpt.path, f);
+    // Read back, the file gives the behaviour it was written with: I-JEPA's weight-decay timing.
+    const TrainedModel loaded = load_trained_model(ckpt.path);
+    CHECK(loaded.step == 3);
+    CHECK(loaded.config.weight_decay_timing == "ijepa");
+    CHECK(loaded.config.taxel_order.empty());
+    // A run with today's default timing is refused, by name; the file's own config resumes.
     JepaModel<float> m2(blob_config(), 3);
-    JepaTrainer<float> t2(m2, source, blob_graph(), tc);
+    JepaTrainer<float> fresh(m2, source, blob_graph(), tc);
+    CHECK_THROWS_WITH_AS(fresh.resume(ckpt.path), doctest::Contains("train.weight_decay_timing = \"ijepa\""), ConfigError);
+    TrainConfig old = tc;
+    old.weight_decay_timing = "ijepa";
+    JepaModel<float> m3(blob_config(), 3);
+    JepaTrainer<float> t2(m3, source, blob_graph(), old);
     t2.resume(ckpt.path);
     CHECK(t2.step() == 3);
-    CHECK(load_trained_model(ckpt.path).step == 3);
   }
 
   TEST_CASE("data parallel: 3 ranks (threads) gather only their shards and follow the 1-process curve") {

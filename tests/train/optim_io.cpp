@@ -106,10 +106,17 @@ TEST_SUITE("train") {
     CHECK(s.wd(0) == doctest::Approx(0.04).epsilon(1e-15));
     CHECK(s.wd(2500) == doctest::Approx(0.22).epsilon(1e-14));
     CHECK(s.wd(5000) == doctest::Approx(0.4).epsilon(1e-15));
+    // The reference code's timing (the default): update s at wd(s), update 0 at wd_start.
+    CHECK(s.wd_timing == tjepa::WeightDecayTiming::reference);
+    CHECK(s.wd_at(0) == doctest::Approx(0.04).epsilon(1e-15));
+    auto ijepa = s;
+    ijepa.wd_timing = tjepa::WeightDecayTiming::ijepa;
     for (std::int64_t step : {0, 10, 1234, 4999}) {
       const double k = static_cast<double>(step + 1);
-      CHECK(s.wd_at(step) ==
+      CHECK(ijepa.wd_at(step) ==
             doctest::Approx(0.4 + (0.04 - 0.4) * 0.5 * (1 + std::cos(std::numbers::pi * k / T))).epsilon(1e-14));
+      CHECK(s.wd_at(step) == doctest::Approx(0.4 + (0.04 - 0.4) * 0.5 * (1 + std::cos(std::numbers::pi * (k - 1) / T)))
+                                 .epsilon(1e-14));
     }
     // Momentum: linear 0.994 → 1 over all steps, indexed by the step just taken.
     CHECK(s.momentum_at(0) == 0.994);
@@ -126,15 +133,25 @@ TEST_SUITE("train") {
     CHECK_THROWS_AS(tjepa::TrainingSchedule::reference(0, 5, 0), tjepa::ConfigError);
   }
 
-  TEST_CASE("the schedule equals a stateful scheduler stepped before each optimizer step") {
+  TEST_CASE("the schedule equals the stateful schedulers of I-JEPA's loop and of the reference code") {
     // I-JEPA's loop: `lr = scheduler.step(); wd = wd_scheduler.step(); ...; optimizer.step()`.
-    const auto s = tjepa::TrainingSchedule::reference(7, 3, 2);
+    auto s = tjepa::TrainingSchedule::reference(7, 3, 2);
+    s.wd_timing = tjepa::WeightDecayTiming::ijepa;
     double counter = 0;
     for (std::int64_t step = 0; step < s.total_steps(); ++step) {
       counter += 1;
       const auto k = static_cast<std::int64_t>(counter);
       CHECK(s.lr_at(step) == s.lr(k));
       CHECK(s.wd_at(step) == s.wd(k));
+    }
+    // The reference code: the optimizer starts at wd_start and its weight-decay scheduler is
+    // stepped after each update.
+    s.wd_timing = tjepa::WeightDecayTiming::reference;
+    double wd = s.wd.ref_wd;
+    std::int64_t stepped = 0;
+    for (std::int64_t step = 0; step < s.total_steps(); ++step) {
+      CHECK(s.wd_at(step) == doctest::Approx(wd).epsilon(1e-15));
+      wd = s.wd(++stepped);
     }
   }
 

@@ -44,8 +44,18 @@ inline constexpr std::string_view checkpoint_format = "tjepa.checkpoint.v1";
 inline constexpr std::string_view encoder_export_format = "tjepa.encoder.v1";
 
 // The version of a checkpoint's config metadata: 1 (no "version" key) is a JEPA run's
-// {"train", "model"}; 2 adds "version" and "objective".
-inline constexpr int checkpoint_metadata_version = 2;
+// {"train", "model"}; 2 adds "version" and "objective"; 3 adds the run keys of
+// checkpoint_legacy_defaults.
+inline constexpr int checkpoint_metadata_version = 3;
+
+// The run ("train") keys added after the first checkpoints, with the values that give the
+// behaviour of a file written without them: a checkpoint that lacks one is read with this value
+// (and resumes only a run that has it).
+inline const nlohmann::json& checkpoint_legacy_defaults() {
+  static const nlohmann::json j = {{"layout_edges", ""},     {"layout_columns", ""}, {"bridges", "connect"},
+                                   {"taxel_order", ""},      {"weight_decay_timing", "ijepa"}};
+  return j;
+}
 
 // The objective a checkpoint's config metadata names ("jepa" for version 1).
 inline std::string checkpoint_objective(const nlohmann::json& config) {

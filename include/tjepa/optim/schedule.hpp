@@ -66,11 +66,19 @@ struct LinearMomentum {
   }
 };
 
+// Which weight decay optimizer step s uses. The Tactile-JEPA reference code steps its weight-decay
+// scheduler after each update, so step s uses wd(s) (step 0 the optimizer's initial wd_start);
+// I-JEPA's loop steps it before each update, so step s uses wd(s + 1).
+enum class WeightDecayTiming { reference, ijepa };
+
+inline const char* to_string(WeightDecayTiming t) { return t == WeightDecayTiming::ijepa ? "ijepa" : "reference"; }
+
 // The three schedules of a run, indexed by the optimizer step s = 0, 1, ..., T − 1.
 struct TrainingSchedule {
   WarmupCosineLr lr;
   CosineWeightDecay wd;
   LinearMomentum momentum;
+  WeightDecayTiming wd_timing = WeightDecayTiming::reference;
 
   // The paper's schedule (Sec. IV-D, training details) for a run of `epochs` × `steps_per_epoch`
   // steps with `warmup_epochs` of warm-up.
@@ -91,9 +99,10 @@ struct TrainingSchedule {
   }
 
   std::int64_t total_steps() const { return lr.total_steps; }
-  // The value optimizer step s uses (the scheduler was advanced first).
+  // The value optimizer step s uses: the learning rate's scheduler was advanced first; the weight
+  // decay's by wd_timing.
   double lr_at(std::int64_t s) const { return lr(s + 1); }
-  double wd_at(std::int64_t s) const { return wd(s + 1); }
+  double wd_at(std::int64_t s) const { return wd(wd_timing == WeightDecayTiming::ijepa ? s + 1 : s); }
   // The EMA momentum applied after optimizer step s.
   double momentum_at(std::int64_t s) const { return momentum(s); }
 

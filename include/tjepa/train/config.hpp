@@ -77,6 +77,9 @@ struct TrainConfig {
   int batch = 32;
   double lr = 1e-3, start_lr = 1e-4, final_lr = 1e-5;  // warm-up start_lr → lr, then cosine to final_lr
   double wd_start = 0.04, wd_end = 0.4;                // cosine-increasing weight decay
+  // Which step of the weight-decay schedule an update uses: "reference" (the Tactile-JEPA code's:
+  // update s at wd(s)) or "ijepa" (I-JEPA's loop: wd(s + 1)); TrainingSchedule::wd_timing.
+  std::string weight_decay_timing = to_string(TrainingSchedule{}.wd_timing);
   double beta1 = AdamWConfig{}.beta1, beta2 = AdamWConfig{}.beta2, eps = AdamWConfig{}.eps;  // AdamW
   double ema_start = 0.99, ema_end = 1.0;              // the target encoder's EMA momentum, linear
   std::uint64_t seed = 0;                              // init, data order, masks, drop-path noise
@@ -99,7 +102,7 @@ struct TrainConfig {
     f("precision", c.precision);
     f("steps", c.steps), f("warmup_steps", c.warmup_steps), f("batch", c.batch);
     f("lr", c.lr), f("start_lr", c.start_lr), f("final_lr", c.final_lr);
-    f("wd_start", c.wd_start), f("wd_end", c.wd_end);
+    f("wd_start", c.wd_start), f("wd_end", c.wd_end), f("weight_decay_timing", c.weight_decay_timing);
     f("beta1", c.beta1), f("beta2", c.beta2), f("eps", c.eps);
     f("ema_start", c.ema_start), f("ema_end", c.ema_end), f("seed", c.seed);
   }
@@ -199,6 +202,8 @@ struct TrainConfig {
     check(finite_pos(final_lr), "final_lr", final_lr, "> 0");
     check(wd_start >= 0 && std::isfinite(wd_start), "wd_start", wd_start, ">= 0");
     check(wd_end >= 0 && std::isfinite(wd_end), "wd_end", wd_end, ">= 0");
+    check(weight_decay_timing == "reference" || weight_decay_timing == "ijepa", "weight_decay_timing",
+          weight_decay_timing, "'reference' or 'ijepa'");
     check(beta1 >= 0 && beta1 < 1, "beta1", beta1, "in [0, 1)");
     check(beta2 >= 0 && beta2 < 1, "beta2", beta2, "in [0, 1)");
     check(finite_pos(eps), "eps", eps, "> 0");
@@ -249,6 +254,7 @@ struct TrainConfig {
     s.lr = WarmupCosineLr{start_lr, lr, final_lr, warmup_steps, steps};
     s.wd = CosineWeightDecay{wd_start, wd_end, steps};
     s.momentum = LinearMomentum{ema_start, ema_end, steps};
+    s.wd_timing = weight_decay_timing == "ijepa" ? WeightDecayTiming::ijepa : WeightDecayTiming::reference;
     s.validate();
     return s;
   }

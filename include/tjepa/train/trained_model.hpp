@@ -95,6 +95,7 @@ inline TrainedModel load_trained_model(const std::filesystem::path& path) {
                      "' run; load_trained_model reads Tactile-JEPA runs ('jepa')");
   TrainedModel m;
   try {
+    m.config.update(checkpoint_legacy_defaults(), "checkpoint_legacy_defaults");  // keys the file may predate
     m.config.update(json_get<nlohmann::json, FileError>(meta, "train", where), where + ".train");
     m.config.validate();
   } catch (const FileError&) {

@@ -167,10 +167,15 @@ class Trainer {
         continue;
       }
       require<FileError>(b.is_object(), path.string(), ": metadata 'config'.", part, " is not a JSON object");
-      for (const auto& [key, value] : a.items())
-        require<ConfigError>(b.contains(key) && b[key] == value, "Trainer::resume: ", path.string(),
-                             " was written with ", part, ".", key, " = ", b.contains(key) ? b[key].dump() : "(none)",
-                             ", this run has ", value.dump());
+      const nlohmann::json& legacy = checkpoint_legacy_defaults();
+      for (const auto& [key, value] : a.items()) {
+        // A key the file predates: its legacy value (checkpoint_legacy_defaults) for run keys.
+        const bool known = b.contains(key) || (part == "train" && legacy.contains(key));
+        const nlohmann::json& saved_value = b.contains(key) ? b[key] : known ? legacy[key] : value;
+        require<ConfigError>(known && saved_value == value, "Trainer::resume: ", path.string(), " was written with ",
+                             part, ".", key, " = ", known ? saved_value.dump() : "(none)", ", this run has ",
+                             value.dump());
+      }
       for (const auto& [key, value] : b.items())
         require<ConfigError>(a.contains(key), "Trainer::resume: ", path.string(), " has ", part, ".", key,
                              ", which this run does not know");
