@@ -459,6 +459,14 @@ struct ProbeOptions {
   bool quiet = false;
 };
 
+// Throws unless rec has the checkpoint's taxels and axes per frame.
+inline void require_fits(const Recording& rec, const TrainedModel& m) {
+  const JepaModel<float>& model = *m.model;
+  require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.config.tau == model.config.in_dim,
+                      rec.source(), ": ", rec.taxels(), " taxels x ", rec.axes(), " axes; the checkpoint expects ",
+                      model.num_tokens(), " taxels x ", model.config.in_dim / m.config.tau, " axes");
+}
+
 // tjepa probe --task: the user's own labels (label_probe.hpp).
 inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
   const LabelTask task = parse_label_task(o.task);
@@ -491,9 +499,7 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
     train_frames = read_label_frames(o.train_labels, o.label_columns, train_rec.frames());
     test_frames = read_label_frames(o.test_labels, o.label_columns, test_rec.frames());
   }
-  for (const Recording* r : {&train_rec, &test_rec})
-    require<ShapeError>(r->axes() * m.config.tau == model.config.in_dim, r->source(), ": ", r->axes(),
-                        " axes; the checkpoint expects ", model.config.in_dim / m.config.tau);
+  for (const Recording* r : {&train_rec, &test_rec}) require_fits(*r, m);
   require<ShapeError>(train_frames.taxels() == test_frames.taxels(), test_labels, ": ", test_frames.taxels(),
                       " label columns, ", train_labels, " has ", train_frames.taxels());
   int classes = 0;
@@ -572,10 +578,7 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
     test_rec = in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data);
     test_lab = read_frame_labels(o.test_labels, test_rec.frames());
   }
-  for (const Recording* r : {&train_rec, &test_rec})
-    require<ShapeError>(r->taxels() == model.num_tokens() && r->axes() * m.config.tau == model.config.in_dim,
-                        r->source(), ": ", r->taxels(), " taxels x ", r->axes(), " axes; the checkpoint expects ",
-                        model.num_tokens(), " taxels x ", model.config.in_dim / m.config.tau, " axes");
+  for (const Recording* r : {&train_rec, &test_rec}) require_fits(*r, m);
   m.track(train_rec);
   m.track(test_rec);
   const WindowSource train_src(train_rec, WindowSpec{m.config.tau}, train_lab, m.pre);
@@ -628,9 +631,7 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
   Recording rec = in_layout_order(read_recording(o.data, o.format), load_skin(SkinSpec::of(m.config)), o.data);
-  require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.config.tau == model.config.in_dim, o.data,
-                      ": ", rec.taxels(), " taxels x ", rec.axes(), " axes; the checkpoint expects ", model.num_tokens(),
-                      " taxels x ", model.config.in_dim / m.config.tau, " axes");
+  require_fits(rec, m);
   m.track(rec);
   const WindowSource src(rec, WindowSpec{m.config.tau, o.stride}, {}, m.pre);
   std::vector<std::int64_t> ids(static_cast<std::size_t>(src.size()));

@@ -157,15 +157,7 @@ inline int distinct_classes(std::span<const int> labels) {
 inline void score_row(LabelProbeRow& row, const std::vector<double>& pred_value, const std::vector<int>& pred_class,
                       const HeadTargets& test) {
   const int S = test.size(), R = test.regression;
-  if (R > 0) {
-    row.rmse.assign(static_cast<std::size_t>(R), 0.0);
-    for (int s = 0; s < S; ++s)
-      for (int a = 0; a < R; ++a) {
-        const double e = pred_value[static_cast<std::size_t>(s) * R + a] - test.value[static_cast<std::size_t>(s) * R + a];
-        row.rmse[static_cast<std::size_t>(a)] += e * e;
-      }
-    for (double& v : row.rmse) v = std::sqrt(v / S);
-  }
+  if (R > 0) row.rmse = rmse_per_column(pred_value.data(), static_cast<std::size_t>(R), test.value.data(), S, R);
   if (test.classes > 0) {
     int right = 0;
     for (int s = 0; s < S; ++s) right += pred_class[static_cast<std::size_t>(s)] == test.label[static_cast<std::size_t>(s)];
@@ -222,7 +214,6 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
       return window_features(wb, layout.group, layout.num_groups());
     };
     const Eigen::MatrixXd Xtr = features(train_src, train.window), Xte = features(test_src, test.window);
-    static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
     LabelProbeRow row;
     row.name = "ridge on raw windows";
     row.flag = one_class;
@@ -232,13 +223,13 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
       Eigen::MatrixXd Y(tr.size(), R);
       for (int s = 0; s < tr.size(); ++s)
         for (int a = 0; a < R; ++a) Y(s, a) = tr.value[static_cast<std::size_t>(s) * R + a];
-      const RidgeModel rm = fit_ridge(Xtr, Y, lambdas, cfg.validation_fraction, cfg.seed);
+      const RidgeModel rm = fit_ridge(Xtr, Y, ridge_lambdas, cfg.validation_fraction, cfg.seed);
       const Eigen::MatrixXd P = predict(rm, Xte);
       for (int s = 0; s < te.size(); ++s)
         for (int a = 0; a < R; ++a) v.push_back(P(s, a));
     }
     if (C > 0) {
-      const RidgeModel rm = fit_ridge_classifier(Xtr, tr.label, C, lambdas, cfg.validation_fraction, cfg.seed);
+      const RidgeModel rm = fit_ridge_classifier(Xtr, tr.label, C, ridge_lambdas, cfg.validation_fraction, cfg.seed);
       c = predict_class(rm, Xte);
     }
     score_row(row, v, c, te);

@@ -60,6 +60,20 @@ nlohmann::json small_model() {
   return {{"dim", 8}, {"depth", 1}, {"heads", 2}, {"predictor_depth", 1}, {"batch", 4}, {"seed", 5}};
 }
 
+// A small pre-training run on the board layout (write_board_layout into dir/anyskin.csv) of the
+// recording dir/data into dir/run; warmup < 0 leaves the default warm-up.
+tjepa::cli::PretrainOptions board_run(const fs::path& dir, const std::string& data, int steps, int warmup) {
+  tjepa::cli::PretrainOptions po;
+  po.overrides = small_model();
+  po.overrides["layout"] = (dir / "anyskin.csv").string();
+  po.overrides["steps"] = steps;
+  if (warmup >= 0) po.overrides["warmup_steps"] = warmup;
+  po.data = {(dir / data).string()};
+  po.out = (dir / "run").string();
+  po.quiet = true;
+  return po;
+}
+
 }  // namespace
 
 TEST_SUITE("cli") {
@@ -74,14 +88,8 @@ TEST_CASE("a 10-taxel magnetometer skin pre-trains with default masks from a tex
   for (int m = 0; m < 8; ++m) header += "motor" + std::to_string(m) + (m < 7 ? " " : "");
   write_rows(t / "session.txt", magnetometer_rows(300), header);
 
-  PretrainOptions po;
-  po.overrides = small_model();
-  po.overrides["layout"] = (t / "anyskin.csv").string();
-  po.overrides["steps"] = 6;  // fewer than the default warm-up: clamped, with a note
-  po.data = {(t / "session.txt").string()};
+  PretrainOptions po = board_run(t.path, "session.txt", 6, -1);  // fewer steps than the default warm-up: clamped
   po.format.columns = "0:30";
-  po.out = (t / "run").string();
-  po.quiet = true;
   std::ostringstream out;
   REQUIRE(run_pretrain(po, out) == 0);
   const std::string text = out.str();
@@ -239,15 +247,8 @@ TEST_CASE("traps: a baseline of the wrong size is named / a resumed run continue
     for (auto& r : rows) r.resize(27);  // 9 magnetometers
     write_rows(t / "rest.txt", rows);
   }
-  PretrainOptions po;
-  po.overrides = small_model();
-  po.overrides["layout"] = (t / "anyskin.csv").string();
-  po.overrides["steps"] = 4;
-  po.overrides["warmup_steps"] = 1;
-  po.data = {(t / "session.txt").string()};
+  PretrainOptions po = board_run(t.path, "session.txt", 4, 1);
   po.baseline = (t / "rest.txt").string();
-  po.out = (t / "run").string();
-  po.quiet = true;
   std::ostringstream out;
   CHECK_THROWS_WITH_AS(run_pretrain(po, out), doctest::Contains("rest.txt: 9 taxels, the layout has 10"), ShapeError);
   CHECK_FALSE(std::filesystem::exists(t / "run"));
@@ -319,14 +320,7 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
   labels(0, 300, t / "train_labels.csv", false);
   labels(300, 400, t / "test_labels.csv", false);
   labels(0, 300, t / "one_class.csv", true);
-  PretrainOptions po;
-  po.overrides = small_model();
-  po.overrides["layout"] = (t / "anyskin.csv").string();
-  po.overrides["steps"] = 3;
-  po.overrides["warmup_steps"] = 1;
-  po.data = {(t / "train.txt").string()};
-  po.out = (t / "run").string();
-  po.quiet = true;
+  const PretrainOptions po = board_run(t.path, "train.txt", 3, 1);
   std::ostringstream log;
   REQUIRE(run_pretrain(po, log) == 0);
 

@@ -22,6 +22,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -163,6 +164,9 @@ inline Eigen::MatrixXd window_features(const WindowBatch& wb, std::span<const in
     }
   return f;
 }
+
+// The λ grid the protocol and the command's probes choose from.
+inline constexpr std::array<double, 9> ridge_lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
 
 struct RidgeModel {
   Eigen::RowVectorXd mean, scale;  // [p] feature standardization: z = (x − mean) / scale

@@ -348,7 +348,7 @@ GraspScores score_heads(MakeFeatures&& features_for, const GraspTasks& tr, const
 template <class Features>
 GraspScores score_ridge_on(Features&& features, const GraspTasks& tr, const GraspTasks& te, std::uint64_t seed,
                            double validation_fraction = 0.2) {
-  static constexpr std::array<double, 9> lambdas{1e-2, 1e-1, 1, 10, 1e2, 1e3, 1e4, 1e5, 1e6};
+  constexpr const auto& lambdas = ridge_lambdas;
   auto targets = [](const std::vector<float>& v) {
     Eigen::MatrixXd y(static_cast<Eigen::Index>(v.size() / 3), 3);
     for (Eigen::Index i = 0; i < y.rows(); ++i)

@@ -305,13 +305,6 @@ inline std::vector<int> read_taxel_order_csv(const std::filesystem::path& path, 
   return column;
 }
 
-inline std::string taxel_order_csv_string(const TaxelLayout& l) {
-  std::string out = "id,column\n";
-  for (int i = 0; i < l.size(); ++i)
-    out += std::to_string(l.ids[i]) + "," + std::to_string(l.has_columns() ? l.column[i] : i) + "\n";
-  return out;
-}
-
 inline Skin read_skin_csv(const std::filesystem::path& nodes, const std::filesystem::path& edges,
                           const NodeCsvColumns& nc = {}, const EdgeCsvColumns& ec = {}) {
   TaxelLayout l = read_layout_csv(nodes, nc);

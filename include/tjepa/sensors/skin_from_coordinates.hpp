@@ -182,16 +182,10 @@ inline InferredSkin skin_from_coordinates(TaxelLayout l, const CoordinateSkinOpt
                                                                            static_cast<std::size_t>(o.bridge_pairs), cands)));
     edges.insert(edges.end(), e.begin(), e.end());
   }
-  // A bridge may repeat an in-group edge only if groups overlap, which they cannot; keep each pair once anyway.
+  // In-group edges and bridges join distinct pairs; listed in (lower, higher) taxel order.
   std::sort(edges.begin(), edges.end(), [](const Edge& a, const Edge& b) {
     return std::pair(std::min(a.src, a.dst), std::max(a.src, a.dst)) < std::pair(std::min(b.src, b.dst), std::max(b.src, b.dst));
   });
-  edges.erase(std::unique(edges.begin(), edges.end(),
-                          [](const Edge& a, const Edge& b) {
-                            return std::min(a.src, a.dst) == std::min(b.src, b.dst) &&
-                                   std::max(a.src, a.dst) == std::max(b.src, b.dst);
-                          }),
-              edges.end());
   r.skin = make_skin(std::move(l), edges);
   const auto more = component_warnings(r.skin);
   r.warnings.insert(r.warnings.end(), more.begin(), more.end());
