@@ -47,7 +47,7 @@ struct EncoderSetup {
   Encoder enc;
   std::vector<float> tokens, out;
   Workspace<float> ws;
-  EncoderSetup(int B, int L) : enc(ps, EncoderConfig{L, dim, depth, heads, 4.0, true, 1e-6}) {
+  EncoderSetup(int B, int L) : enc(ps, EncoderConfig{.num_tokens = L, .dim = dim, .depth = depth, .heads = heads, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6}) {
     ps.allocate();
     init_params(ps, 1);
     tokens = random_floats(std::size_t(B) * L * dim, 2);
@@ -153,9 +153,9 @@ void BM_JepaStepModel(benchmark::State& state) {
   const int N = 368, B = 8, K = 258, t = 51, R = 4, in = 30;
   ParamSet<float> ps, target, pps;
   Tokenizer tok = Tokenizer::per_taxel(ps, N, 3, in / 3, dim);
-  Encoder enc(ps, EncoderConfig{N, dim, depth, heads, 4.0, true, 1e-6});
+  Encoder enc(ps, EncoderConfig{.num_tokens = N, .dim = dim, .depth = depth, .heads = heads, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
   Tokenizer::per_taxel(target, N, 3, in / 3, dim);
-  Encoder(target, EncoderConfig{N, dim, depth, heads, 4.0, true, 1e-6});
+  Encoder(target, EncoderConfig{.num_tokens = N, .dim = dim, .depth = depth, .heads = heads, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
   Predictor pred(pps, PredictorConfig{dim, dim, 4, heads, 4.0, false, 1e-6});
   for (auto* p : {&ps, &target, &pps}) {
     p->allocate();

@@ -84,6 +84,7 @@
 #include "tjepa/optim/schedule.hpp"
 
 #include "tjepa/io/checkpoint.hpp"
+#include "tjepa/io/reference_checkpoint.hpp"
 #include "tjepa/io/safetensors.hpp"
 
 #include "tjepa/train/health.hpp"

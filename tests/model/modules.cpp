@@ -136,7 +136,7 @@ using test::grad_tolerance;
 TEST_SUITE("nn") {
   TEST_CASE("Encoder on a context subset: gradients of tokens and parameters (2 blocks - drop-path)") {
     ParamSet<double> ps;
-    EncoderConfig cfg{7, 12, 2, 3, 4.0, true, 1e-6};
+    EncoderConfig cfg{.num_tokens = 7, .dim = 12, .depth = 2, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6};
     Encoder enc(ps, cfg);
     ps.allocate();
     test::randomize(ps, 1);
@@ -166,6 +166,45 @@ TEST_SUITE("nn") {
     enc.backward(ps, w.data(), dtokens.data(), cache, ws);
     CHECK(gradient_error(tokens.data(), dtokens.data(), tokens.size(), loss) < grad_tolerance);
     test::check_param_gradients(ps, loss);
+  }
+
+  TEST_CASE("Encoder with token types: taxeltype_embed rows added per token type - gradients") {
+    ParamSet<double> ps;
+    EncoderConfig cfg{.num_tokens = 6, .dim = 8, .depth = 1, .heads = 2, .mlp_ratio = 2.0, .bias = true, .eps = 1e-6, .token_type = {2, 0, 1, 1, 0, 2}, .token_types = 3};
+    Encoder enc(ps, cfg);
+    ps.allocate();
+    test::randomize(ps, 5);
+    CHECK(ps.infos()[ps.id("taxeltype_embed").index].shape == std::vector<std::int64_t>{3, 8});
+    const int B = 2, N = 6, K = 4, d = 8;
+    Rng rng(6);
+    auto tokens = test::normal_vector(std::size_t(B) * N * d, rng);
+    const std::vector<int> ctx{0, 2, 5, 3, 1, 1, 4, 2};
+    auto w = test::normal_vector(std::size_t(B) * K * d, rng);
+    std::vector<double> out(w.size());
+    Workspace<double> ws;
+    auto loss = [&] {
+      enc.forward(ps, tokens.data(), B, ctx.data(), K, out.data(), nullptr, ws);
+      return test::dot(w.data(), out.data(), out.size());
+    };
+    EncoderCache<double> cache;
+    std::vector<double> dtokens(tokens.size(), 0.0);
+    ps.zero_grad();
+    enc.forward(ps, tokens.data(), B, ctx.data(), K, out.data(), &cache, ws);
+    enc.backward(ps, w.data(), dtokens.data(), cache, ws);
+    CHECK(gradient_error(tokens.data(), dtokens.data(), tokens.size(), loss) < grad_tolerance);
+    test::check_param_gradients(ps, loss);
+    // The type row is a per-token offset: moving it into the tokens of that type gives the same output.
+    const double before = loss();
+    double* table = ps.value(enc.type_embed);
+    for (int b = 0; b < B; ++b)
+      for (int n = 0; n < N; ++n)
+        for (int c = 0; c < d; ++c) tokens[(std::size_t(b) * N + n) * d + c] += table[cfg.token_type[std::size_t(n)] * d + c];
+    std::fill(table, table + 3 * d, 0.0);
+    CHECK(loss() == doctest::Approx(before).epsilon(1e-12));
+    EncoderConfig bad = cfg;
+    bad.token_type[1] = 3;
+    ParamSet<double> ps2;
+    CHECK_THROWS_WITH_AS(Encoder(ps2, bad), doctest::Contains("token_type[1] = 3"), ConfigError);
   }
 
   TEST_CASE("Predictor - tiled targets: gradients of context - position rows and parameters (2 blocks)") {
@@ -240,7 +279,7 @@ TEST_SUITE("nn") {
 
   TEST_CASE("Encoder and Predictor backward accumulate: two passes give twice the gradient") {
     ParamSet<double> ps;
-    Encoder enc(ps, EncoderConfig{6, 12, 2, 3, 4.0, true, 1e-6});
+    Encoder enc(ps, EncoderConfig{.num_tokens = 6, .dim = 12, .depth = 2, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
     Predictor pred(ps, PredictorConfig{12, 12, 1, 3, 4.0, false, 1e-6});
     ps.allocate();
     test::randomize(ps, 5);
@@ -361,6 +400,11 @@ TEST_SUITE("nn") {
       CHECK(ps.infos()[ps.id("patch_embed.proj.weight").index].shape == std::vector<std::int64_t>{12, 2, 3});
       CHECK(ps.contains("patch_embed.norm.bias"));
     }
+    SUBCASE("per taxel - temporal padding 2 of 5 frames") {
+      tok = Tokenizer::per_taxel(ps, 4, 2, 5, d, kernels::layer_norm_eps, "patch_embed.", 2);
+      CHECK(tok.padding == 2);
+      CHECK_THROWS_AS(Tokenizer::per_taxel(ps, 4, 2, 5, d, kernels::layer_norm_eps, "x.", 3), ConfigError);
+    }
     SUBCASE("grouped") {
       tok = Tokenizer::grouped(ps, {4, 5, 4, 4, 5}, 3, d);
       CHECK(ps.infos()[ps.id("tokenizer.direct4.0.weight").index].shape == std::vector<std::int64_t>{12, 12});
@@ -392,6 +436,26 @@ TEST_SUITE("nn") {
       x[std::size_t(in_used) + 1] += 5.0;  // a padding value of token 0
       CHECK(loss() == before);
       CHECK(dx[std::size_t(in_used) + 1] == 0.0);
+    }
+    if (tok.padding > 0) {
+      // The Conv1d's view: p zeros, then frames 0..τ−p−1; the last p frames are never read.
+      const double before = loss();
+      x[4] += 5.0;  // token 0, axis 0, frame 4
+      x[std::size_t(tok.width) + 8] -= 3.0;  // token 1, axis 1, frame 3
+      CHECK(loss() == before);
+      CHECK(dx[4] == 0.0);
+      // Against the shifted input through an unpadded map with the same weights.
+      ParamSet<double> ps0;
+      const Tokenizer tok0 = Tokenizer::per_taxel(ps0, 4, 2, 5, d);
+      ps0.allocate();
+      std::copy(ps.values().begin(), ps.values().end(), ps0.values().begin());
+      std::vector<double> shifted(x.size(), 0.0), y0(y.size());
+      for (std::size_t r = 0; r < x.size() / 10; ++r)
+        for (int a = 0; a < 2; ++a)
+          for (int f = 2; f < 5; ++f) shifted[r * 10 + a * 5 + f] = x[r * 10 + a * 5 + f - 2];
+      tok0.forward(ps0, shifted.data(), B, y0.data(), nullptr, ws);
+      tok.forward(ps, x.data(), B, y.data(), nullptr, ws);
+      CHECK(y0 == y);
     }
     test::check_param_gradients(ps, loss);
   }
@@ -656,7 +720,7 @@ TEST_SUITE("nn") {
 
   TEST_CASE("bad input at the module boundary throws - naming the argument") {
     ParamSet<float> ps, other;
-    Encoder enc(ps, EncoderConfig{10, 12, 1, 3, 4.0, true, 1e-6});
+    Encoder enc(ps, EncoderConfig{.num_tokens = 10, .dim = 12, .depth = 1, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
     Predictor(other, PredictorConfig{12, 12, 1, 3, 4.0, false, 1e-6});
     Workspace<float> ws;
     std::vector<float> tokens(2 * 10 * 12), out(tokens.size());
@@ -671,13 +735,13 @@ TEST_SUITE("nn") {
     CHECK_THROWS_AS(enc.forward(ps, tokens.data(), 2, nullptr, 4, out.data(), nullptr, ws), ShapeError);
     EncoderCache<float> empty;
     CHECK_THROWS_AS(enc.backward(ps, out.data(), nullptr, empty, ws), ConfigError);
-    CHECK_THROWS_AS(Encoder(ps, EncoderConfig{10, 10, 1, 3, 4.0, true, 1e-6}), ConfigError);
+    CHECK_THROWS_AS(Encoder(ps, EncoderConfig{.num_tokens = 10, .dim = 10, .depth = 1, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6}), ConfigError);
   }
 
   TEST_CASE("init_params: the reference implementation's values - deterministic from the seed") {
     ParamSet<float> a, b;
-    Encoder ea(a, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});
-    Encoder eb(b, EncoderConfig{20, 24, 2, 3, 4.0, true, 1e-6});
+    Encoder ea(a, EncoderConfig{.num_tokens = 20, .dim = 24, .depth = 2, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
+    Encoder eb(b, EncoderConfig{.num_tokens = 20, .dim = 24, .depth = 2, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
     Predictor pa(a, PredictorConfig{24, 24, 1, 3, 4.0, false, 1e-6});
     Predictor pb(b, PredictorConfig{24, 24, 1, 3, 4.0, false, 1e-6});
     a.allocate();
@@ -711,7 +775,7 @@ TEST_SUITE("nn") {
   TEST_CASE("Inference (row-tiled MLP) - frozen packed weights: the training forward's outputs / bit for bit") {
     ParamSet<float> ps;
     const int N = 53, d = 48, B = 2;
-    Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
+    Encoder enc(ps, EncoderConfig{.num_tokens = N, .dim = d, .depth = 2, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
     ps.allocate();
     init_params(ps, 3);
     Rng rng(15);
@@ -748,7 +812,7 @@ TEST_SUITE("nn") {
     // tokens by 30 %). Without AVX512-BF16 bf16 is fp32, bit for bit.
     ParamSet<float> ps;
     const int N = 120, d = 192, B = 2;
-    Encoder enc(ps, EncoderConfig{N, d, 4, 3, 4.0, true, 1e-6});
+    Encoder enc(ps, EncoderConfig{.num_tokens = N, .dim = d, .depth = 4, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
     ps.allocate();
     init_params(ps, 4);
     for (float& v : ps.values()) v *= 2.0f;
@@ -802,7 +866,7 @@ TEST_SUITE("nn") {
   TEST_CASE("StageClock: an inference call marks its stages in order / changes no output / allocates nothing") {
     ParamSet<float> ps;
     const int N = 21, d = 24, B = 1;
-    Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
+    Encoder enc(ps, EncoderConfig{.num_tokens = N, .dim = d, .depth = 2, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
     ps.allocate();
     init_params(ps, 5);
     Rng rng(9);
@@ -836,7 +900,7 @@ TEST_SUITE("nn") {
     ParamSet<float> ps;
     const int N = 40, d = 48, B = 2, K = 23, t = 7;
     Tokenizer tok = Tokenizer::per_taxel(ps, N, 3, 10, d);
-    Encoder enc(ps, EncoderConfig{N, d, 2, 3, 4.0, true, 1e-6});
+    Encoder enc(ps, EncoderConfig{.num_tokens = N, .dim = d, .depth = 2, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6});
     Predictor pred(ps, PredictorConfig{d, d, 2, 3, 4.0, false, 1e-6});
     AttentiveProbe probe(ps, ProbeConfig{d, 3, 4.0, 32, 3, 1e-6, {}});
     ps.allocate();

@@ -30,7 +30,7 @@ JepaConfig tiny_config(int depth = 2) {
   JepaConfig c;
   c.in_dim = 4;
   c.axes = 2;
-  c.encoder = EncoderConfig{9, 8, depth, 2, 2.0, true, 1e-6};
+  c.encoder = EncoderConfig{.num_tokens = 9, .dim = 8, .depth = depth, .heads = 2, .mlp_ratio = 2.0, .bias = true, .eps = 1e-6};
   c.predictor = PredictorConfig{8, 8, 1, 2, 2.0, false, 1e-6};
   return c;
 }
@@ -106,7 +106,7 @@ JepaConfig blob_config() {
   JepaConfig c;
   c.in_dim = 4;  // m·τ
   c.axes = 2;
-  c.encoder = EncoderConfig{36, 16, 2, 2, 2.0, true, 1e-6};
+  c.encoder = EncoderConfig{.num_tokens = 36, .dim = 16, .depth = 2, .heads = 2, .mlp_ratio = 2.0, .bias = true, .eps = 1e-6};
   c.predictor = PredictorConfig{16, 16, 1, 2, 2.0, false, 1e-6};
   return c;
 }
@@ -606,9 +606,10 @@ TEST_SUITE("train") {
     // A run with today's default timing is refused, by name; the file's own config resumes.
     JepaModel<float> m2(blob_config(), 3);
     JepaTrainer<float> fresh(m2, source, blob_graph(), tc);
-    CHECK_THROWS_WITH_AS(fresh.resume(ckpt.path), doctest::Contains("train.weight_decay_timing = \"ijepa\""), ConfigError);
+    CHECK_THROWS_WITH_AS(fresh.resume(ckpt.path), doctest::Contains("train.wd_initial = -1.0"), ConfigError);
     TrainConfig old = tc;
     old.weight_decay_timing = "ijepa";
+    old.wd_initial = -1;
     JepaModel<float> m3(blob_config(), 3);
     JepaTrainer<float> t2(m3, source, blob_graph(), old);
     t2.resume(ckpt.path);

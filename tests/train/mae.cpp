@@ -33,7 +33,7 @@ MaeConfig tiny_mae_config() {
   MaeConfig c;
   c.in_dim = 4;
   c.axes = 2;
-  c.encoder = EncoderConfig{12, 8, 1, 2, 2.0, true, 1e-6};
+  c.encoder = EncoderConfig{.num_tokens = 12, .dim = 8, .depth = 1, .heads = 2, .mlp_ratio = 2.0, .bias = true, .eps = 1e-6};
   c.decoder = PredictorConfig{8, 8, 1, 2, 2.0, false, 1e-6};
   return c;
 }
@@ -407,7 +407,7 @@ TEST_SUITE("train") {
     MaeConfig c;
     c.in_dim = W;
     c.axes = 2;
-    c.encoder = EncoderConfig{N, 16, 2, 2, 2.0, true, 1e-6};
+    c.encoder = EncoderConfig{.num_tokens = N, .dim = 16, .depth = 2, .heads = 2, .mlp_ratio = 2.0, .bias = true, .eps = 1e-6};
     c.decoder = PredictorConfig{16, 16, 1, 2, 2.0, false, 1e-6};
     MaeModel<float> model(c, 13);
     AdamW<float> opt(model.trainable());

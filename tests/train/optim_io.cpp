@@ -106,9 +106,11 @@ TEST_SUITE("train") {
     CHECK(s.wd(0) == doctest::Approx(0.04).epsilon(1e-15));
     CHECK(s.wd(2500) == doctest::Approx(0.22).epsilon(1e-14));
     CHECK(s.wd(5000) == doctest::Approx(0.4).epsilon(1e-15));
-    // The reference code's timing (the default): update s at wd(s), update 0 at wd_start.
+    // The reference code's timing (the default): update s at wd(s), update 0 at wd_initial (the
+    // optimizer's constructor value; unset: wd(0) = wd_start).
     CHECK(s.wd_timing == tjepa::WeightDecayTiming::reference);
     CHECK(s.wd_at(0) == doctest::Approx(0.04).epsilon(1e-15));
+    CHECK(tjepa::TrainConfig{}.schedule().wd_at(0) == 0.05);
     auto ijepa = s;
     ijepa.wd_timing = tjepa::WeightDecayTiming::ijepa;
     for (std::int64_t step : {0, 10, 1234, 4999}) {
@@ -144,10 +146,11 @@ TEST_SUITE("train") {
       CHECK(s.lr_at(step) == s.lr(k));
       CHECK(s.wd_at(step) == s.wd(k));
     }
-    // The reference code: the optimizer starts at wd_start and its weight-decay scheduler is
-    // stepped after each update.
+    // The reference code: the optimizer starts at its constructor value (optim_cfg weight_decay
+    // 0.05, not the schedule's 0.04) and its weight-decay scheduler is stepped after each update.
     s.wd_timing = tjepa::WeightDecayTiming::reference;
-    double wd = s.wd.ref_wd;
+    s.wd_initial = 0.05;
+    double wd = 0.05;
     std::int64_t stepped = 0;
     for (std::int64_t step = 0; step < s.total_steps(); ++step) {
       CHECK(s.wd_at(step) == doctest::Approx(wd).epsilon(1e-15));

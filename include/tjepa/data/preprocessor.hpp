@@ -98,6 +98,25 @@ class Preprocessor {
     }
   }
 
+  // Per-axis standardization with given statistics (a model's own normalization, e.g. the
+  // reference's xela_mean / xela_std buffers): (x − mean[a]) / std[a] for every value.
+  static Preprocessor with_statistics(std::vector<float> mean, std::vector<float> std) {
+    require<ConfigError>(!mean.empty() && mean.size() == std.size(), "Preprocessor::with_statistics: ", mean.size(),
+                         " means and ", std.size(), " stds, expected one of each per axis");
+    for (std::size_t a = 0; a < mean.size(); ++a)
+      require<ConfigError>(std::isfinite(mean[a]) && std::isfinite(std[a]) && std[a] > 0,
+                           "Preprocessor::with_statistics: axis ", a, " has mean ", mean[a], " and std ", std[a],
+                           ", expected finite values and std > 0");
+    PreprocessConfig c;
+    c.scaling = Scaling::per_axis;
+    c.min_std = *std::min_element(std.begin(), std.end());
+    Preprocessor pre(c);
+    pre.axes_ = static_cast<int>(mean.size());
+    pre.mean_ = std::move(mean);
+    pre.std_ = std::move(std);
+    return pre;
+  }
+
   const PreprocessConfig& config() const { return cfg_; }
   // True once every statistic the configuration needs is fitted (or restored).
   bool ready() const {

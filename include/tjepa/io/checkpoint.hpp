@@ -45,15 +45,16 @@ inline constexpr std::string_view encoder_export_format = "tjepa.encoder.v1";
 
 // The version of a checkpoint's config metadata: 1 (no "version" key) is a JEPA run's
 // {"train", "model"}; 2 adds "version" and "objective"; 3 adds the run keys of
-// checkpoint_legacy_defaults.
-inline constexpr int checkpoint_metadata_version = 3;
+// checkpoint_legacy_defaults; 4 adds wd_initial.
+inline constexpr int checkpoint_metadata_version = 4;
 
 // The run ("train") keys added after the first checkpoints, with the values that give the
 // behaviour of a file written without them: a checkpoint that lacks one is read with this value
 // (and resumes only a run that has it).
 inline const nlohmann::json& checkpoint_legacy_defaults() {
   static const nlohmann::json j = {{"layout_edges", ""},     {"layout_columns", ""}, {"bridges", "connect"},
-                                   {"taxel_order", ""},      {"weight_decay_timing", "ijepa"}};
+                                   {"taxel_order", ""},      {"weight_decay_timing", "ijepa"},
+                                   {"wd_initial", -1.0}};
   return j;
 }
 

@@ -3,6 +3,7 @@
 // LayerNorm.
 //
 //   x[b, k] = tokens[b, c[b, k]] + pos_embed[c[b, k]]      c = context indices [B, K] (or all N)
+//             (+ taxeltype_embed[type[c[b, k]]] when the config gives token types)
 //   x ← blocks(x);  out = norm(x)                           out [B, K, d]
 //
 // The same Encoder object runs the context encoder (on a subset of tokens, with gradients) and
@@ -11,7 +12,9 @@
 // PyTorch names (the reference's SignalTransformer, prefix "" by default):
 //   pos_embed [1, N, d]; blocks.{i}.norm1.{weight,bias} [d]; blocks.{i}.attn.qkv.{weight [3d, d],
 //   bias [3d]}; blocks.{i}.attn.proj.{weight [d, d], bias}; blocks.{i}.norm2.*;
-//   blocks.{i}.mlp.fc1.{weight [4d, d], bias}; blocks.{i}.mlp.fc2.{weight [d, 4d], bias}; norm.*
+//   blocks.{i}.mlp.fc1.{weight [4d, d], bias}; blocks.{i}.mlp.fc2.{weight [d, 4d], bias}; norm.*;
+//   taxeltype_embed [types, d] (the reference's XelaTransformer: rows 4x4, 4x6, curved pad), with
+//   token types only. The predictor reads pos_embed alone, without the type rows, as there.
 // The tokenizer (tokenizer.hpp) registers its own names (patch_embed.* / tokenizer.*).
 #include <cstdint>
 #include <string>
@@ -31,6 +34,10 @@ struct EncoderConfig {
   double mlp_ratio = 4.0;
   bool bias = true;  // qkv / proj / fc1 / fc2 biases
   double eps = kernels::layer_norm_eps;
+  // A learned row per token type added to every token (the reference's taxel-type embedding):
+  // token_type [N] in [0, token_types); empty (and token_types 0): none.
+  std::vector<int> token_type = {};
+  int token_types = 0;
 };
 
 struct EncoderOptions {
@@ -51,6 +58,7 @@ struct Encoder {
   PositionTable pos;
   BlockStack stack;
   NormParams norm;
+  ParamId type_embed;  // valid only with token types
 
   Encoder() = default;
   template <class T>
@@ -58,7 +66,15 @@ struct Encoder {
     require<ConfigError>(c.num_tokens > 0, "Encoder: num_tokens ", c.num_tokens, ", expected > 0");
     require<ConfigError>(c.dim > 0 && c.heads > 0 && c.dim % c.heads == 0, "Encoder: dim ", c.dim,
                          " and heads ", c.heads, ", expected dim a positive multiple of heads");
+    require<ConfigError>(c.token_types >= 0 && (c.token_type.empty() == (c.token_types == 0)) &&
+                             (c.token_type.empty() || static_cast<int>(c.token_type.size()) == c.num_tokens),
+                         "Encoder: ", c.token_type.size(), " token types over ", c.token_types,
+                         " rows, expected none, or num_tokens = ", c.num_tokens, " over token_types > 0 rows");
+    for (std::size_t i = 0; i < c.token_type.size(); ++i)
+      require<ConfigError>(c.token_type[i] >= 0 && c.token_type[i] < c.token_types, "Encoder: token_type[", i,
+                           "] = ", c.token_type[i], ", expected in [0, ", c.token_types, ")");
     pos = PositionTable::add(ps, prefix + "pos_embed", c.num_tokens, c.dim);
+    if (c.token_types > 0) type_embed = ps.add(prefix + "taxeltype_embed", {c.token_types, c.dim}, ParamInit::trunc_normal);
     BlockConfig bc{c.dim, c.heads, c.mlp_ratio, c.bias, c.bias, c.bias, c.eps};
     stack = BlockStack::add(ps, prefix + "blocks.", c.depth, bc);
     norm = NormParams::add(ps, prefix + "norm", c.dim, c.eps);
@@ -86,6 +102,8 @@ struct Encoder {
     else
       detail::parallel_copy(tokens, tokens + M * d, x);
     pos.forward(ps, x, context, B, K);
+    if (config.token_types > 0)
+      kernels::gather_add_rows(x, ps.value(type_embed), 0, type_rows(context, B, K, ws), B, K, d);
     ws.mark("embed");
     if (cache) {
       cache->B = B;
@@ -116,11 +134,22 @@ struct Encoder {
     stack.backward(ps, g, cache.stack, ws);
     const int* idx = cache.context.empty() ? nullptr : cache.context.data();
     pos.backward(ps, g, idx, B, K);
+    if (config.token_types > 0) kernels::scatter_add_rows(ps.grad(type_embed), 0, g, type_rows(idx, B, K, ws), B, K, d);
     if (!dtokens) return;
     if (idx)
       kernels::scatter_add_rows(dtokens, std::size_t(N) * d, g, idx, B, K, d);
     else
       for (std::size_t i = 0; i < M * d; ++i) dtokens[i] += g[i];
+  }
+
+ private:
+  // The type row of each of the B·K tokens (context indices, or all N in order), in ws.index.
+  template <class T>
+  const int* type_rows(const int* context, int B, int K, Workspace<T>& ws) const {
+    ws.index.resize(std::size_t(B) * K);
+    for (std::size_t i = 0; i < ws.index.size(); ++i)
+      ws.index[i] = config.token_type[std::size_t(context ? context[i] : static_cast<int>(i % std::size_t(K)))];
+    return ws.index.data();
   }
 };
 

@@ -6,7 +6,10 @@
 //     The reference's patch_embed.proj is a Conv1d with weight [d, m, τ], registered with that
 //     shape so a strict load_state_dict accepts it: flattened, its column index is axis·τ + frame,
 //     so rows must hold a taxel's window axis-major (data/window_source.hpp's windows_to_tokens) to load
-//     it 1:1 (assuming no temporal padding in that Conv1d; its PatchEmbed1d source was not available).
+//     it 1:1. `padding` p is that Conv1d's temporal zero padding (2 in the reference's checkpoints
+//     without a `_temporal_patch_version` marker, 0 after): with kernel = stride = τ and 2p < τ it
+//     yields one chunk that reads p zeros and then frames 0..τ−p−1, so row value axis·τ + f is
+//     x[axis·τ + f − p] (0 for f < p) and the last p frames are never read.
 //   grouped (DECO-50): one map and one LayerNorm per group size n (4 and 5), W = n_max·k with
 //     k = τ·m values per taxel; a group of size n uses the first n·k values of its row (the rest
 //     is padding). PyTorch (the reference's DecoHypertaxelTokenizer, mode "direct"):
@@ -38,17 +41,23 @@ struct Tokenizer {
   };
   std::vector<Map> maps;
   int num_tokens = 0, width = 0, dim = 0;
+  int axes = 0, frames = 0, padding = 0;  // per taxel: m, τ and the temporal padding p
 
   // Per-taxel tokenizer for N taxels with m axes × τ frames each (rows axis-major, m·τ values).
   template <class T>
   static Tokenizer per_taxel(ParamSet<T>& ps, int N, int axes, int frames, int dim, double eps = kernels::layer_norm_eps,
-                             const std::string& prefix = "patch_embed.") {
+                             const std::string& prefix = "patch_embed.", int padding = 0) {
     require<ConfigError>(N > 0 && axes > 0 && frames > 0 && dim > 0, "Tokenizer::per_taxel: N = ", N,
                          ", axes = ", axes, ", frames = ", frames, ", dim = ", dim, ", expected all > 0");
+    require<ConfigError>(padding >= 0 && 2 * padding < frames, "Tokenizer::per_taxel: padding = ", padding,
+                         ", expected 0 <= 2·padding < frames = ", frames, " (one time chunk per window)");
     Tokenizer t;
     t.num_tokens = N;
     t.width = axes * frames;
     t.dim = dim;
+    t.axes = axes;
+    t.frames = frames;
+    t.padding = padding;
     t.maps.push_back({LinearParams::add(ps, prefix + "proj", t.width, dim, true, {dim, axes, frames}),
                       NormParams::add(ps, prefix + "norm", dim, eps), {}});
     return t;
@@ -96,7 +105,7 @@ struct Tokenizer {
       const int G = m.tokens.empty() ? num_tokens : static_cast<int>(m.tokens.size());
       const int M = B * G, in = m.proj.in;
       const T* xm = x;
-      if (!m.tokens.empty() || cache) {
+      if (!m.tokens.empty() || cache || padding > 0) {
         T* buf = detail::grow(cache ? cache->x[i] : ws.rows, std::size_t(M) * in);
         gather_columns(buf, x, B, m.tokens, in);
         xm = buf;
@@ -156,13 +165,19 @@ struct Tokenizer {
           const int g = m.tokens.empty() ? j : m.tokens[std::size_t(j)];
           const T* src = dxm + (std::size_t(b) * G + j) * in;
           T* dst = dx + (std::size_t(b) * num_tokens + g) * width;
-          for (int q = 0; q < in; ++q) dst[q] += src[q];
+          if (padding == 0) {
+            for (int q = 0; q < in; ++q) dst[q] += src[q];
+            continue;
+          }
+          for (int a = 0; a < axes; ++a)
+            for (int f = padding; f < frames; ++f) dst[a * frames + f - padding] += src[a * frames + f];
         }
     }
   }
 
  private:
-  // buf[b·G + j, :in] = x[b, tokens[j], :in] (tokens empty: all tokens).
+  // buf[b·G + j, :in] = x[b, tokens[j], :in] (tokens empty: all tokens), each axis's frames
+  // shifted by the temporal padding.
   template <class T>
   void gather_columns(T* buf, const T* x, int B, const std::vector<int>& tokens, int in) const {
     const int G = tokens.empty() ? num_tokens : static_cast<int>(tokens.size());
@@ -170,7 +185,13 @@ struct Tokenizer {
       for (int j = 0; j < G; ++j) {
         const int g = tokens.empty() ? j : tokens[std::size_t(j)];
         const T* src = x + (std::size_t(b) * num_tokens + g) * width;
-        std::copy(src, src + in, buf + (std::size_t(b) * G + j) * in);
+        T* dst = buf + (std::size_t(b) * G + j) * in;
+        if (padding == 0) {
+          std::copy(src, src + in, dst);
+          continue;
+        }
+        for (int a = 0; a < axes; ++a)
+          for (int f = 0; f < frames; ++f) dst[a * frames + f] = f < padding ? T(0) : src[a * frames + f - padding];
       }
   }
 };

@@ -67,8 +67,9 @@ struct LinearMomentum {
 };
 
 // Which weight decay optimizer step s uses. The Tactile-JEPA reference code steps its weight-decay
-// scheduler after each update, so step s uses wd(s) (step 0 the optimizer's initial wd_start);
-// I-JEPA's loop steps it before each update, so step s uses wd(s + 1).
+// scheduler after each update, so step s ≥ 1 uses wd(s) and step 0 the optimizer's constructor
+// value (TrainingSchedule::wd_initial; its config: 0.05, while wd(0) = 0.04); I-JEPA's loop steps
+// it before each update, so step s uses wd(s + 1).
 enum class WeightDecayTiming { reference, ijepa };
 
 inline const char* to_string(WeightDecayTiming t) { return t == WeightDecayTiming::ijepa ? "ijepa" : "reference"; }
@@ -79,6 +80,8 @@ struct TrainingSchedule {
   CosineWeightDecay wd;
   LinearMomentum momentum;
   WeightDecayTiming wd_timing = WeightDecayTiming::reference;
+  // Step 0's weight decay under the reference timing: the optimizer's constructor value; < 0: wd(0).
+  double wd_initial = -1;
 
   // The paper's schedule (Sec. IV-D, training details) for a run of `epochs` × `steps_per_epoch`
   // steps with `warmup_epochs` of warm-up.
@@ -102,7 +105,10 @@ struct TrainingSchedule {
   // The value optimizer step s uses: the learning rate's scheduler was advanced first; the weight
   // decay's by wd_timing.
   double lr_at(std::int64_t s) const { return lr(s + 1); }
-  double wd_at(std::int64_t s) const { return wd(wd_timing == WeightDecayTiming::ijepa ? s + 1 : s); }
+  double wd_at(std::int64_t s) const {
+    if (wd_timing == WeightDecayTiming::ijepa) return wd(s + 1);
+    return s == 0 && wd_initial >= 0 ? wd_initial : wd(s);
+  }
   // The EMA momentum applied after optimizer step s.
   double momentum_at(std::int64_t s) const { return momentum(s); }
 

@@ -80,6 +80,9 @@ struct TrainConfig {
   // Which step of the weight-decay schedule an update uses: "reference" (the Tactile-JEPA code's:
   // update s at wd(s)) or "ijepa" (I-JEPA's loop: wd(s + 1)); TrainingSchedule::wd_timing.
   std::string weight_decay_timing = to_string(TrainingSchedule{}.wd_timing);
+  // The first update's weight decay under the reference timing: the reference's AdamW constructor
+  // value (its optim_cfg weight_decay); -1: wd(0) = wd_start. TrainingSchedule::wd_initial.
+  double wd_initial = 0.05;
   double beta1 = AdamWConfig{}.beta1, beta2 = AdamWConfig{}.beta2, eps = AdamWConfig{}.eps;  // AdamW
   double ema_start = 0.99, ema_end = 1.0;              // the target encoder's EMA momentum, linear
   std::uint64_t seed = 0;                              // init, data order, masks, drop-path noise
@@ -103,6 +106,7 @@ struct TrainConfig {
     f("steps", c.steps), f("warmup_steps", c.warmup_steps), f("batch", c.batch);
     f("lr", c.lr), f("start_lr", c.start_lr), f("final_lr", c.final_lr);
     f("wd_start", c.wd_start), f("wd_end", c.wd_end), f("weight_decay_timing", c.weight_decay_timing);
+    f("wd_initial", c.wd_initial);
     f("beta1", c.beta1), f("beta2", c.beta2), f("eps", c.eps);
     f("ema_start", c.ema_start), f("ema_end", c.ema_end), f("seed", c.seed);
   }
@@ -204,6 +208,8 @@ struct TrainConfig {
     check(wd_end >= 0 && std::isfinite(wd_end), "wd_end", wd_end, ">= 0");
     check(weight_decay_timing == "reference" || weight_decay_timing == "ijepa", "weight_decay_timing",
           weight_decay_timing, "'reference' or 'ijepa'");
+    check(wd_initial == -1 || (wd_initial >= 0 && std::isfinite(wd_initial)), "wd_initial", wd_initial,
+          ">= 0, or -1 (wd_start)");
     check(beta1 >= 0 && beta1 < 1, "beta1", beta1, "in [0, 1)");
     check(beta2 >= 0 && beta2 < 1, "beta2", beta2, "in [0, 1)");
     check(finite_pos(eps), "eps", eps, "> 0");
@@ -255,6 +261,7 @@ struct TrainConfig {
     s.wd = CosineWeightDecay{wd_start, wd_end, steps};
     s.momentum = LinearMomentum{ema_start, ema_end, steps};
     s.wd_timing = weight_decay_timing == "ijepa" ? WeightDecayTiming::ijepa : WeightDecayTiming::reference;
+    s.wd_initial = wd_initial;
     s.validate();
     return s;
   }

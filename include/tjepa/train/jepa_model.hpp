@@ -50,6 +50,9 @@ struct ContextEncoderConfig {
   // well above W·noise maps idle taxels to one "no contact" token and lets a token's direction
   // carry the contact's amplitude. Init only: checkpoints are unaffected.
   double tokenizer_bias_std = 0.0;
+  // The per-taxel tokenizer's temporal zero padding (Tokenizer::per_taxel): 0, or the 2 of the
+  // reference's checkpoints that predate its `_temporal_patch_version` marker.
+  int temporal_padding = 0;
 
   // A config C (deriving from this one) at its defaults, with the reference's ViT-Tiny encoder
   // for num_tokens tokens of in_dim = m·τ values, m = axes.
@@ -75,6 +78,17 @@ struct ContextEncoderConfig {
     require<ConfigError>(group_size.empty() || static_cast<int>(group_size.size()) == encoder.num_tokens, who,
                          ": group_size has ", group_size.size(), " entries, expected encoder.num_tokens = ",
                          encoder.num_tokens, " (or none)");
+    require<ConfigError>(temporal_padding == 0 || (group_size.empty() && 2 * temporal_padding < in_dim / axes), who,
+                         ": temporal_padding = ", temporal_padding,
+                         ", expected 0, or with the per-taxel tokenizer 2·padding < τ = ", in_dim / axes);
+    require<ConfigError>(static_cast<int>(encoder.token_type.size()) == (encoder.token_types > 0 ? encoder.num_tokens : 0),
+                         who, ": encoder.token_type has ", encoder.token_type.size(), " entries for ",
+                         encoder.token_types, " types, expected num_tokens = ", encoder.num_tokens,
+                         " with types, none without");
+    for (std::size_t i = 0; i < encoder.token_type.size(); ++i)
+      require<ConfigError>(encoder.token_type[i] >= 0 && encoder.token_type[i] < encoder.token_types, who,
+                           ": encoder.token_type[", i, "] = ", encoder.token_type[i], ", expected in [0, ",
+                           encoder.token_types, ")");
   }
 
   // Reads the keys encoder_json writes into this config; a missing key or a wrong type throws E
@@ -94,17 +108,27 @@ struct ContextEncoderConfig {
     json_read<E>(e, "mlp_ratio", encoder.mlp_ratio, we);
     json_read<E>(e, "bias", encoder.bias, we);
     json_read<E>(e, "eps", encoder.eps, we);
+    // Written only when set (files from before them lack them).
+    if (j.contains("temporal_padding")) json_read<E>(j, "temporal_padding", temporal_padding, where);
+    if (e.contains("token_types")) json_read<E>(e, "token_types", encoder.token_types, we);
+    if (e.contains("token_type")) json_read<E>(e, "token_type", encoder.token_type, we);
   }
 
   nlohmann::json encoder_json() const {
     const auto& e = encoder;
-    return {{"in_dim", in_dim},
-            {"axes", axes},
-            {"group_size", group_size},
-            {"tokenizer_bias_std", tokenizer_bias_std},
-            {"encoder",
-             {{"num_tokens", e.num_tokens}, {"dim", e.dim}, {"depth", e.depth}, {"heads", e.heads},
-              {"mlp_ratio", e.mlp_ratio}, {"bias", e.bias}, {"eps", e.eps}}}};
+    nlohmann::json j = {{"in_dim", in_dim},
+                        {"axes", axes},
+                        {"group_size", group_size},
+                        {"tokenizer_bias_std", tokenizer_bias_std},
+                        {"encoder",
+                         {{"num_tokens", e.num_tokens}, {"dim", e.dim}, {"depth", e.depth}, {"heads", e.heads},
+                          {"mlp_ratio", e.mlp_ratio}, {"bias", e.bias}, {"eps", e.eps}}}};
+    if (temporal_padding != 0) j["temporal_padding"] = temporal_padding;
+    if (e.token_types > 0) {
+      j["encoder"]["token_types"] = e.token_types;
+      j["encoder"]["token_type"] = e.token_type;
+    }
+    return j;
   }
 };
 
@@ -186,8 +210,9 @@ struct JepaConfig : ContextEncoderConfig {
 template <class T>
 void add_context_encoder(ParamSet<T>& ps, const ContextEncoderConfig& c, Tokenizer& tokenizer, Encoder& encoder) {
   const int N = c.encoder.num_tokens, d = c.encoder.dim;
-  tokenizer = c.group_size.empty() ? Tokenizer::per_taxel(ps, N, c.axes, c.in_dim / c.axes, d, c.encoder.eps)
-                                   : Tokenizer::grouped(ps, c.group_size, c.in_dim, d, c.encoder.eps);
+  tokenizer = c.group_size.empty()
+                  ? Tokenizer::per_taxel(ps, N, c.axes, c.in_dim / c.axes, d, c.encoder.eps, "patch_embed.", c.temporal_padding)
+                  : Tokenizer::grouped(ps, c.group_size, c.in_dim, d, c.encoder.eps);
   encoder = Encoder(ps, c.encoder);
 }
 
