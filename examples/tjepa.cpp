@@ -1,4 +1,4 @@
-// The `tjepa` command: layout / pretrain / probe / embed / demo. `tjepa demo` is the README's
+// The `tjepa` command: layout / pretrain / probe / embed / convert / eval / demo. `tjepa demo` is the README's
 // main job. The subcommands live in cli/commands.hpp; this file only parses the command line.
 // Any error is one line on stderr ("tjepa: error: ...") and a non-zero exit.
 #include <CLI/CLI.hpp>
@@ -13,6 +13,7 @@
 #endif
 
 #include "cli/commands.hpp"
+#include "cli/convert.hpp"
 #include "cli/eval.hpp"
 #include "cli/parse.hpp"
 
@@ -115,6 +116,25 @@ int main(int argc, char** argv) {
   embed->add_flag("--force", eo.force, "overwrite --out");
   embed->add_flag("--quiet", eo.quiet, "no progress line");
 
+  ConvertOptions co;
+  auto* convert = app.add_subcommand(
+      "convert", "The reference code's checkpoint (safetensors state dict) to a tjepa checkpoint, or a tjepa "
+      "checkpoint back to the reference's state dict");
+  convert->add_option("input", co.in, "reference state dict (.safetensors; a .ckpt via "
+                                      "tools/reference/torch_checkpoint.py) or tjepa checkpoint")->required();
+  convert->add_option("--out", co.out, "output .safetensors")->required();
+  convert->add_option("--heads", co.heads, "attention heads (default: the file's config or the reference's model sizes)");
+  convert->add_option("--padding", co.padding, "the tokenizer's temporal padding, 0 or 2 (default: the file's marker)");
+  convert->add_option("--layout", co.layout, "the skin: built-in layout or layout CSV (default: allegro for 368 taxels)");
+  convert->add_option("--edges", co.edges, "edges CSV of a layout CSV");
+  convert->add_option("--layout-columns", co.columns, "the layout CSV's column names, e.g. x=visual_x,y=visual_y");
+  convert->add_option("--bridges", co.bridges, "inferred graphs: connect | near | none")->capture_default_str();
+  convert->add_option("--order", co.order, "the recordings' (= the reference model's) taxel order: reference | "
+                                           "xserver | id,column CSV (default: reference for allegro)");
+  convert->add_option("--taxel-types", co.taxel_types, "type of each token in the reference's order, e.g. 2,2,0,1 "
+                                                       "(default: the Xela hand's 4x4 / 4x6 / curved pads)");
+  convert->add_flag("--force", co.force, "overwrite --out");
+
   std::uint64_t demo_seed = 0;
   std::string demo_out = "runs/demo";
   bool demo_quiet = false;
@@ -158,6 +178,7 @@ int main(int argc, char** argv) {
     if (*pretrain) return run_pretrain(po, std::cout);
     if (*probe) return run_probe(pb, std::cout);
     if (*embed) return run_embed(eo, std::cout);
+    if (*convert) return run_convert(co, std::cout);
     if (*eval) return run_eval(ev.resolve(argc, argv), std::cout);
     if (*demo) {
       EvalOptions dm = demo_eval_options(demo_seed);

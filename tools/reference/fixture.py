@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """The PyTorch fixture of tests/reference: Tactile-JEPA's model and training step in PyTorch, with the
 module structure and state-dict names of the reference code (E-Kovtun/tactile, tactile_ssl:
 XelaJEPAModule with context_encoder / target_encoder / predictor, XelaTransformer, PatchEmbed1d,
@@ -28,11 +28,12 @@ import argparse
 import json
 import math
 import os
-import struct
 
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
+
+from safetensors_io import write_safetensors
 
 EPS = 1e-6  # LayerNorm eps of every norm (the reference's partial(nn.LayerNorm, eps=1e-6))
 
@@ -195,25 +196,6 @@ def wd_at(s, c):
 
 def momentum_at(s, c):
     return c["ema_start"] + s * (c["ema_end"] - c["ema_start"]) / c["total"]
-
-
-def write_safetensors(path, tensors, metadata):
-    names = {torch.float64: "F64", torch.float32: "F32", torch.int64: "I64", torch.int32: "I32"}
-    header, blobs, offset = {"__metadata__": metadata}, [], 0
-    for name, t in tensors.items():
-        data = t.detach().contiguous().cpu().numpy().tobytes()
-        header[name] = {"dtype": names[t.dtype], "shape": list(t.shape), "data_offsets": [offset, offset + len(data)]}
-        blobs.append(data)
-        offset += len(data)
-    h = json.dumps(header, separators=(",", ":")).encode()
-    h += b" " * ((8 - len(h) % 8) % 8)
-    tmp = path + ".tmp"
-    with open(tmp, "wb") as f:
-        f.write(struct.pack("<Q", len(h)))
-        f.write(h)
-        for b in blobs:
-            f.write(b)
-    os.replace(tmp, path)
 
 
 def run(variant, timing, dtype, out_dir):
