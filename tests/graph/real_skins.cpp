@@ -150,6 +150,15 @@ TEST_SUITE("graph") {
       for (int j : t) same += column[j] == j;
       CHECK(same == 6);
     }
+    // The reference's taxel types (taxeltype_embed rows: 4x4, 4x6, curved) follow the pads, in its
+    // order and so in tjepa's.
+    const std::vector<int> type = tjepa::layouts::allegro::reference_taxel_types();
+    REQUIRE(type.size() == 368u);
+    for (int j = 0; j < l.size(); ++j) {
+      const std::size_t n = l.taxels_of_group(l.group[j]).size();
+      CHECK(type[j] == (n == 30 ? 2 : n == 24 ? 1 : 0));
+      CHECK(type[column[j]] == type[j]);
+    }
   }
 
   TEST_CASE("Allegro graph: the reference's 17 pad pairs / short bridges / and its own edges from coordinates") {

@@ -151,6 +151,18 @@ inline std::vector<int> reference_columns() {
     for (int k = 0; k < 30; ++k) column[static_cast<std::size_t>(first + tip[k])] = first + k;
   return column;
 }
+
+// The reference's taxel type of each token in its order (XELA_FLATTEN_ORDER of
+// tactile_ssl/data/xela/utils.py): rows of taxeltype_embed 0 = 4x4 pad, 1 = 4x6 palm pad, 2 = curved
+// fingertip. That order's pads are tjepa's, so this is also the type of each tjepa taxel.
+inline std::vector<int> reference_taxel_types() {
+  std::vector<int> t;
+  const auto pad = [&](int n, int type) { t.insert(t.end(), static_cast<std::size_t>(n), type); };
+  pad(30, 2), pad(32, 0);                 // thumb: tip, 2 pads
+  for (int f = 0; f < 3; ++f) pad(30, 2), pad(48, 0);  // index, middle, ring: tip, 3 pads
+  pad(72, 1);                             // three palm pads
+  return t;
+}
 }  // namespace allegro
 
 inline Skin allegro_xela() {
