@@ -11,6 +11,7 @@
 #include <vector>
 
 #include <tjepa/core/atomic_write.hpp>
+#include <tjepa/io/reference_checkpoint.hpp>
 #include <tjepa/train/jepa_objective.hpp>
 
 #include "targets.hpp"
@@ -69,6 +70,22 @@ void write_corpus(const fs::path& root) {
     tjepa::write_edges_csv(dir("edges_csv") / "grid_edges.csv", grid.layout, grid.graph);
   }
   tjepa::write_file_atomic(dir("run_config") / "defaults.json", tjepa::TrainConfig{}.to_json().dump(2));
+  // reference_checkpoint: a 6-taxel reference-code state dict (padding 2, taxel types, normalization).
+  {
+    tjepa::JepaConfig c = tjepa::JepaConfig::reference(6, 15, 3);  // τ = 5
+    c.encoder.dim = c.predictor.in_dim = c.predictor.dim = 8;
+    c.encoder.depth = c.predictor.depth = 1;
+    c.encoder.heads = c.predictor.heads = 2;
+    c.temporal_padding = 2;
+    c.encoder.token_types = 1;
+    c.encoder.token_type.assign(6, 0);
+    const tjepa::JepaModel<float> m(c, 0);
+    tjepa::ReferenceFacts facts;
+    facts.version_marker = -1;
+    facts.mean = {0.f, 1.f, 2.f};
+    facts.std = {1.f, 2.f, 3.f};
+    tjepa::save_safetensors(dir("reference_checkpoint") / "tiny.safetensors", tjepa::reference_state(m, facts, {}));
+  }
 }
 
 std::vector<char> read_all(const fs::path& p) {

@@ -20,6 +20,7 @@
 #include <tjepa/core/error.hpp>
 #include <tjepa/data/npy.hpp>
 #include <tjepa/data/text_reader.hpp>
+#include <tjepa/io/reference_checkpoint.hpp>
 #include <tjepa/io/safetensors.hpp>
 #include <tjepa/sensors/csv.hpp>
 #include <tjepa/sensors/generic.hpp>
@@ -124,9 +125,29 @@ struct Target {
   int (*run)(const std::uint8_t*, std::size_t);
 };
 
+// A reference-code state dict through the converter: config, load, and back.
+inline int reference_checkpoint(const std::uint8_t* data, std::size_t size) {
+  return expect_tjepa_errors([&] {
+    const auto file = parse_safetensors(std::span(reinterpret_cast<const std::byte*>(data), size), "input");
+    ReferenceOptions opt;
+    opt.heads = 2;
+    if (file.contains("context_encoder.pos_embed")) {
+      const Tensor& pos = file.at("context_encoder.pos_embed");
+      if (pos.shape.size() == 3 && pos.shape[1] > 0 && pos.shape[1] < 4096)
+        opt.token_types.assign(static_cast<std::size_t>(pos.shape[1]), 0);
+    }
+    ReferenceFacts facts;
+    const JepaConfig c = reference_model_config(file, opt, &facts);
+    JepaModel<float> m(c, 0);
+    load_reference_state(file, m, opt);
+    (void)reference_state(m, facts, opt);
+  });
+}
+
 inline constexpr Target targets[] = {
     {"safetensors", safetensors}, {"checkpoint", checkpoint}, {"npy", npy},           {"text_recording", text_recording},
     {"layout_csv", layout_csv},   {"edges_csv", edges_csv},   {"run_config", run_config},
+    {"reference_checkpoint", reference_checkpoint},
 };
 
 }  // namespace tjepa::fuzz

@@ -42,6 +42,7 @@
 #include "tjepa/io/safetensors.hpp"
 #include "tjepa/sensors/allegro_xela.hpp"
 #include "tjepa/train/jepa_model.hpp"
+#include "tjepa/train/trained_model.hpp"
 
 namespace tjepa {
 
@@ -137,8 +138,10 @@ inline JepaConfig reference_model_config(const SafetensorsFile& f, const Referen
   const std::string ce = "context_encoder.", te = "target_encoder.", pr = "predictor.";
   ReferenceFacts fx;
   const Tensor& pos = detail::reference_tensor(f, ce + "pos_embed");
-  require<FileError>(pos.shape.size() == 3 && pos.shape[0] == 1, src, ": context_encoder.pos_embed has shape ",
-                     detail::shape_string(pos.shape), ", expected [1, tokens, d]");
+  require<FileError>(pos.shape.size() == 3 && pos.shape[0] == 1 && pos.shape[1] > 0 && pos.shape[2] > 0 &&
+                         pos.shape[1] < (1 << 24) && pos.shape[2] < (1 << 16),
+                     src, ": context_encoder.pos_embed has shape ", detail::shape_string(pos.shape),
+                     ", expected [1, tokens, d]");
   const int P = static_cast<int>(pos.shape[1]), d = static_cast<int>(pos.shape[2]);
   JepaConfig c;
   c.encoder.num_tokens = P;
@@ -148,7 +151,9 @@ inline JepaConfig reference_model_config(const SafetensorsFile& f, const Referen
   const bool grouped = !f.contains(ce + "patch_embed.proj.weight");
   if (!grouped) {
     const Tensor& w = f.at(ce + "patch_embed.proj.weight");
-    require<FileError>(w.shape.size() == 3 && w.shape[0] == d, src, ": context_encoder.patch_embed.proj.weight has shape ",
+    require<FileError>(w.shape.size() == 3 && w.shape[0] == d && w.shape[1] > 0 && w.shape[2] > 0 &&
+                           w.shape[1] * w.shape[2] < (1 << 24),
+                       src, ": context_encoder.patch_embed.proj.weight has shape ",
                        detail::shape_string(w.shape), ", expected [d = ", d, ", channels, chunk]");
     c.axes = static_cast<int>(w.shape[1]);
     c.in_dim = static_cast<int>(w.shape[1] * w.shape[2]);
@@ -165,9 +170,12 @@ inline JepaConfig reference_model_config(const SafetensorsFile& f, const Referen
     require<ConfigError>(static_cast<int>(opt.group_size.size()) == P, src,
                          ": a grouped tokenizer (tokenizer.direct*): give the members of each of its ", P,
                          " tokens (ReferenceOptions::group_size)");
+    for (int n : opt.group_size)
+      require<ConfigError>(n > 0, src, ": group sizes must be > 0, got ", n);
     const int n0 = opt.group_size.front();
     const Tensor& w = detail::reference_tensor(f, ce + "tokenizer.direct" + std::to_string(n0) + ".0.weight");
-    require<FileError>(w.shape.size() == 2 && w.shape[1] % n0 == 0, src, ": tokenizer.direct", n0,
+    require<FileError>(w.shape.size() == 2 && w.shape[1] > 0 && w.shape[1] % n0 == 0 && w.shape[1] < (1 << 24), src,
+                       ": tokenizer.direct", n0,
                        ".0.weight has shape ", detail::shape_string(w.shape), ", expected [d, ", n0, "·k]");
     c.in_dim = static_cast<int>(w.shape[1]) / n0;
     c.axes = opt.axes > 0 ? opt.axes : 1;
@@ -196,8 +204,13 @@ inline JepaConfig reference_model_config(const SafetensorsFile& f, const Referen
   // Encoder blocks: depth, MLP width, biases (all or none).
   c.encoder.depth = detail::count_blocks(f, ce);
   require<FileError>(c.encoder.depth > 0, src, ": context_encoder has no blocks.0");
-  const Tensor& fc1 = detail::reference_tensor(f, ce + "blocks.0.mlp.fc1.weight");
-  c.encoder.mlp_ratio = static_cast<double>(fc1.shape[0]) / d;
+  const auto matrix = [&](const std::string& name, int cols) -> const Tensor& {
+    const Tensor& t = detail::reference_tensor(f, name);
+    require<FileError>(t.shape.size() == 2 && t.shape[0] > 0 && t.shape[0] < (1 << 24) && t.shape[1] == cols, src,
+                       ": tensor '", name, "' has shape ", detail::shape_string(t.shape), ", expected [rows, ", cols, "]");
+    return t;
+  };
+  c.encoder.mlp_ratio = static_cast<double>(matrix(ce + "blocks.0.mlp.fc1.weight", d).shape[0]) / d;
   const bool qb = f.contains(ce + "blocks.0.attn.qkv.bias"), pb = f.contains(ce + "blocks.0.attn.proj.bias"),
              fb = f.contains(ce + "blocks.0.mlp.fc1.bias");
   require<FileError>(qb == pb && pb == fb, src, ": context_encoder blocks with qkv_bias ", qb, ", proj_bias ", pb,
@@ -237,12 +250,11 @@ inline JepaConfig reference_model_config(const SafetensorsFile& f, const Referen
   c.predictor.in_dim = d;
   c.predictor.depth = detail::count_blocks(f, pr);
   require<FileError>(c.predictor.depth > 0, src, ": predictor has no blocks.0");
-  const Tensor& ip = detail::reference_tensor(f, pr + "input_projection.weight");
-  c.predictor.dim = static_cast<int>(ip.shape[0]);
+  c.predictor.dim = static_cast<int>(matrix(pr + "input_projection.weight", d).shape[0]);
   require<FileError>(c.predictor.dim == d, src, ": predictor width ", c.predictor.dim,
                      ", tjepa's predictor has the encoder's width ", d);
   c.predictor.heads = heads;
-  c.predictor.mlp_ratio = static_cast<double>(detail::reference_tensor(f, pr + "blocks.0.mlp.fc1.weight").shape[0]) / d;
+  c.predictor.mlp_ratio = static_cast<double>(matrix(pr + "blocks.0.mlp.fc1.weight", d).shape[0]) / d;
   for (const char* b : {"attn.qkv.bias", "attn.proj.bias", "mlp.fc1.bias", "mlp.fc2.bias"})
     require<FileError>(!f.contains(pr + "blocks.0." + b), src, ": predictor.blocks.0.", b,
                        ": tjepa's predictor blocks have no biases (the reference's default)");
@@ -259,6 +271,11 @@ inline JepaConfig reference_model_config(const SafetensorsFile& f, const Referen
   } catch (const Error& e) {
     fail<FileError>(src, ": ", e.what());
   }
+  // A model no larger than the file: metadata-sized allocations from a small file are refused.
+  double held = 0;
+  for (const std::string& name : f.names()) held += static_cast<double>(f.at(name).numel());
+  require<FileError>(detail::jepa_weight_count(c) <= held, src, ": the tensors' shapes describe a model of about ",
+                     detail::jepa_weight_count(c), " weights, the file holds ", held, " values");
   // Every tensor must be one tjepa reads (or a fact above).
   ParamSet<float> ctx, pred;
   Tokenizer tok;
