@@ -88,6 +88,11 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(1, 1 << 30));
   probe->add_option("--simulate-test-frames", pb.simulate_test_frames, "simulated held-out frames")
       ->capture_default_str()->check(CLI::Range(1, 1 << 30));
+  probe->add_option("--min-contact", pb.min_contact,
+                    "frames in contact for a window to count (default: 5 with simulated labels, off with --task)");
+  probe->add_option("--contact-threshold", pb.contact_threshold,
+                    "--task: a frame is in contact when a taxel's preprocessed reading exceeds this norm")
+      ->capture_default_str();
   probe->add_option("--max-windows", pb.max_windows, "labelled windows per split (0: all)")->capture_default_str();
   probe->add_option("--epochs", pb.probe.max_epochs, "probe epoch limit (early stopping)")->capture_default_str();
   probe->add_option("--patience", pb.probe.patience, "epochs without a better validation loss before stopping")

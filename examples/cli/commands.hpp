@@ -199,7 +199,8 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
       picked.mode == "xela" && baseline ? track_drift(run, *baseline, rec_ptrs) : std::nullopt;
   const Preprocessor pre = fit_preprocessor(picked.mode, baseline ? &*baseline : nullptr, recs);
   const int axes = recs[0].axes();
-  const WindowSource src(recs, WindowSpec{run.tau}, {}, pre);
+  const WindowSource src(recs, window_spec(run.tau, o.format), {}, pre);
+  note_dropped(src, "pre-training data", out);
 
   OutputFiles files;
   // A resumed run writes into its own folder unless told otherwise, and continues its log there.
@@ -445,7 +446,11 @@ struct ProbeOptions {
   DataFormat format;                  // how recordings are read (axes, columns, header, NaN)
   std::uint64_t simulate_seed = 1;
   int simulate_train_frames = 20000, simulate_test_frames = 10000;  // the demo's (8000 + 4000 gave noisy results)
-  int min_contact = 5;                     // frames in contact for a window to count
+  // Frames in contact for a window to count; -1: 5 with the simulator's labels, 0 (off) with --task,
+  // where a frame is in contact when a taxel's preprocessed reading has a norm over its axes above
+  // contact_threshold (in the preprocessing's units: standard deviations after standardization).
+  int min_contact = -1;
+  double contact_threshold = 3.0;
   int max_windows = 0;                     // per split, 0 = all
   HeadTrainConfig probe{.max_epochs = 60, .batch = 32, .lr = 1e-3};  // early-stopped on a validation split
   int repeats = 1;                         // probes with seeds seed, seed + 1, ... averaged
@@ -510,10 +515,20 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
                      ": class ids up to ", classes - 1, ", expected at least two classes");
   m.track(train_rec);
   m.track(test_rec);
-  const WindowSource train_src(train_rec, WindowSpec{m.config.tau}, {}, m.pre);
-  const WindowSource test_src(test_rec, WindowSpec{m.config.tau}, {}, m.pre);
-  const WindowLabels train = window_labels(train_src, train_frames, task, classes, train_labels);
-  const WindowLabels test = window_labels(test_src, test_frames, task, classes, test_labels);
+  const WindowSource train_src(train_rec, window_spec(m.config.tau, o.format), {}, m.pre);
+  const WindowSource test_src(test_rec, window_spec(m.config.tau, o.format), {}, m.pre);
+  note_dropped(train_src, "training recording", out);
+  note_dropped(test_src, "held-out recording", out);
+  WindowLabels train = window_labels(train_src, train_frames, task, classes, train_labels);
+  WindowLabels test = window_labels(test_src, test_frames, task, classes, test_labels);
+  if (o.min_contact > 0) {
+    const auto before = std::make_pair(train.window.size(), test.window.size());
+    keep_contact_windows(train, train_src, o.min_contact, o.contact_threshold, train_labels);
+    keep_contact_windows(test, test_src, o.min_contact, o.contact_threshold, test_labels);
+    out << "contact filter: windows with at least " << o.min_contact << " frames in which a taxel's reading exceeds "
+        << o.contact_threshold << ": " << train.window.size() << " of " << before.first << " training, "
+        << test.window.size() << " of " << before.second << " held-out\n";
+  }
   out << "probe for " << o.task << " labels on " << o.checkpoint << ": " << train.window.size() << " training and "
       << test.window.size() << " held-out windows\n";
   // The default epochs suit thousands of windows; on a few hundred an epoch is a handful of steps,
@@ -532,13 +547,14 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
   }
   const std::vector<LabelProbeRow> rows = label_probe_rows(
       m, o.encoder == "target" ? model.target : model.context, o.encoder, train_src, train, test_src, test, skin,
-      cfg, o.quiet);
+      cfg, o.quiet, o.repeats);
   out << label_probe_markdown(rows, test.targets, static_cast<int>(train.window.size()));
   if (!o.out.empty()) {
     OutputFiles files;
     write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint},
                                                        {"task", o.task},
                                                        {"train_windows", train.window.size()},
+                                                       {"repeats", o.repeats},
                                                        {"test_windows", test.window.size()},
                                                        {"results", label_probe_json(rows)}}
                                             .dump(2));
@@ -581,12 +597,14 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   for (const Recording* r : {&train_rec, &test_rec}) require_fits(*r, m);
   m.track(train_rec);
   m.track(test_rec);
-  const WindowSource train_src(train_rec, WindowSpec{m.config.tau}, train_lab, m.pre);
-  const WindowSource test_src(test_rec, WindowSpec{m.config.tau}, test_lab, m.pre);
+  const WindowSource train_src(train_rec, window_spec(m.config.tau, o.format), train_lab, m.pre);
+  const WindowSource test_src(test_rec, window_spec(m.config.tau, o.format), test_lab, m.pre);
+  note_dropped(train_src, "training recording", out);
+  note_dropped(test_src, "held-out recording", out);
   const ProbeLabels train = ProbeLabels::from_source(
-      train_src, labelled_windows(train_src, o.min_contact, o.max_windows, o.probe.seed));
+      train_src, labelled_windows(train_src, o.min_contact < 0 ? 5 : o.min_contact, o.max_windows, o.probe.seed));
   const ProbeLabels test = ProbeLabels::from_source(
-      test_src, labelled_windows(test_src, o.min_contact, o.max_windows, o.probe.seed + 1));
+      test_src, labelled_windows(test_src, o.min_contact < 0 ? 5 : o.min_contact, o.max_windows, o.probe.seed + 1));
   for (int c : train.indenter)
     require<DataError>(c < num_indenter_shapes, "indenter class ", c, " in the training labels, expected < ",
                        num_indenter_shapes);
@@ -627,13 +645,16 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
                        "--checkpoint, --data and --out are required");
   require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
                        "', expected target or context");
+  require<ConfigError>(parse_non_finite(o.format.non_finite) != NonFinite::drop,
+                       "embed writes one row per window of the recording; --non-finite drop would shift them: use "
+                       "hold, interpolate or zero");
   OutputFiles::check_new(o.out, o.force);
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
   Recording rec = in_layout_order(read_recording(o.data, o.format), load_skin(SkinSpec::of(m.config)), o.data);
   require_fits(rec, m);
   m.track(rec);
-  const WindowSource src(rec, WindowSpec{m.config.tau, o.stride}, {}, m.pre);
+  const WindowSource src(rec, window_spec(m.config.tau, o.format, o.stride), {}, m.pre);
   std::vector<std::int64_t> ids(static_cast<std::size_t>(src.size()));
   for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = static_cast<std::int64_t>(i);
   ProgressLine bar("embed", src.size(), o.quiet);

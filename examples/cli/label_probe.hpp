@@ -12,7 +12,8 @@
 //   random encoder         the checkpoint's architecture at a random initialization, frozen;
 //   this checkpoint        its target (or context) encoder, frozen.
 // Heads are attentive probes trained with early stopping on a validation split of the training
-// windows (train_head). A head whose best validation loss is not 2 % below the constant's on the
+// windows (train_head); with repeats, one per seed, averaged with their standard deviation.
+// Optionally only windows in contact count (keep_contact_windows; off by default). A head whose best validation loss is not 2 % below the constant's on the
 // same split is flagged (it learned nothing), as is a row no better than the constant on the
 // held-out windows and a split whose windows hold one class.
 #include <chrono>
@@ -91,10 +92,56 @@ inline WindowLabels window_labels(const WindowSource& src, const Recording& fram
   return w;
 }
 
+// Keeps the windows of w with at least min_frames frames in which some taxel's preprocessed
+// reading (what the encoder sees) has a norm over its axes above threshold.
+inline void keep_contact_windows(WindowLabels& w, const WindowSource& src, int min_frames, double threshold,
+                                 const std::string& file) {
+  const int R = w.targets.regression;
+  WindowLabels kept;
+  kept.targets.regression = R;
+  kept.targets.classes = w.targets.classes;
+  WindowBatch wb;
+  const std::size_t chunk = 256;
+  for (std::size_t first = 0; first < w.window.size(); first += chunk) {
+    const std::size_t n = std::min(chunk, w.window.size() - first);
+    src.gather(std::span<const std::int64_t>(w.window.data() + first, n), wb);
+    const int N = wb.taxels, L = wb.length, m = wb.axes;
+    for (std::size_t b = 0; b < n; ++b) {
+      int frames = 0;
+      for (int j = 0; j < L; ++j) {
+        bool contact = false;
+        for (int t = 0; t < N && !contact; ++t) {
+          const float* x = wb.x.data() + b * wb.per_window() + (static_cast<std::size_t>(t) * L + j) * m;
+          double sq = 0;
+          for (int a = 0; a < m; ++a) sq += double(x[a]) * x[a];
+          contact = sq > threshold * threshold;
+        }
+        frames += contact;
+      }
+      if (frames < min_frames) continue;
+      const std::size_t i = first + b;
+      kept.window.push_back(w.window[i]);
+      if (R > 0)
+        kept.targets.value.insert(kept.targets.value.end(), w.targets.value.begin() + std::ptrdiff_t(i * R),
+                                  w.targets.value.begin() + std::ptrdiff_t((i + 1) * R));
+      else
+        kept.targets.label.push_back(w.targets.label[i]);
+    }
+  }
+  require<DataError>(kept.window.size() >= 4, file, ": ", kept.window.size(), " of ", w.window.size(),
+                     " labelled windows have ", min_frames, " frames in contact (a taxel above ", threshold,
+                     "), expected at least 4: lower --min-contact or --contact-threshold");
+  w = std::move(kept);
+}
+
 struct LabelProbeRow {
   std::string name;
   std::vector<double> rmse;         // regression: per output
   double accuracy = std::numeric_limits<double>::quiet_NaN();
+  // Heads with repeats > 1: the mean over the repeats that did not diverge (rmse, accuracy), the
+  // sample standard deviation of the mean RMSE (regression) or the top-1 (classification).
+  int repeats = 1;
+  double sd = std::numeric_limits<double>::quiet_NaN();
   double validation = std::numeric_limits<double>::quiet_NaN();  // heads: best validation loss
   int best_epoch = -1, epochs = 0;
   std::string flag;                 // why the row says little ("" = nothing to say)
@@ -170,7 +217,8 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
                                                    const std::string& encoder_name, const WindowSource& train_src,
                                                    const WindowLabels& train, const WindowSource& test_src,
                                                    const WindowLabels& test, const Skin& skin,
-                                                   const HeadTrainConfig& cfg, bool quiet) {
+                                                   const HeadTrainConfig& cfg, bool quiet, int repeats = 1) {
+  require<ConfigError>(repeats >= 1, "label probe: repeats = ", repeats, ", expected >= 1");
   const TaxelLayout& layout = skin.layout;
   const HeadTargets& tr = train.targets;
   const HeadTargets& te = test.targets;
@@ -248,24 +296,71 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
                              [&](std::int64_t d, std::int64_t) { bar.update(tr.size() + d, tr.size() + d, ""); });
     FrozenFeatures<float> ftr(std::move(etr), model.num_tokens(), model.dim());
     FrozenFeatures<float> fte(std::move(ete), model.num_tokens(), model.dim());
-    ProbeHead<float> head(model.dim(), m.config.heads, R, C, cfg.seed);
-    const HeadTrainResult fit = train_head(head, ftr, tr, cfg);
-    LabelProbeRow row;
-    row.name = name;
-    row.validation = fit.best_validation;
-    row.best_epoch = fit.best_epoch;
-    row.epochs = fit.epochs();
-    const std::vector<float> y = predict_head(head, fte, te.size());
-    std::vector<double> v;
-    std::vector<int> c;
-    const int out = R + C;
-    for (int s = 0; s < te.size(); ++s) {
-      const float* r = y.data() + static_cast<std::size_t>(s) * out;
-      for (int a = 0; a < R; ++a) v.push_back(r[a]);
-      if (C > 0) c.push_back(static_cast<int>(std::max_element(r + R, r + out) - (r + R)));
+    // One head per repeat (seeds cfg.seed, cfg.seed + 1, ...); a diverged one is left out of the mean.
+    std::vector<LabelProbeRow> runs;
+    int diverged = 0;
+    for (int rep = 0; rep < repeats; ++rep) {
+      HeadTrainConfig c_rep = cfg;
+      c_rep.seed = cfg.seed + static_cast<std::uint64_t>(rep);
+      ProbeHead<float> head(model.dim(), m.config.heads, R, C, c_rep.seed);
+      const HeadTrainResult fit = train_head(head, ftr, tr, c_rep);
+      LabelProbeRow row;
+      row.name = name;
+      row.validation = fit.best_validation;
+      row.best_epoch = fit.best_epoch;
+      row.epochs = fit.epochs();
+      const std::vector<float> y = predict_head(head, fte, te.size());
+      std::vector<double> v;
+      std::vector<int> c;
+      const int out = R + C;
+      for (int s = 0; s < te.size(); ++s) {
+        const float* r = y.data() + static_cast<std::size_t>(s) * out;
+        for (int a = 0; a < R; ++a) v.push_back(r[a]);
+        if (C > 0) c.push_back(static_cast<int>(std::max_element(r + R, r + out) - (r + R)));
+      }
+      score_row(row, v, c, te);
+      if (!std::isfinite(row.validation) && repeats > 1) {
+        ++diverged;
+        continue;
+      }
+      runs.push_back(std::move(row));
     }
-    score_row(row, v, c, te);
+    if (runs.empty()) {  // every repeat diverged: the first one's row, flagged
+      LabelProbeRow row;
+      row.name = name;
+      row.repeats = repeats;
+      row.flag = "all " + std::to_string(repeats) + " repeats diverged (validation loss not finite)";
+      row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      return row;
+    }
+    LabelProbeRow row = runs.front();
+    row.repeats = repeats;
+    if (runs.size() > 1) {
+      const double k = static_cast<double>(runs.size());
+      const auto score = [&](const LabelProbeRow& r) {
+        if (R == 0) return r.accuracy;
+        double s = 0;
+        for (double e : r.rmse) s += e / static_cast<double>(r.rmse.size());
+        return s;
+      };
+      double mean_score = 0, ss = 0, val = 0;
+      for (const auto& r : runs) mean_score += score(r) / k, val += r.validation / k;
+      for (const auto& r : runs) ss += (score(r) - mean_score) * (score(r) - mean_score);
+      for (std::size_t a = 0; a < row.rmse.size(); ++a) {
+        row.rmse[a] = 0;
+        for (const auto& r : runs) row.rmse[a] += r.rmse[a] / k;
+      }
+      if (C > 0) {
+        row.accuracy = 0;
+        for (const auto& r : runs) row.accuracy += r.accuracy / k;
+      }
+      row.validation = val;
+      row.sd = std::sqrt(ss / (k - 1));
+    }
     row.flag = join(join(one_class, head_flag(row.validation, constant)), held_out_flag(row, rows.front()));
+    if (diverged > 0)
+      row.flag = join(row.flag, std::to_string(diverged) + " of " + std::to_string(repeats) +
+                                    " repeats diverged and are left out of the mean");
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return row;
   };
@@ -297,12 +392,17 @@ inline std::string label_probe_markdown(const std::vector<LabelProbeRow>& rows, 
       s += buf;
       mean += v / static_cast<double>(r.rmse.size());
     }
+    const bool sd = std::isfinite(r.sd);
     if (R > 1) {
-      std::snprintf(buf, sizeof buf, " %.4g |", mean);
+      std::snprintf(buf, sizeof buf, sd ? " %.4g ± %.2g |" : " %.4g |", mean, r.sd);
+      s += buf;
+    } else if (R == 1 && sd) {  // the one output's column carries the spread
+      s.pop_back(), s.pop_back();
+      std::snprintf(buf, sizeof buf, " ± %.2g |", r.sd);
       s += buf;
     }
     if (C > 0) {
-      std::snprintf(buf, sizeof buf, " %.1f |", 100 * r.accuracy);
+      std::snprintf(buf, sizeof buf, sd ? " %.1f ± %.1f |" : " %.1f |", 100 * r.accuracy, 100 * r.sd);
       s += buf;
     }
     s += r.best_epoch >= 0 ? " " + std::to_string(r.best_epoch + 1) + " of " + std::to_string(r.epochs) + " |" : " - |";
@@ -319,6 +419,8 @@ inline nlohmann::json label_probe_json(const std::vector<LabelProbeRow>& rows) {
     if (std::isfinite(r.accuracy)) j["accuracy"] = r.accuracy;
     if (std::isfinite(r.validation)) j["validation_loss"] = r.validation;
     if (r.best_epoch >= 0) j["best_epoch"] = r.best_epoch + 1, j["epochs"] = r.epochs;
+    if (r.repeats > 1) j["repeats"] = r.repeats;
+    if (std::isfinite(r.sd)) j["sd"] = r.sd;
     a.push_back(std::move(j));
   }
   return a;

@@ -234,6 +234,19 @@ inline std::vector<int> parse_column_ranges(const std::string& spec) {
   return cols;
 }
 
+// The windows of a run's recordings: τ frames, `stride` apart (0: τ), and with --non-finite drop
+// none that holds a NaN/Inf reading.
+inline WindowSpec window_spec(int tau, const DataFormat& fmt, int stride = 0) {
+  return WindowSpec{tau, stride, parse_non_finite(fmt.non_finite) == NonFinite::drop};
+}
+
+// Says how many windows --non-finite drop left out of `src` (nothing when none).
+inline void note_dropped(const WindowSource& src, const std::string& what, std::ostream& out) {
+  if (src.dropped() > 0)
+    out << "note: " << what << ": " << src.dropped() << " of " << src.dropped() + src.size()
+        << " windows left out: they hold NaN/Inf readings (--non-finite drop)\n";
+}
+
 // A recording from .npy ([T, N, m] or [T, N·m] with axes given) or text/CSV. A .npy is read into
 // memory, not mapped (the command runs for hours and the file may change under it), unless map is
 // set: data-parallel ranks map it and read only the windows of their shards (the file must then

@@ -179,8 +179,28 @@ TEST_CASE("non-finite readings: an error at the file's line before any statistic
   const Recording zeroed = read_recording(t / "gaps.csv", f);
   CHECK(zeroed(2, 0, 1) == 0.0f);
   CHECK(zeroed(3, 1, 0) == 0.0f);
+  // drop: the readings stay, the windows that hold one are left out (and only those).
+  f.non_finite = "drop";
+  const Recording kept = read_recording(t / "gaps.csv", f);
+  CHECK(std::isnan(kept(2, 0, 1)));
+  CHECK(std::isinf(kept(3, 1, 0)));
+  const WindowSource every(kept, WindowSpec{2, 1, true});
+  CHECK(every.size() == 1);  // frames 0-1; 1-2 and 2-3 hold a NaN/Inf
+  CHECK(every.dropped() == 2);
+  CHECK(every.start_of(0) == 0);
+  const WindowSource strict(kept, WindowSpec{2, 1});
+  WindowBatch wb;
+  const std::int64_t second[1] = {1};
+  CHECK_THROWS_WITH_AS(strict.gather(second, wb), doctest::Contains("at frame 2, taxel 0, axis 1"), DataError);
+  CHECK_THROWS_WITH_AS(WindowSource(kept.frames_range(2, 4), WindowSpec{2, 1, true}),
+                       doctest::Contains("1 windows left out for NaN/Inf readings"), DataError);
+  CHECK(window_spec(10, f).skip_non_finite);
+  EmbedOptions eo;
+  eo.checkpoint = eo.data = eo.out = "unused";
+  eo.format = f;
+  CHECK_THROWS_WITH_AS(run_embed(eo, std::cout), doctest::Contains("--non-finite drop would shift them"), ConfigError);
   f.non_finite = "skip";
-  CHECK_THROWS_WITH_AS(read_recording(t / "gaps.csv", f), doctest::Contains("expected error, hold, interpolate or zero"), ConfigError);
+  CHECK_THROWS_WITH_AS(read_recording(t / "gaps.csv", f), doctest::Contains("expected error, hold, interpolate, zero or drop"), ConfigError);
   // A .npy with an Inf: named by frame, taxel and axis as the file holds it.
   Recording r(5, 2, 3, 1.0f);
   r.at(3, 1, 2) = std::numeric_limits<float>::infinity();
@@ -350,6 +370,29 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
     for (int a = 0; a < 2; ++a) CHECK(std::isfinite(r["rmse"][a].get<double>()));
   }
   for (int r = 2; r < 4; ++r) CHECK(j["results"][r].contains("validation_loss"));
+
+  // Repeats: each head row is the mean over seeds, with its standard deviation; the contact filter
+  // (off by default for user labels) keeps the windows in which a taxel's reading stands out.
+  {
+    ProbeOptions rep = pb;
+    rep.repeats = 2;
+    rep.force = true;
+    rep.min_contact = 3;
+    rep.contact_threshold = 2.0;
+    std::ostringstream rout;
+    REQUIRE(run_probe(rep, rout) == 0);
+    CHECK(rout.str().find("contact filter: windows with at least 3 frames") != std::string::npos);
+    const auto r = nlohmann::json::parse(read_file(t / "probe.json"));
+    CHECK(r["repeats"] == 2);
+    CHECK(r["train_windows"].get<int>() <= 30);
+    for (int k = 2; k < 4; ++k) {
+      CHECK(r["results"][k]["repeats"] == 2);
+      CHECK(std::isfinite(r["results"][k]["sd"].get<double>()));
+    }
+    CHECK(rout.str().find(" ± ") != std::string::npos);
+    rep.contact_threshold = 1e6;
+    CHECK_THROWS_WITH_AS(run_probe(rep, rout), doctest::Contains("lower --min-contact or --contact-threshold"), DataError);
+  }
 
   // Classification by board, and a training split that holds one class: flagged.
   pb.task = "classification";

@@ -1,6 +1,7 @@
 #pragma once
 // Errors. Every bad input at the API boundary throws tjepa::Error (or a subclass) whose message
 // names the argument, the value seen and what was expected. Hot loops check nothing.
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -44,10 +45,19 @@ class NumericError : public Error {
 };
 
 namespace detail {
+// A NaN is written "nan" whatever its sign bit (x86 arithmetic makes "-nan"), so messages read the
+// same on every machine.
+template <class A>
+const A& message_part(const A& a) {
+  return a;
+}
+inline double message_part(double a) { return a != a ? std::fabs(a) : a; }
+inline float message_part(float a) { return a != a ? std::fabs(a) : a; }
+
 template <class... Args>
 std::string concat(const Args&... args) {
   std::ostringstream os;
-  (os << ... << args);
+  (os << ... << message_part(args));
   return os.str();
 }
 }  // namespace detail

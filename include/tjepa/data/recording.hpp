@@ -137,19 +137,21 @@ inline std::size_t find_non_finite(std::span<const float> values) {
 
 // What to do with NaN/Inf readings: stop (an error naming where), hold the taxel-axis's last finite
 // reading (0 before the first), interpolate linearly in time between the finite readings around
-// the gap (the nearest one at either end), or write 0.
-enum class NonFinite { error, hold, interpolate, zero };
+// the gap (the nearest one at either end), write 0, or drop: keep them in the recording and leave
+// out every window that holds one (WindowSpec::skip_non_finite; statistics skip them).
+enum class NonFinite { error, hold, interpolate, zero, drop };
 
 inline NonFinite parse_non_finite(const std::string& s) {
   if (s == "hold") return NonFinite::hold;
   if (s == "interpolate") return NonFinite::interpolate;
   if (s == "zero") return NonFinite::zero;
-  require<ConfigError>(s == "error", "non-finite policy '", s, "', expected error, hold, interpolate or zero");
+  if (s == "drop") return NonFinite::drop;
+  require<ConfigError>(s == "error", "non-finite policy '", s, "', expected error, hold, interpolate, zero or drop");
   return NonFinite::error;
 }
 
 // Applies the policy; returns how many readings it replaced (error: throws at the first, with
-// require_finite's message).
+// require_finite's message; drop: replaces nothing and returns 0).
 inline std::size_t replace_non_finite(Recording& rec, NonFinite policy, const std::string& where);
 
 // Throws DataError naming the frame, taxel and axis of the first NaN/Inf: `where` says which step
@@ -165,7 +167,7 @@ inline void require_finite(const Recording& rec, const std::string& where) {
 }
 
 inline std::size_t replace_non_finite(Recording& rec, NonFinite policy, const std::string& where) {
-  if (find_non_finite(rec.values()) == rec.size()) return 0;
+  if (policy == NonFinite::drop || find_non_finite(rec.values()) == rec.size()) return 0;
   if (policy == NonFinite::error) require_finite(rec, where);
   const std::size_t per = static_cast<std::size_t>(rec.taxels()) * rec.axes();
   float* v = rec.mutable_data();

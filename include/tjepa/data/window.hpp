@@ -19,6 +19,9 @@ namespace tjepa {
 struct WindowSpec {
   int length = 10;  // τ, frames per window
   int stride = 0;   // frames between window starts; 0: length (non-overlapping)
+  // Leave out the windows that hold a NaN/Inf reading (NonFinite::drop); otherwise such a window
+  // is a DataError when it is gathered.
+  bool skip_non_finite = false;
 
   int step() const { return stride > 0 ? stride : length; }
   void validate() const {

@@ -59,10 +59,27 @@ class WindowSource {
       require<ShapeError>(labels_.empty() || labels_[r].size() == static_cast<std::size_t>(rec.frames()),
                           "WindowSource: ", name(r), " has ", rec.frames(), " frames but ", labels_.empty() ? 0 : labels_[r].size(),
                           " frame labels");
-      for (std::int64_t t : window_starts(rec.frames(), spec_)) windows_.push_back({static_cast<int>(r), static_cast<int>(t)});
+      // Frames holding a NaN/Inf reading, when such windows are left out.
+      std::vector<int> bad_before(static_cast<std::size_t>(rec.frames()) + 1, 0);  // prefix counts
+      if (spec_.skip_non_finite) {
+        const std::size_t per = static_cast<std::size_t>(rec.taxels()) * rec.axes();
+        for (int t = 0; t < rec.frames(); ++t) {
+          const bool bad = find_non_finite(std::span<const float>(rec.frame(t), per)) != per;
+          bad_before[static_cast<std::size_t>(t) + 1] = bad_before[static_cast<std::size_t>(t)] + bad;
+        }
+      }
+      for (std::int64_t t : window_starts(rec.frames(), spec_)) {
+        if (bad_before[static_cast<std::size_t>(t + spec_.length)] != bad_before[static_cast<std::size_t>(t)]) {
+          ++dropped_;
+          continue;
+        }
+        windows_.push_back({static_cast<int>(r), static_cast<int>(t)});
+      }
     }
     require<DataError>(!windows_.empty(), "WindowSource: no window of ", spec_.length,
-                       " frames fits in the recordings (longest has ", longest(), " frames)");
+                       " frames fits in the recordings (longest has ", longest(), " frames",
+                       dropped_ > 0 ? ", " + std::to_string(dropped_) + " windows left out for NaN/Inf readings" : "",
+                       ")");
     if (pre_) require<ConfigError>(pre_->ready(), "WindowSource: the preprocessor is not fitted");
   }
   WindowSource(Recording recording, WindowSpec spec, std::vector<FrameLabel> labels = {},
@@ -72,6 +89,8 @@ class WindowSource {
                      std::move(pre)) {}
 
   std::int64_t size() const { return static_cast<std::int64_t>(windows_.size()); }
+  // Windows left out because they hold a NaN/Inf reading (WindowSpec::skip_non_finite).
+  std::int64_t dropped() const { return dropped_; }
   int taxels() const { return recs_[0].taxels(); }
   int axes() const { return recs_[0].axes(); }
   int length() const { return spec_.length; }
@@ -191,6 +210,7 @@ class WindowSource {
   WindowSpec spec_;
   std::optional<Preprocessor> pre_;
   std::vector<Window> windows_;
+  std::int64_t dropped_ = 0;
 };
 
 // Window batch [B, N, τ, m] → per-taxel tokenizer input [B, N, m·τ], each taxel's window
