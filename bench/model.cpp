@@ -65,9 +65,9 @@ void encoder_forward(benchmark::State& state, Precision precision, bool frozen =
   EncoderSetup e(B, L);
   e.ws.precision = precision;
   e.ws.frozen_weights = frozen;
-  if (frozen) e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), nullptr, e.ws);  // packs
+  if (frozen) e.enc.forward(e.ps, {e.tokens.data(), B}, e.out.data(), e.ws);  // packs
   for (auto _ : state) {
-    e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), nullptr, e.ws);
+    e.enc.forward(e.ps, {e.tokens.data(), B}, e.out.data(), e.ws);
     benchmark::DoNotOptimize(e.out.data());
   }
   state.counters["GFLOP/s"] =
@@ -101,7 +101,7 @@ void BM_EncoderForwardBackward(benchmark::State& state) {
   std::uint64_t step = 0;
   auto train_step = [&] {
     e.ps.zero_grad();
-    e.enc.forward(e.ps, e.tokens.data(), B, nullptr, L, e.out.data(), &cache, e.ws, {DropPath{rate, ++step}, nullptr});
+    e.enc.forward(e.ps, {e.tokens.data(), B}, e.out.data(), cache, e.ws, {DropPath{rate, ++step}, nullptr});
     e.enc.backward(e.ps, dout.data(), dtokens.data(), cache, e.ws);
   };
   train_step();  // warm-up: the cache and workspace grow (and fault in their pages) once
@@ -131,7 +131,7 @@ void BM_PredictorForwardBackward(benchmark::State& state) {
   PredictorCache<float> cache;
   auto train_step = [&] {
     ps.zero_grad();
-    pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), &cache, ws);
+    pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), cache, ws);
     pred.backward(ps, dout.data(), dctx.data(), nullptr, cache, ws);
   };
   train_step();  // warm-up, as above
@@ -176,11 +176,11 @@ void BM_JepaStepModel(benchmark::State& state) {
     ps.zero_grad();
     pps.zero_grad();
     ++step;
-    tok.forward(target, x.data(), B, ttokens.data(), nullptr, ws);
-    enc.forward(target, ttokens.data(), B, nullptr, N, z.data(), nullptr, ws, {DropPath{0.3, step}, nullptr});
-    tok.forward(ps, x.data(), B, tokens.data(), &tc, ws);
-    enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), &ec, ws, {DropPath{0.3, step + (1u << 30)}, nullptr});
-    pred.forward(pps, {zc.data(), B, K, target.value(enc.pos_embed()), N, tg.data(), B * R, t}, out.data(), &pc, ws);
+    tok.forward(target, x.data(), B, ttokens.data(), ws);
+    enc.forward(target, {ttokens.data(), B}, z.data(), ws, {DropPath{0.3, step}, nullptr});
+    tok.forward(ps, x.data(), B, tokens.data(), tc, ws);
+    enc.forward(ps, {tokens.data(), B, ctx}, zc.data(), ec, ws, {DropPath{0.3, step + (1u << 30)}, nullptr});
+    pred.forward(pps, {zc.data(), B, K, target.value(enc.pos_embed()), N, tg.data(), B * R, t}, out.data(), pc, ws);
     std::fill(dzc.begin(), dzc.end(), 0.0f);
     pred.backward(pps, dout.data(), dzc.data(), nullptr, pc, ws);
     std::fill(dtokens.begin(), dtokens.end(), 0.0f);
@@ -226,10 +226,10 @@ void BM_TokenizerGrouped(benchmark::State& state) {
   for (auto _ : state) {
     if (train) {
       ps.zero_grad();
-      tok.forward(ps, x.data(), B, out.data(), &cache, ws);
+      tok.forward(ps, x.data(), B, out.data(), cache, ws);
       tok.backward(ps, dout.data(), dx.data(), cache, ws);
     } else {
-      tok.forward(ps, x.data(), B, out.data(), nullptr, ws);
+      tok.forward(ps, x.data(), B, out.data(), ws);
     }
     benchmark::DoNotOptimize(out.data());
   }
@@ -257,7 +257,7 @@ void BM_ProbeTrainStep(benchmark::State& state) {
   ProbeCache<float> cache;
   for (auto _ : state) {
     ps.zero_grad();
-    probe.forward(ps, x.data(), B, L, nullptr, y.data(), &cache, ws);
+    probe.forward(ps, {x.data(), B, L}, y.data(), cache, ws);
     probe.backward(ps, dy.data(), to_tokens ? dx.data() : nullptr, cache, ws);
     benchmark::DoNotOptimize(ps.grad(probe.query));
   }

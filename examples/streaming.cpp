@@ -349,10 +349,10 @@ int main(int argc, char** argv) {
             window[(static_cast<std::size_t>(n) * m + a) * tau + j] = f[static_cast<std::size_t>(n) * m + a];
       }
       ws.mark("window");
-      model->tokenizer.forward(model->target, window.data(), 1, tokens.data(), nullptr, ws);
+      model->tokenizer.forward(model->target, window.data(), 1, tokens.data(), ws);
       ws.mark("tokenizer");
-      model->encoder.forward(model->target, tokens.data(), 1, nullptr, N, emb.data(), nullptr, ws);
-      probe.probe.forward(probe.params, emb.data(), 1, N, nullptr, y.data(), nullptr, ws);
+      model->encoder.forward(model->target, {tokens.data(), 1}, emb.data(), ws);
+      probe.probe.forward(probe.params, {emb.data(), 1, N}, y.data(), ws);
       ws.mark("probe");
       checksum += y[0];
       if (stages && k >= warmup) {

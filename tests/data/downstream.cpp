@@ -73,7 +73,10 @@ TEST_CASE("probe loss: gradient through the AttentiveProbe matches central diffe
   ProbeCache<double> cache;
   std::vector<double> y(static_cast<std::size_t>(B) * (3 + C)), dy(y.size());
   auto loss = [&](bool grad) {
-    p.probe.forward(p.params, x.data(), B, L, nullptr, y.data(), grad ? &cache : nullptr, ws);
+    if (grad)
+      p.probe.forward(p.params, {x.data(), B, L}, y.data(), cache, ws);
+    else
+      p.probe.forward(p.params, {x.data(), B, L}, y.data(), ws);
     const auto l = detail::head_loss(y.data(), static_cast<std::size_t>(force_axes + C), f.data(), c.data(), B,
                                      force_axes, C, 0.7, grad ? dy.data() : nullptr);
     return l[0] + 0.7 * l[1];
@@ -265,11 +268,11 @@ TEST_CASE("end to end: the encoder trains with the probe / embeddings match the 
     AlignedVector<float> rows, tk(16 * 8), e(16 * 8), raw(16 * 8);
     windows_to_tokens(wb, rows);
     Workspace<float> ws;
-    tok.forward(ps, rows.data(), 1, tk.data(), nullptr, ws);
-    enc.forward(ps, tk.data(), 1, nullptr, 16, e.data(), nullptr, ws);
+    tok.forward(ps, rows.data(), 1, tk.data(), ws);
+    enc.forward(ps, {tk.data(), 1}, e.data(), ws);
     for (std::size_t i = 0; i < e.size(); ++i) REQUIRE(e[i] == doctest::Approx(emb[i]).epsilon(1e-5));
-    tok.forward(ps, wb.x.data(), 1, tk.data(), nullptr, ws);
-    enc.forward(ps, tk.data(), 1, nullptr, 16, raw.data(), nullptr, ws);
+    tok.forward(ps, wb.x.data(), 1, tk.data(), ws);
+    enc.forward(ps, {tk.data(), 1}, raw.data(), ws);
     double diff = 0;
     for (std::size_t i = 0; i < raw.size(); ++i) diff += std::abs(raw[i] - emb[i]);
     CHECK(diff > 1e-2);

@@ -743,7 +743,7 @@ TEST_SUITE("data") {
     REQUIRE(tok.width == ng * tau * m);
     tjepa::Workspace<double> ws;
     std::vector<double> y(static_cast<std::size_t>(B) * G * d);
-    tok.forward(ps, tokens.data(), B, y.data(), nullptr, ws);
+    tok.forward(ps, tokens.data(), B, y.data(), ws);
 
     std::vector<double> x_ref(static_cast<std::size_t>(B) * tau * G * 5, 0.0);
     for (int b = 0; b < B; ++b)

@@ -155,13 +155,13 @@ TEST_SUITE("nn") {
     SUBCASE("no drop-path") {}
     SUBCASE("drop-path 0.5") { opt.drop_path = {0.5, 99}; }
     auto loss = [&] {
-      enc.forward(ps, tokens.data(), B, ctx.data(), K, out.data(), nullptr, ws, opt);
+      enc.forward(ps, {tokens.data(), B, ctx}, out.data(), ws, opt);
       return test::dot(w.data(), out.data(), out.size());
     };
     EncoderCache<double> cache;
     std::vector<double> dtokens(tokens.size(), 0.0);
     ps.zero_grad();
-    enc.forward(ps, tokens.data(), B, ctx.data(), K, out.data(), &cache, ws, opt);
+    enc.forward(ps, {tokens.data(), B, ctx}, out.data(), cache, ws, opt);
     CHECK(test::dot(w.data(), out.data(), out.size()) == doctest::Approx(loss()).epsilon(1e-12));
     enc.backward(ps, w.data(), dtokens.data(), cache, ws);
     CHECK(gradient_error(tokens.data(), dtokens.data(), tokens.size(), loss) < grad_tolerance);
@@ -183,13 +183,13 @@ TEST_SUITE("nn") {
     std::vector<double> out(w.size());
     Workspace<double> ws;
     auto loss = [&] {
-      enc.forward(ps, tokens.data(), B, ctx.data(), K, out.data(), nullptr, ws);
+      enc.forward(ps, {tokens.data(), B, ctx}, out.data(), ws);
       return test::dot(w.data(), out.data(), out.size());
     };
     EncoderCache<double> cache;
     std::vector<double> dtokens(tokens.size(), 0.0);
     ps.zero_grad();
-    enc.forward(ps, tokens.data(), B, ctx.data(), K, out.data(), &cache, ws);
+    enc.forward(ps, {tokens.data(), B, ctx}, out.data(), cache, ws);
     enc.backward(ps, w.data(), dtokens.data(), cache, ws);
     CHECK(gradient_error(tokens.data(), dtokens.data(), tokens.size(), loss) < grad_tolerance);
     test::check_param_gradients(ps, loss);
@@ -225,13 +225,13 @@ TEST_SUITE("nn") {
     std::vector<double> out(w.size());
     Workspace<double> ws;
     auto loss = [&] {
-      pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), nullptr, ws);
+      pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), ws);
       return test::dot(w.data(), out.data(), out.size());
     };
     PredictorCache<double> cache;
     std::vector<double> dctx(ctx.size(), 0.0), dpos(pos.size(), 0.0);
     ps.zero_grad();
-    pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), &cache, ws);
+    pred.forward(ps, {ctx.data(), Bc, K, pos.data(), N, tg.data(), B, t}, out.data(), cache, ws);
     pred.backward(ps, w.data(), dctx.data(), dpos.data(), cache, ws);
     CHECK(gradient_error(ctx.data(), dctx.data(), ctx.size(), loss) < grad_tolerance);
     CHECK(gradient_error(pos.data(), dpos.data(), pos.size(), loss) < grad_tolerance);
@@ -294,8 +294,8 @@ TEST_SUITE("nn") {
     PredictorCache<double> pc;
     auto step = [&](std::vector<double>& dtokens) {
       std::vector<double> dz(z.size(), 0.0);
-      enc.forward(ps, tokens.data(), B, ctx.data(), K, z.data(), &ec, ws, {DropPath{0.3, 7}, nullptr});
-      pred.forward(ps, {z.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), B, t}, out.data(), &pc, ws);
+      enc.forward(ps, {tokens.data(), B, ctx}, z.data(), ec, ws, {DropPath{0.3, 7}, nullptr});
+      pred.forward(ps, {z.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), B, t}, out.data(), pc, ws);
       pred.backward(ps, w.data(), dz.data(), ps.grad(enc.pos_embed()), pc, ws);
       enc.backward(ps, dz.data(), dtokens.data(), ec, ws);
     };
@@ -422,12 +422,12 @@ TEST_SUITE("nn") {
     std::vector<double> y(w.size());
     Workspace<double> ws;
     auto loss = [&] {
-      tok.forward(ps, x.data(), B, y.data(), nullptr, ws);
+      tok.forward(ps, x.data(), B, y.data(), ws);
       return test::dot(w.data(), y.data(), y.size());
     };
     TokenizerCache<double> cache;
     ps.zero_grad();
-    tok.forward(ps, x.data(), B, y.data(), &cache, ws);
+    tok.forward(ps, x.data(), B, y.data(), cache, ws);
     std::vector<double> dx(x.size(), 0.0);
     tok.backward(ps, w.data(), dx.data(), cache, ws);
     CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
@@ -453,8 +453,8 @@ TEST_SUITE("nn") {
       for (std::size_t r = 0; r < x.size() / 10; ++r)
         for (int a = 0; a < 2; ++a)
           for (int f = 2; f < 5; ++f) shifted[r * 10 + a * 5 + f] = x[r * 10 + a * 5 + f - 2];
-      tok0.forward(ps0, shifted.data(), B, y0.data(), nullptr, ws);
-      tok.forward(ps, x.data(), B, y.data(), nullptr, ws);
+      tok0.forward(ps0, shifted.data(), B, y0.data(), ws);
+      tok.forward(ps, x.data(), B, y.data(), ws);
       CHECK(y0 == y);
     }
     test::check_param_gradients(ps, loss);
@@ -612,12 +612,12 @@ TEST_SUITE("nn") {
     std::vector<double> y(w.size());
     Workspace<double> ws;
     auto loss = [&] {
-      probe.forward(ps, x.data(), B, L, valid.data(), y.data(), nullptr, ws);
+      probe.forward(ps, {x.data(), B, L, valid}, y.data(), ws);
       return test::dot(w.data(), y.data(), y.size());
     };
     ProbeCache<double> cache;
     ps.zero_grad();
-    probe.forward(ps, x.data(), B, L, valid.data(), y.data(), &cache, ws);
+    probe.forward(ps, {x.data(), B, L, valid}, y.data(), cache, ws);
     CHECK(test::dot(w.data(), y.data(), y.size()) == doctest::Approx(loss()).epsilon(1e-13));
     std::vector<double> dx(x.size(), 0.0);
     probe.backward(ps, w.data(), dx.data(), cache, ws);
@@ -627,9 +627,9 @@ TEST_SUITE("nn") {
     // NaN in the padded tokens changes nothing: the same outputs and the same gradients.
     auto run = [&] {
       std::vector<double> out(y.size()), grads;
-      probe.forward(ps, x.data(), B, L, valid.data(), out.data(), nullptr, ws);  // inference
+      probe.forward(ps, {x.data(), B, L, valid}, out.data(), ws);  // inference
       ps.zero_grad();
-      probe.forward(ps, x.data(), B, L, valid.data(), y.data(), &cache, ws);
+      probe.forward(ps, {x.data(), B, L, valid}, y.data(), cache, ws);
       CHECK(y == out);
       std::fill(dx.begin(), dx.end(), 0.0);
       probe.backward(ps, w.data(), dx.data(), cache, ws);
@@ -691,12 +691,12 @@ TEST_SUITE("nn") {
     std::vector<double> y(w.size());
     Workspace<double> ws;
     auto loss = [&] {
-      probe.forward(ps, x.data(), B, L, nullptr, y.data(), nullptr, ws);
+      probe.forward(ps, {x.data(), B, L}, y.data(), ws);
       return test::dot(w.data(), y.data(), y.size());
     };
     ProbeCache<double> cache;
     ps.zero_grad();
-    probe.forward(ps, x.data(), B, L, nullptr, y.data(), &cache, ws);
+    probe.forward(ps, {x.data(), B, L}, y.data(), cache, ws);
     CHECK(test::dot(w.data(), y.data(), y.size()) == doctest::Approx(loss()).epsilon(1e-13));
     std::vector<double> dx(x.size(), 0.0);
     probe.backward(ps, w.data(), dx.data(), cache, ws);
@@ -709,9 +709,9 @@ TEST_SUITE("nn") {
     CHECK(y[0] != y0[0]);
     CHECK(y[3] == y0[3]);  // sample 1 unchanged
     std::vector<std::uint8_t> valid(std::size_t(B) * L, 1);
-    CHECK_THROWS_WITH_AS(probe.forward(ps, x.data(), B, L, valid.data(), y.data(), nullptr, ws),
+    CHECK_THROWS_WITH_AS(probe.forward(ps, {x.data(), B, L, valid}, y.data(), ws),
                          doctest::Contains("no padded tokens"), ShapeError);
-    CHECK_THROWS_WITH_AS(probe.forward(ps, x.data(), B * L, 1, nullptr, y.data(), nullptr, ws),
+    CHECK_THROWS_WITH_AS(probe.forward(ps, {x.data(), B * L, 1}, y.data(), ws),
                          doctest::Contains("built for 5"), ShapeError);
     ParamSet<double> bad;
     c.pooling.components = 0;
@@ -725,14 +725,17 @@ TEST_SUITE("nn") {
     Workspace<float> ws;
     std::vector<float> tokens(2 * 10 * 12), out(tokens.size());
     std::vector<int> ctx{0, 1, 2, 10};
-    CHECK_THROWS_WITH_AS(enc.forward(ps, tokens.data(), 2, nullptr, 10, out.data(), nullptr, ws),
+    CHECK_THROWS_WITH_AS(enc.forward(ps, {tokens.data(), 2}, out.data(), ws),
                          "Encoder::forward: the ParamSet is not allocated", ConfigError);
     ps.allocate();
     other.allocate();
-    CHECK_THROWS_AS(enc.forward(other, tokens.data(), 2, nullptr, 10, out.data(), nullptr, ws), ConfigError);
-    CHECK_THROWS_WITH_AS(enc.forward(ps, tokens.data(), 2, ctx.data(), 2, out.data(), nullptr, ws),
+    CHECK_THROWS_AS(enc.forward(other, {tokens.data(), 2}, out.data(), ws), ConfigError);
+    CHECK_THROWS_WITH_AS(enc.forward(ps, {tokens.data(), 2, ctx}, out.data(), ws),
                          "Encoder::forward: context[3] = 10, expected [0, 10)", ShapeError);
-    CHECK_THROWS_AS(enc.forward(ps, tokens.data(), 2, nullptr, 4, out.data(), nullptr, ws), ShapeError);
+    CHECK_THROWS_WITH_AS(enc.forward(ps, {tokens.data(), 2, std::span<const int>(ctx.data(), 3)}, out.data(), ws),
+                         "Encoder::forward: 3 context indices for batch 2, expected a multiple of it", ShapeError);
+    CHECK_THROWS_WITH_AS(enc.forward(ps, {nullptr, 2}, out.data(), ws), "Encoder::forward: null tokens or out",
+                         ShapeError);
     EncoderCache<float> empty;
     CHECK_THROWS_AS(enc.backward(ps, out.data(), nullptr, empty, ws), ConfigError);
     CHECK_THROWS_AS(Encoder(ps, EncoderConfig{.num_tokens = 10, .dim = 10, .depth = 1, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6}), ConfigError);
@@ -784,21 +787,21 @@ TEST_SUITE("nn") {
     EncoderCache<float> cache;
     Workspace<float> ws, fws;
     fws.frozen_weights = true;
-    enc.forward(ps, tokens.data(), B, nullptr, N, train.data(), &cache, ws);  // untiled MLP, per-call packing
-    enc.forward(ps, tokens.data(), B, nullptr, N, infer.data(), nullptr, ws);
+    enc.forward(ps, {tokens.data(), B}, train.data(), cache, ws);  // untiled MLP, per-call packing
+    enc.forward(ps, {tokens.data(), B}, infer.data(), ws);
     CHECK(infer == train);
-    enc.forward(ps, tokens.data(), B, nullptr, N, frozen.data(), nullptr, fws);
+    enc.forward(ps, {tokens.data(), B}, frozen.data(), fws);
     CHECK(frozen == train);
     CHECK(fws.packed.size() == 8);  // qkv, proj, fc1, fc2 of 2 blocks, packed once
-    const long n = count_allocations([&] { enc.forward(ps, tokens.data(), B, nullptr, N, frozen.data(), nullptr, fws); });
+    const long n = count_allocations([&] { enc.forward(ps, {tokens.data(), B}, frozen.data(), fws); });
     CHECK(n == 0);
     CHECK(frozen == train);
     CHECK(fws.packed.size() == 8);
     // The packed copies are keyed by address: new values need clear(), then they are used.
     for (float& v : ps.values()) v *= 1.5f;
-    enc.forward(ps, tokens.data(), B, nullptr, N, infer.data(), nullptr, ws);
+    enc.forward(ps, {tokens.data(), B}, infer.data(), ws);
     fws.packed.clear();
-    enc.forward(ps, tokens.data(), B, nullptr, N, frozen.data(), nullptr, fws);
+    enc.forward(ps, {tokens.data(), B}, frozen.data(), fws);
     CHECK(frozen == infer);
     CHECK(infer != train);
   }
@@ -826,10 +829,10 @@ TEST_SUITE("nn") {
     bws.precision = Precision::bf16;
     fws.precision = Precision::bf16;
     fws.frozen_weights = true;
-    enc.forward(ps, tokens.data(), B, nullptr, N, y32.data(), nullptr, ws);
-    enc.forward(rounded, tokens.data(), B, nullptr, N, yr.data(), nullptr, ws);
-    enc.forward(ps, tokens.data(), B, nullptr, N, y16.data(), nullptr, bws);
-    enc.forward(ps, tokens.data(), B, nullptr, N, f16.data(), nullptr, fws);
+    enc.forward(ps, {tokens.data(), B}, y32.data(), ws);
+    enc.forward(rounded, {tokens.data(), B}, yr.data(), ws);
+    enc.forward(ps, {tokens.data(), B}, y16.data(), bws);
+    enc.forward(ps, {tokens.data(), B}, f16.data(), fws);
     CHECK(f16 == y16);
     CHECK(fws.packed.size() == 16);  // 4 weights × 4 blocks, packed once in bf16
     if (!detail::bgemm::native) {
@@ -858,7 +861,7 @@ TEST_SUITE("nn") {
     CHECK(rel16 <= 0.01);
     CHECK(rel16 <= 2 * rel_r);
     CHECK(rel16 > 0);  // the bf16 path ran
-    const long n = count_allocations([&] { enc.forward(ps, tokens.data(), B, nullptr, N, f16.data(), nullptr, fws); });
+    const long n = count_allocations([&] { enc.forward(ps, {tokens.data(), B}, f16.data(), fws); });
     CHECK(n == 0);
     CHECK(f16 == y16);
   }
@@ -873,11 +876,11 @@ TEST_SUITE("nn") {
     std::vector<float> tokens(std::size_t(B) * N * d), off(tokens.size()), on(tokens.size());
     test::fill_normal(tokens, rng);
     Workspace<float> ws;
-    enc.forward(ps, tokens.data(), B, nullptr, N, off.data(), nullptr, ws);
+    enc.forward(ps, {tokens.data(), B}, off.data(), ws);
     StageClock clock;
     ws.clock = &clock;
     clock.start();
-    const long n = count_allocations([&] { enc.forward(ps, tokens.data(), B, nullptr, N, on.data(), nullptr, ws); });
+    const long n = count_allocations([&] { enc.forward(ps, {tokens.data(), B}, on.data(), ws); });
     CHECK(n == 0);
     CHECK(on == off);
     std::vector<std::string> names;
@@ -914,12 +917,12 @@ TEST_SUITE("nn") {
     std::vector<float> zc(std::size_t(B) * K * d), out(std::size_t(2 * B) * t * d), y(std::size_t(B) * 3);
     Workspace<float> ws;
     auto run = [&] {
-      tok.forward(ps, x.data(), B, tokens.data(), nullptr, ws);
+      tok.forward(ps, x.data(), B, tokens.data(), ws);
       // The target encoder, with the reference's drop-path 0.3 (it runs in training mode there).
-      enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, ws, {DropPath{0.3, 5}, nullptr});
-      enc.forward(ps, tokens.data(), B, ctx.data(), K, zc.data(), nullptr, ws);        // context
-      pred.forward(ps, {zc.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), 2 * B, t}, out.data(), nullptr, ws);
-      probe.forward(ps, z.data(), B, N, nullptr, y.data(), nullptr, ws);
+      enc.forward(ps, {tokens.data(), B}, z.data(), ws, {DropPath{0.3, 5}, nullptr});
+      enc.forward(ps, {tokens.data(), B, ctx}, zc.data(), ws);        // context
+      pred.forward(ps, {zc.data(), B, K, ps.value(enc.pos_embed()), N, tg.data(), 2 * B, t}, out.data(), ws);
+      probe.forward(ps, {z.data(), B, N}, y.data(), ws);
     };
     run();
     const std::vector<float> first = out;
@@ -933,7 +936,7 @@ TEST_SUITE("nn") {
     CHECK(out == first);
     // The counter is live: a fresh workspace allocates.
     Workspace<float> fresh;
-    CHECK(count_allocations([&] { enc.forward(ps, tokens.data(), B, nullptr, N, z.data(), nullptr, fresh); }) > 0);
+    CHECK(count_allocations([&] { enc.forward(ps, {tokens.data(), B}, z.data(), fresh); }) > 0);
   }
 }
 

@@ -280,18 +280,16 @@ TEST_SUITE("train") {
     const int B = 2, N = 9, d = 8;
     Workspace<double> ws;
     std::vector<double> tok(B * N * d), h(B * N * d), z(B * masks.K * d);
-    model.tokenizer.forward(model.target, x.data(), B, tok.data(), nullptr, ws);
-    model.encoder.forward(model.target, tok.data(), B, nullptr, N, h.data(), nullptr, ws);
-    model.tokenizer.forward(model.context, x.data(), B, tok.data(), nullptr, ws);
-    model.encoder.forward(model.context, tok.data(), B, masks.context.data(), masks.K, z.data(), nullptr, ws);
+    model.tokenizer.forward(model.target, x.data(), B, tok.data(), ws);
+    model.encoder.forward(model.target, {tok.data(), B}, h.data(), ws);
+    model.tokenizer.forward(model.context, x.data(), B, tok.data(), ws);
+    model.encoder.forward(model.context, {tok.data(), B, masks.context}, z.data(), ws);
     double mean = 0;
     for (int j = 0; j < masks.num_targets(); ++j) {
       const TargetSet& ts = masks.targets[j];
       std::vector<double> p(B * ts.size * d);
-      model.predictor.forward(model.predictor_params,
-                              {z.data(), B, masks.K, model.target.value(model.encoder.pos_embed()), N,
-                               ts.indices.data(), B, ts.size},
-                              p.data(), nullptr, ws);
+      model.predictor.forward(model.predictor_params, {z.data(), B, masks.K, model.target.value(model.encoder.pos_embed()), N,
+                               ts.indices.data(), B, ts.size}, p.data(), ws);
       double s = 0;
       for (int b = 0; b < B; ++b)
         for (int k = 0; k < ts.size; ++k)

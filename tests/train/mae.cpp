@@ -123,11 +123,9 @@ TEST_SUITE("train") {
     CHECK(M == 9);
     Workspace<double> ws;
     std::vector<double> tok(B * N * d), z(B * K * d), p(B * M * W);
-    model.tokenizer.forward(model.context, x.data(), B, tok.data(), nullptr, ws);
-    model.encoder.forward(model.context, tok.data(), B, masks.context.data(), K, z.data(), nullptr, ws);
-    model.decoder.forward(model.decoder_params,
-                          {z.data(), B, K, model.decoder_pos_rows(), N, masks.targets[0].indices.data(), B, M},
-                          p.data(), nullptr, ws);
+    model.tokenizer.forward(model.context, x.data(), B, tok.data(), ws);
+    model.encoder.forward(model.context, {tok.data(), B, masks.context}, z.data(), ws);
+    model.decoder.forward(model.decoder_params, {z.data(), B, K, model.decoder_pos_rows(), N, masks.targets[0].indices.data(), B, M}, p.data(), ws);
     double s = 0;
     for (int b = 0; b < B; ++b)
       for (int k = 0; k < M; ++k)

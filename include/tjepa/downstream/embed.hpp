@@ -38,8 +38,8 @@ inline AlignedVector<float> embed_windows(const ParamSet<float>& ps, const Token
     src.gather(ids.subspan(static_cast<std::size_t>(s0), static_cast<std::size_t>(B)), wb);
     float* tok = detail::grow(tokens, static_cast<std::size_t>(B) * per);
     windows_to_tokens(wb, rows);
-    tokenizer.forward(ps, rows.data(), B, tok, nullptr, ws);
-    encoder.forward(ps, tok, B, nullptr, N, out.data() + static_cast<std::size_t>(s0) * per, nullptr, ws);
+    tokenizer.forward(ps, rows.data(), B, tok, ws);
+    encoder.forward(ps, {tok, B}, out.data() + static_cast<std::size_t>(s0) * per, ws);
     if (progress) progress(s0 + B, S);
   }
   return out;

@@ -89,10 +89,13 @@ class EncoderFeatures {
     const T* x = rows_.data();
     T* tokens_buf = detail::grow(tokens_, M);
     T* out = detail::grow(out_, M);
-    tok_.forward(ps_, x, B, tokens_buf, train ? &tok_cache_ : nullptr, ws_);
-    EncoderOptions opt;
-    if (train) opt.drop_path = DropPath{drop_path_, noise_()};
-    enc_.forward(ps_, tokens_buf, B, nullptr, N, out, train ? &enc_cache_ : nullptr, ws_, opt);
+    if (train) {
+      tok_.forward(ps_, x, B, tokens_buf, tok_cache_, ws_);
+      enc_.forward(ps_, {tokens_buf, B}, out, enc_cache_, ws_, EncoderOptions{DropPath{drop_path_, noise_()}, nullptr});
+    } else {
+      tok_.forward(ps_, x, B, tokens_buf, ws_);
+      enc_.forward(ps_, {tokens_buf, B}, out, ws_);
+    }
     return out;
   }
   // dx [B, L, d]: the probe's gradient at the embeddings of the last training forward.

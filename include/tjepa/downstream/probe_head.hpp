@@ -150,7 +150,7 @@ std::vector<T> head_outputs(const ProbeHead<T>& head, Features& features, std::s
   for (std::size_t s0 = 0; s0 < ids.size(); s0 += static_cast<std::size_t>(batch)) {
     const int B = static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(batch), ids.size() - s0));
     const T* x = features.forward(ids.subspan(s0, static_cast<std::size_t>(B)), false);
-    head.probe.forward(head.params, x, B, L, nullptr, y.data() + s0 * static_cast<std::size_t>(out), nullptr, ws);
+    head.probe.forward(head.params, {x, B, L}, y.data() + s0 * static_cast<std::size_t>(out), ws);
   }
   return y;
 }
@@ -241,7 +241,7 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
     T* yp = detail::grow(y, static_cast<std::size_t>(B) * out);
     T* dyp = detail::grow(dy, static_cast<std::size_t>(B) * out);
     const T* x = features.forward(ids, true);
-    head.probe.forward(head.params, x, B, L, nullptr, yp, &cache, ws);
+    head.probe.forward(head.params, {x, B, L}, yp, cache, ws);
     const auto [f, ce] = detail::head_loss(yp, static_cast<std::size_t>(out), z.data(), lab.data(), B, R, C,
                                            cfg.class_weight, dyp);
     return f + cfg.class_weight * ce;

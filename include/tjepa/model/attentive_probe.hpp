@@ -12,6 +12,7 @@
 // cross_attention_block.xattn.{q,kv,proj}.*, cross_attention_block.norm2.*,
 // cross_attention_block.mlp.{fc1,fc2}.*; head.fc1.*, head.fc2.*.
 #include <algorithm>
+#include <span>
 #include <string>
 #include <type_traits>
 
@@ -40,6 +41,15 @@ struct ProbeCache {
   AlignedVector<T> q2, z;                     // [B, d], [B, head_hidden]
   std::vector<std::uint8_t> key_valid;
   TaxelPoolCache<T> taxel;                    // pooling.kind = taxel
+};
+
+// What the probe reads: x [batch, length, d] and which rows are real tokens (key_valid [batch,
+// length], nonzero = real; empty: all).
+template <class T>
+struct ProbeInput {
+  const T* x = nullptr;
+  int batch = 0, length = 0;
+  std::span<const std::uint8_t> key_valid = {};
 };
 
 struct AttentiveProbe {
@@ -133,10 +143,28 @@ struct AttentiveProbe {
     mlp.forward(ps, qn, h, detail::grow(ws.hidden2, std::size_t(B) * hid), q2, B, q2);
   }
 
-  // x [B, L, d] → y [B, out]. key_valid [B, L] or nullptr. cache == nullptr: inference.
+  // in.x [B, L, d] → y [B, out]: inference.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* y,
-               std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
+  void forward(const ParamSet<T>& ps, const ProbeInput<std::type_identity_t<T>>& in, T* y, Workspace<T>& ws) const {
+    run(ps, in, y, nullptr, ws);
+  }
+  // The same, keeping in `cache` what backward needs.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const ProbeInput<std::type_identity_t<T>>& in, T* y,
+               std::type_identity_t<ProbeCache<T>>& cache, Workspace<T>& ws) const {
+    run(ps, in, y, &cache, ws);
+  }
+
+ private:
+  template <class T>
+  void run(const ParamSet<T>& ps, const ProbeInput<T>& in, T* y, std::type_identity_t<ProbeCache<T>>* cache,
+           Workspace<T>& ws) const {
+    const T* x = in.x;
+    const int B = in.batch, L = in.length;
+    require<ShapeError>(in.key_valid.empty() || in.key_valid.size() == std::size_t(B) * std::size_t(L),
+                        "AttentiveProbe::forward: ", in.key_valid.size(), " key_valid entries, expected none or B·L = ",
+                        std::size_t(B) * std::size_t(L));
+    const std::uint8_t* key_valid = in.key_valid.empty() ? nullptr : in.key_valid.data();
     require<ConfigError>(has_head(), "AttentiveProbe::forward: the probe was built without a head (out_dim 0)");
     check_params(ps, head.fc2.weight, "AttentiveProbe::forward");
     require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::forward: B = ", B, ", L = ", L, ", expected > 0");
@@ -148,6 +176,7 @@ struct AttentiveProbe {
     head.forward(ps, q2, z, zact, y, B);
   }
 
+ public:
   // dy [B, out] → parameter gradients and dx [B, L, d] += (may be nullptr).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, std::type_identity_t<T>* dx, const ProbeCache<T>& c, Workspace<T>& ws) const {

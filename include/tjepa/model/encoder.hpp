@@ -17,6 +17,7 @@
 //   token types only. The predictor reads pos_embed alone, without the type rows, as there.
 // The tokenizer (tokenizer.hpp) registers its own names (patch_embed.* / tokenizer.*).
 #include <cstdint>
+#include <span>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -38,6 +39,15 @@ struct EncoderConfig {
   // token_type [N] in [0, token_types); empty (and token_types 0): none.
   std::vector<int> token_type = {};
   int token_types = 0;
+};
+
+// What the encoder reads: tokens [batch, N, d] and the context's token indices [batch, K]
+// (empty: all N tokens in order).
+template <class T>
+struct EncoderInput {
+  const T* tokens = nullptr;
+  int batch = 0;
+  std::span<const int> context = {};
 };
 
 struct EncoderOptions {
@@ -84,40 +94,17 @@ struct Encoder {
   // The position table (the predictor reads the target encoder's rows by default).
   ParamId pos_embed() const { return pos.table; }
 
-  // tokens [B, N, d] → out [B, K, d]. context [B, K] token indices, or nullptr for all N tokens
-  // (then K must be N). cache == nullptr: inference (no allocation once the shape was seen).
+  // in.tokens [B, N, d] → out [B, K, d]: inference (no allocation once the shape was seen).
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* tokens, int B, const int* context, int K, T* out,
-               std::type_identity_t<EncoderCache<T>>* cache, Workspace<T>& ws, const EncoderOptions& opt = {}) const {
-    const int N = config.num_tokens, d = config.dim;
-    check_params(ps, norm.bias, "Encoder::forward");
-    require<ShapeError>(B > 0, "Encoder::forward: B = ", B, ", expected > 0");
-    require<ShapeError>(K > 0 && K <= N, "Encoder::forward: K = ", K, ", expected 1..", N);
-    require<ShapeError>(context || K == N, "Encoder::forward: K = ", K, " without context indices, expected ", N);
-    if (context) check_indices(context, std::size_t(B) * K, N, "Encoder::forward", "context");
-    const std::size_t M = std::size_t(B) * K;
-    T* x = detail::grow(ws.x, M * d);
-    if (context)
-      kernels::gather_rows(x, tokens, std::size_t(N) * d, context, B, K, d);
-    else
-      detail::parallel_copy(tokens, tokens + M * d, x);
-    pos.forward(ps, x, context, B, K);
-    if (config.token_types > 0)
-      kernels::gather_add_rows(x, ps.value(type_embed), 0, type_rows(context, B, K, ws), B, K, d);
-    ws.mark("embed");
-    if (cache) {
-      cache->B = B;
-      cache->K = K;
-      if (context)
-        cache->context.assign(context, context + M);
-      else
-        cache->context.clear();
-    }
-    stack.forward(ps, x, x, B, K, opt.key_valid, opt.drop_path, cache ? &cache->stack : nullptr, ws);
-    T* mean = cache ? detail::grow(cache->mean, M) : nullptr;
-    T* rstd = cache ? detail::grow(cache->rstd, M) : nullptr;
-    norm.forward(ps, x, out, mean, rstd, int(M));
-    ws.mark("norm");
+  void forward(const ParamSet<T>& ps, const EncoderInput<std::type_identity_t<T>>& in, T* out, Workspace<T>& ws,
+               const EncoderOptions& opt = {}) const {
+    run(ps, in, out, nullptr, ws, opt);
+  }
+  // The same, keeping in `cache` what backward needs.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const EncoderInput<std::type_identity_t<T>>& in, T* out,
+               std::type_identity_t<EncoderCache<T>>& cache, Workspace<T>& ws, const EncoderOptions& opt = {}) const {
+    run(ps, in, out, &cache, ws, opt);
   }
 
   // dout [B, K, d] → parameter gradients (added to ps) and dtokens [B, N, d] += (may be nullptr).
@@ -143,6 +130,45 @@ struct Encoder {
   }
 
  private:
+  template <class T>
+  void run(const ParamSet<T>& ps, const EncoderInput<T>& in, T* out, std::type_identity_t<EncoderCache<T>>* cache, Workspace<T>& ws,
+           const EncoderOptions& opt) const {
+    const int N = config.num_tokens, d = config.dim, B = in.batch;
+    check_params(ps, norm.bias, "Encoder::forward");
+    require<ShapeError>(in.tokens && out, "Encoder::forward: null tokens or out");
+    require<ShapeError>(B > 0, "Encoder::forward: batch = ", B, ", expected > 0");
+    const int* context = in.context.empty() ? nullptr : in.context.data();
+    require<ShapeError>(in.context.size() % std::size_t(B) == 0, "Encoder::forward: ", in.context.size(),
+                        " context indices for batch ", B, ", expected a multiple of it");
+    const int K = context ? static_cast<int>(in.context.size() / std::size_t(B)) : N;
+    require<ShapeError>(K <= N, "Encoder::forward: K = ", K, " context tokens per sample, expected 1..", N);
+    if (context) check_indices(context, std::size_t(B) * K, N, "Encoder::forward", "context");
+    const T* tokens = in.tokens;
+    const std::size_t M = std::size_t(B) * K;
+    T* x = detail::grow(ws.x, M * d);
+    if (context)
+      kernels::gather_rows(x, tokens, std::size_t(N) * d, context, B, K, d);
+    else
+      detail::parallel_copy(tokens, tokens + M * d, x);
+    pos.forward(ps, x, context, B, K);
+    if (config.token_types > 0)
+      kernels::gather_add_rows(x, ps.value(type_embed), 0, type_rows(context, B, K, ws), B, K, d);
+    ws.mark("embed");
+    if (cache) {
+      cache->B = B;
+      cache->K = K;
+      if (context)
+        cache->context.assign(context, context + M);
+      else
+        cache->context.clear();
+    }
+    stack.forward(ps, x, x, B, K, opt.key_valid, opt.drop_path, cache ? &cache->stack : nullptr, ws);
+    T* mean = cache ? detail::grow(cache->mean, M) : nullptr;
+    T* rstd = cache ? detail::grow(cache->rstd, M) : nullptr;
+    norm.forward(ps, x, out, mean, rstd, int(M));
+    ws.mark("norm");
+  }
+
   // The type row of each of the B·K tokens (context indices, or all N in order), in ws.index.
   template <class T>
   const int* type_rows(const int* context, int B, int K, Workspace<T>& ws) const {

@@ -86,10 +86,22 @@ struct Predictor {
     output_projection = LinearParams::add(ps, prefix + "output_projection", c.dim, c.output_width(), true);
   }
 
-  // in → out [B, t, d_out]. cache == nullptr: inference.
+  // in → out [B, t, d_out]: inference.
   template <class T>
-  void forward(const ParamSet<T>& ps, const PredictorInput<T>& in, T* out,
-               std::type_identity_t<PredictorCache<T>>* cache, Workspace<T>& ws) const {
+  void forward(const ParamSet<T>& ps, const PredictorInput<std::type_identity_t<T>>& in, T* out, Workspace<T>& ws) const {
+    run(ps, in, out, nullptr, ws);
+  }
+  // The same, keeping in `cache` what backward needs.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const PredictorInput<std::type_identity_t<T>>& in, T* out,
+               std::type_identity_t<PredictorCache<T>>& cache, Workspace<T>& ws) const {
+    run(ps, in, out, &cache, ws);
+  }
+
+ private:
+  template <class T>
+  void run(const ParamSet<T>& ps, const PredictorInput<T>& in, T* out, std::type_identity_t<PredictorCache<T>>* cache,
+           Workspace<T>& ws) const {
     const int pd = config.dim, din = config.in_dim;
     const T* ctx = in.ctx;
     const T* pos = in.pos;
@@ -136,6 +148,7 @@ struct Predictor {
     output_projection.forward(ps, normed, out, int(Mt));
   }
 
+ public:
   // dout [B, t, d_out] → parameter gradients, dctx [Bc, K, d_in] += and dpos [N, pd] += (either
   // may be nullptr: the default reads the target encoder's table, which takes no gradient).
   template <class T>

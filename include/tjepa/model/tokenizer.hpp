@@ -90,10 +90,21 @@ struct Tokenizer {
     return t;
   }
 
-  // x [B, G, width] → out [B, G, dim]. cache == nullptr: inference.
+  // x [B, G, width] → out [B, G, dim]: inference.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, int B, T* out, std::type_identity_t<TokenizerCache<T>>* cache,
+  void forward(const ParamSet<T>& ps, const T* x, int B, T* out, Workspace<T>& ws) const {
+    run(ps, x, B, out, nullptr, ws);
+  }
+  // The same, keeping in `cache` what backward needs.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, int B, T* out, std::type_identity_t<TokenizerCache<T>>& cache,
                Workspace<T>& ws) const {
+    run(ps, x, B, out, &cache, ws);
+  }
+
+ private:
+  template <class T>
+  void run(const ParamSet<T>& ps, const T* x, int B, T* out, std::type_identity_t<TokenizerCache<T>>* cache, Workspace<T>& ws) const {
     check_params(ps, maps.back().norm.bias, "Tokenizer::forward");
     require<ShapeError>(B > 0, "Tokenizer::forward: B = ", B, ", expected > 0");
     if (cache) {
@@ -128,6 +139,7 @@ struct Tokenizer {
     }
   }
 
+ public:
   // dout [B, G, dim] → parameter gradients and dx [B, G, width] += (may be nullptr; padding
   // columns get nothing).
   template <class T>

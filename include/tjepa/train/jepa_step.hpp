@@ -165,8 +165,8 @@ class JepaStep {
     // Target encoder on every token: no cache, no gradient.
     T* h = detail::grow(w_.h, BN * d);
     T* tokens = detail::grow(w_.tokens, BN * d);
-    model.tokenizer.forward(model.target, x, B, tokens, nullptr, w_.ws);
-    model.encoder.forward(model.target, tokens, B, nullptr, N, h, nullptr, w_.ws, EncoderOptions{target_dp, nullptr});
+    model.tokenizer.forward(model.target, x, B, tokens, w_.ws);
+    model.encoder.forward(model.target, {tokens, B}, h, w_.ws, EncoderOptions{target_dp, nullptr});
     JepaLossResult& result = result_;
     w_.token_moments = column_moments(h, BN, d);
     result.target_std = w_.token_moments.mean_std();
@@ -181,9 +181,8 @@ class JepaStep {
 
     // Context encoder on the context tokens.
     T* z = detail::grow(w_.z, static_cast<std::size_t>(B) * K * d);
-    model.tokenizer.forward(model.context, x, B, tokens, &w_.tokenizer_cache, w_.ws);
-    model.encoder.forward(model.context, tokens, B, masks.context.data(), K, z, &w_.context_cache, w_.ws,
-                          EncoderOptions{context_dp, nullptr});
+    model.tokenizer.forward(model.context, x, B, tokens, w_.tokenizer_cache, w_.ws);
+    model.encoder.forward(model.context, {tokens, B, masks.context}, z, w_.context_cache, w_.ws, EncoderOptions{context_dp, nullptr});
 
     const int num_targets = masks.num_targets();
     result.target_losses.assign(static_cast<std::size_t>(num_targets), 0.0);
@@ -211,8 +210,7 @@ class JepaStep {
       T* y = detail::grow(g.y, R * rows * d);
       T* dpred = detail::grow(g.dpred, R * rows * d);
       // Row r·B + b of the tiled batch predicts target r of sample b from context b.
-      model.predictor.forward(model.predictor_params, {z, B, K, position_rows(), N, idx, R * B, t}, pred, &g.cache,
-                              w_.ws);
+      model.predictor.forward(model.predictor_params, {z, B, K, position_rows(), N, idx, R * B, t}, pred, g.cache, w_.ws);
       for (int r = 0; r < R; ++r)
         kernels::gather_rows(y + r * rows * d, h, static_cast<std::size_t>(N) * d, idx + r * rows, B, t, d);
       for (int r = 0; r < R; ++r) {

@@ -224,16 +224,14 @@ double mae_forward(MaeModel<T>& model, const T* x, int B, const MaskBatch& masks
 
   T* tokens = detail::grow(w.tokens, static_cast<std::size_t>(B) * N * d);
   T* z = detail::grow(w.z, static_cast<std::size_t>(B) * K * d);
-  model.tokenizer.forward(model.context, x, B, tokens, &w.tokenizer_cache, w.ws);
-  model.encoder.forward(model.context, tokens, B, masks.context.data(), K, z, &w.encoder_cache, w.ws,
-                        EncoderOptions{dp, nullptr});
+  model.tokenizer.forward(model.context, x, B, tokens, w.tokenizer_cache, w.ws);
+  model.encoder.forward(model.context, {tokens, B, masks.context}, z, w.encoder_cache, w.ws, EncoderOptions{dp, nullptr});
 
   const std::size_t rows = static_cast<std::size_t>(B) * M;
   T* pred = detail::grow(w.pred, rows * W);
   T* y = detail::grow(w.y, rows * W);
   T* dpred = detail::grow(w.dpred, rows * W);
-  model.decoder.forward(model.decoder_params, {z, B, K, model.decoder_pos_rows(), N, masked, B, M}, pred,
-                        &w.decoder_cache, w.ws);
+  model.decoder.forward(model.decoder_params, {z, B, K, model.decoder_pos_rows(), N, masked, B, M}, pred, w.decoder_cache, w.ws);
   kernels::gather_rows(y, x, static_cast<std::size_t>(N) * W, masked, B, M, W);
   if (model.config.norm_targets) normalize_rows(y, rows, W, mae_target_norm_eps);
   // dpred = ∂L/∂pred, kept for mae_backward.
