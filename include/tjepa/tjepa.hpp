@@ -77,6 +77,7 @@
 #include "tjepa/model/taxel_pooling.hpp"
 #include "tjepa/model/tokenizer.hpp"
 #include "tjepa/model/workspace.hpp"
+#include "tjepa/model/dino_head.hpp"
 
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
@@ -97,6 +98,8 @@
 #include "tjepa/train/trainer.hpp"
 #include "tjepa/train/jepa_objective.hpp"
 #include "tjepa/train/mae.hpp"
+#include "tjepa/train/dino_loss.hpp"
+#include "tjepa/train/dino.hpp"
 
 #include "tjepa/downstream/causal_attention.hpp"
 #include "tjepa/downstream/cross_entropy.hpp"

@@ -168,6 +168,63 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
+  TEST_CASE("Encoder with register rows and a mask token (DINO's student): shapes, masked rows, gradients") {
+    ParamSet<double> ps;
+    EncoderConfig cfg{.num_tokens = 6, .dim = 8, .depth = 2, .heads = 2, .mlp_ratio = 2.0, .bias = true, .eps = 1e-6, .register_tokens = 2, .mask_token = true};
+    Encoder enc(ps, cfg);
+    ps.allocate();
+    test::randomize(ps, 7);
+    CHECK(ps.infos()[ps.id("register_tokens").index].shape == std::vector<std::int64_t>{1, 2, 8});
+    CHECK(ps.infos()[ps.id("mask_token").index].shape == std::vector<std::int64_t>{1, 1, 8});
+    const int B = 2, N = 6, K = 3, d = 8, R = 2;
+    Rng rng(8);
+    auto tokens = test::normal_vector(std::size_t(B) * N * d, rng);
+    const std::vector<int> ctx{0, 2, 5, 3, 1, 4};
+    const std::vector<std::uint8_t> masked{0, 1, 0, 1, 0, 0};
+    auto w = test::normal_vector(std::size_t(B) * (R + K) * d, rng);
+    std::vector<double> out(w.size());
+    Workspace<double> ws;
+    auto loss = [&] {
+      enc.forward(ps, {tokens.data(), B, ctx, masked}, out.data(), ws, {DropPath{0.5, 3}, nullptr});
+      return test::dot(w.data(), out.data(), out.size());
+    };
+    EncoderCache<double> cache;
+    std::vector<double> dtokens(tokens.size(), 0.0);
+    ps.zero_grad();
+    enc.forward(ps, {tokens.data(), B, ctx, masked}, out.data(), cache, ws, {DropPath{0.5, 3}, nullptr});
+    CHECK(test::dot(w.data(), out.data(), out.size()) == doctest::Approx(loss()).epsilon(1e-12));
+    enc.backward(ps, w.data(), dtokens.data(), cache, ws);
+    CHECK(gradient_error(tokens.data(), dtokens.data(), tokens.size(), loss) < grad_tolerance);
+    test::check_param_gradients(ps, loss);
+    // A masked token's input reaches nothing: its rows of dtokens are zero (token 2 of sample 0 and
+    // token 3 of sample 1 are seen nowhere else).
+    for (int c = 0; c < d; ++c) {
+      CHECK(dtokens[std::size_t(0 * N + 2) * d + c] == 0.0);
+      CHECK(dtokens[std::size_t(1 * N + 3) * d + c] == 0.0);
+    }
+    // Without the register rows in the output: the token rows of the full output, and their gradients.
+    const EncoderOptions tokens_only{.drop_path = DropPath{0.5, 3}, .register_rows = false};
+    std::vector<double> part(std::size_t(B) * K * d), full(out.size());
+    enc.forward(ps, {tokens.data(), B, ctx, masked}, full.data(), ws, {DropPath{0.5, 3}, nullptr});
+    enc.forward(ps, {tokens.data(), B, ctx, masked}, part.data(), ws, tokens_only);
+    for (int b = 0; b < B; ++b)
+      for (std::size_t i = 0; i < std::size_t(K) * d; ++i)
+        CHECK(part[std::size_t(b) * K * d + i] == full[(std::size_t(b) * (R + K) + R) * d + i]);
+    auto wk = test::normal_vector(part.size(), rng);
+    auto part_loss = [&] {
+      enc.forward(ps, {tokens.data(), B, ctx, masked}, part.data(), ws, tokens_only);
+      return test::dot(wk.data(), part.data(), part.size());
+    };
+    ps.zero_grad();
+    enc.forward(ps, {tokens.data(), B, ctx, masked}, part.data(), cache, ws, tokens_only);
+    enc.backward(ps, wk.data(), static_cast<double*>(nullptr), cache, ws);
+    test::check_param_gradients(ps, part_loss);
+    // Masked flags must cover every context token.
+    CHECK_THROWS_WITH_AS(enc.forward(ps, {tokens.data(), B, ctx, std::span<const std::uint8_t>(masked.data(), 4)},
+                                     out.data(), ws),
+                         "Encoder::forward: 4 masked flags, expected none or batch·K", ShapeError);
+  }
+
   TEST_CASE("Encoder with token types: taxeltype_embed rows added per token type - gradients") {
     ParamSet<double> ps;
     EncoderConfig cfg{.num_tokens = 6, .dim = 8, .depth = 1, .heads = 2, .mlp_ratio = 2.0, .bias = true, .eps = 1e-6, .token_type = {2, 0, 1, 1, 0, 2}, .token_types = 3};

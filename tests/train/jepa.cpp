@@ -559,6 +559,51 @@ TEST_SUITE("train") {
     CHECK_THROWS_WITH_AS(jt.resume(ckpt.path), doctest::Contains("a checkpoint of a 'mae' run"), ConfigError);
   }
 
+  TEST_CASE("DINO through the Trainer: the loss falls / save then resume is bitwise / a JEPA file is refused") {
+    const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
+    TrainConfig tc = blob_trainer_config(12, 2, 3);
+    tc.drop_path = 0.1;
+    DinoConfig dc = dino_config(tc, 36, 2);
+    dc.local_views = 2;
+    CHECK(dc.head.prototypes == 16 * tc.dim);
+    DinoModel<float> straight_model(dc, 7);
+    DinoTrainer<float> straight(straight_model, source, tc);
+    const auto stats = straight.run();
+    REQUIRE(stats.size() == 12);
+    for (const auto& st : stats) {
+      CHECK(std::isfinite(st.loss));
+      CHECK(st.loss == doctest::Approx(st.dino + st.ibot + st.koleo).epsilon(1e-6));
+    }
+    CHECK(stats.front().teacher_temp == doctest::Approx(dc.teacher_temp[0]));
+
+    TempPath ckpt("dino_resume");
+    DinoModel<float> first_model(dc, 7);
+    DinoTrainer<float> first(first_model, source, tc);
+    first.checkpoint = ckpt.path;
+    first.checkpoint_every = 4;
+    REQUIRE(first.run(10).size() == 10);  // checkpoints after steps 4 and 8
+    DinoModel<float> resumed_model(dc, 999);  // another init: everything must come from the file
+    DinoTrainer<float> resumed(resumed_model, source, tc);
+    resumed.resume(ckpt.path);
+    CHECK(resumed.step() == 8);
+    const auto tail = resumed.run();
+    REQUIRE(tail.size() == 4);
+    for (std::size_t k = 0; k < tail.size(); ++k) CHECK(tail[k].loss == stats[8 + k].loss);  // bitwise
+    for (auto [a, b] : {std::pair{&resumed_model.student, &straight_model.student},
+                        {&resumed_model.teacher_head, &straight_model.teacher_head},
+                        {&resumed_model.centers, &straight_model.centers}})
+      CHECK(std::ranges::equal(a->values(), b->values()));
+    const nlohmann::json meta = nlohmann::json::parse(load_safetensors(ckpt.path).metadata.at("config"));
+    CHECK(meta["objective"] == "dino");
+    CHECK(meta["dino"]["views"] == nlohmann::json{2, 2});
+
+    TempPath jepa_ckpt("dino_vs_jepa");
+    JepaModel<float> jm(blob_config(), 7);
+    JepaTrainer<float> jt(jm, source, blob_graph(), tc);
+    jt.save(jepa_ckpt.path);
+    CHECK_THROWS_WITH_AS(resumed.resume(jepa_ckpt.path), doctest::Contains("a checkpoint of a 'jepa' run"), ConfigError);
+  }
+
   TEST_CASE("one default per setting: TrainConfig's module keys default to the modules' configs") {
     const TrainConfig tc;
     const MaskConfig m = tc.masks(), m0;

@@ -39,7 +39,8 @@ inline AlignedVector<float> embed_windows(const ParamSet<float>& ps, const Token
     float* tok = detail::grow(tokens, static_cast<std::size_t>(B) * per);
     windows_to_tokens(wb, rows);
     tokenizer.forward(ps, rows.data(), B, tok, ws);
-    encoder.forward(ps, {tok, B}, out.data() + static_cast<std::size_t>(s0) * per, ws);
+    encoder.forward(ps, {tok, B}, out.data() + static_cast<std::size_t>(s0) * per, ws,
+                    EncoderOptions{.register_rows = false});
     if (progress) progress(s0 + B, S);
   }
   return out;

@@ -91,10 +91,11 @@ class EncoderFeatures {
     T* out = detail::grow(out_, M);
     if (train) {
       tok_.forward(ps_, x, B, tokens_buf, tok_cache_, ws_);
-      enc_.forward(ps_, {tokens_buf, B}, out, enc_cache_, ws_, EncoderOptions{DropPath{drop_path_, noise_()}, nullptr});
+      enc_.forward(ps_, {tokens_buf, B}, out, enc_cache_, ws_,
+                   EncoderOptions{.drop_path = DropPath{drop_path_, noise_()}, .register_rows = false});
     } else {
       tok_.forward(ps_, x, B, tokens_buf, ws_);
-      enc_.forward(ps_, {tokens_buf, B}, out, ws_);
+      enc_.forward(ps_, {tokens_buf, B}, out, ws_, EncoderOptions{.register_rows = false});
     }
     return out;
   }

@@ -46,6 +46,7 @@
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/sim/grasping_hand.hpp"
 #include "tjepa/train/config.hpp"
+#include "tjepa/train/dino.hpp"
 #include "tjepa/train/mae.hpp"
 #include "tjepa/train/trained_model.hpp"
 #include "tjepa/train/trainer.hpp"
@@ -78,7 +79,7 @@ struct GraspEvalConfig {
   GraspTaskConfig tasks{.max_object_windows = 1500, .max_force_windows = 1500, .max_pose_sequences = 300};
   GraspHeadConfig heads;
   // Rows to run.
-  bool ridge = true, random = true, end_to_end = true, mae = true, jepa = true, ablation = true;
+  bool ridge = true, random = true, end_to_end = true, mae = true, dino = true, jepa = true, ablation = true;
   bool linear_readout = true;  // the linear read-out table of the frozen main rows
   int readout_components = 3;  // k of its token components (as many numbers per taxel as its 3 axes)
   // Directory of pre-trained encoders kept between runs (eval/pretrain_cache.hpp; empty: none):
@@ -137,7 +138,7 @@ struct GraspEvalConfig {
                        {"probe_pooling", to_string(heads.probe_pooling.kind)},
                        {"sequence_pooling", to_string(heads.sequence_pooling.kind)},
                        {"pooling_components", heads.sequence_pooling.components}}},
-            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}, {"readout_components", readout_components}}}};
+            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"dino", dino}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}, {"readout_components", readout_components}}}};
   }
 };
 
@@ -435,6 +436,29 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
                     {"seconds", seconds(t)}});
       }
       frozen_row(res.main, res.linear, "MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
+    }
+    if (c.dino) {  // the teacher encoder, as DINO evaluates (its register row left out of the features)
+      TrainConfig cfg = c.train;
+      cfg.seed = s;
+      DinoModel<float> dino(dino_config(cfg, graph.num_nodes(), axes), s);
+      if (cfg.position_eigenvectors > 0)  // as make_jepa_model: every method starts from the same encoder
+        dino.set_positions(graph_positions(graph, cfg.dim, cfg.position_eigenvectors, cfg.position_scale, s));
+      const nlohmann::json key = cache.key("DINO", s, {{"train", cfg.to_json()}});
+      if (!from_cache("DINO", s, key, dino.teacher)) {
+        const auto t = clock::now();
+        DinoTrainer<float> trainer(dino, *d.pretrain, cfg);
+        trainer.on_step = [&](const DinoStepStats& st) {
+          if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
+            say("  DINO seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
+                std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss) + " (dino " + std::to_string(st.dino) +
+                ", ibot " + std::to_string(st.ibot) + ", koleo " + std::to_string(st.koleo) + ")");
+        };
+        const auto log = trainer.run();
+        pretrained(key, dino.teacher,
+                   {{"row", "DINO"}, {"seed", s}, {"first_loss", log.front().loss}, {"last_loss", log.back().loss},
+                    {"seconds", seconds(t)}});
+      }
+      frozen_row(res.main, res.linear, "DINO, frozen", "DINO", s, dino.teacher, dino.tokenizer, dino.encoder);
     }
     if (c.jepa) {
       auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);

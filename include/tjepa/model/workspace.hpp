@@ -29,6 +29,7 @@ struct Workspace {
   AlignedVector<T> rows;    // [rows, ·] gathered rows (predictor targets, tokenizer groups); the probe's query
   AlignedVector<T> rows2;   // [rows, ·] second gathered buffer; the probe's folded keys, then its norm2 output
   std::vector<int> index;   // [M] row indices (the encoder's token types)
+  AlignedVector<T> registers;  // [B·(R + K), d] the encoder's output (or its gradient) with its register rows
   // Backward scratch.
   AlignedVector<T> dx;       // [M, d] gradient flowing down the residual stream
   AlignedVector<T> dbranch;  // [M, d]; the probe's inference copy of its tokens with padded rows zeroed
