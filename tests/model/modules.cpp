@@ -168,7 +168,7 @@ TEST_SUITE("nn") {
     test::check_param_gradients(ps, loss);
   }
 
-  TEST_CASE("Encoder with register rows and a mask token (DINO's student): shapes, masked rows, gradients") {
+  TEST_CASE("Encoder with register rows and a mask token (DINO's student): shapes / masked rows / gradients") {
     ParamSet<double> ps;
     EncoderConfig cfg{.num_tokens = 6, .dim = 8, .depth = 2, .heads = 2, .mlp_ratio = 2.0, .bias = true, .eps = 1e-6, .register_tokens = 2, .mask_token = true};
     Encoder enc(ps, cfg);

@@ -40,7 +40,7 @@ DinoConfig tiny_dino_config() {
 }  // namespace
 
 TEST_SUITE("train") {
-  TEST_CASE("DinoHead: output rows are cosines with unit prototypes; gradients of input and parameters") {
+  TEST_CASE("DinoHead: output rows are cosines with unit prototypes / gradients of input and parameters") {
     const test::SingleThread one_thread;
     ParamSet<double> ps;
     DinoHead head(ps, DinoHeadConfig{5, 7, 4, 9});
@@ -78,7 +78,7 @@ TEST_SUITE("train") {
                          ConfigError);
   }
 
-  TEST_CASE("DINO cross-entropy, teacher softmax and KoLeo: values and central differences") {
+  TEST_CASE("DINO cross-entropy / teacher softmax and KoLeo: values and central differences") {
     const int M = 3, P = 5;
     Rng rng(9);
     auto s = test::normal_vector(std::size_t(M) * P, rng);
@@ -117,7 +117,7 @@ TEST_SUITE("train") {
                          doctest::Contains("expected M >= 2"), ShapeError);
   }
 
-  TEST_CASE("DINO views: contiguous runs of the drawn sizes, masked tokens inside the global views only") {
+  TEST_CASE("DINO views: contiguous runs of the drawn sizes / masked tokens inside the global views only") {
     DinoConfig c = tiny_dino_config();
     c.encoder.num_tokens = 40;
     for (std::uint64_t s = 0; s < 20; ++s) {
@@ -193,7 +193,7 @@ TEST_SUITE("train") {
     CHECK_THROWS_WITH_AS(dino_backward(model, w), doctest::Contains("holds no forward pass"), ConfigError);
   }
 
-  TEST_CASE("a DINO update: AdamW on the student, EMA teacher, centers toward the teacher's rows") {
+  TEST_CASE("a DINO update: AdamW on the student / EMA teacher / centers toward the teacher's rows") {
     const DinoConfig c = tiny_dino_config();
     DinoModel<double> model(c, 1);
     CHECK(std::ranges::equal(model.teacher.values(), model.student.values()));
