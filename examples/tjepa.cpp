@@ -184,12 +184,13 @@ int main(int argc, char** argv) {
     if (*probe) return run_probe(pb, std::cout);
     if (*embed) return run_embed(eo, std::cout);
     if (*convert) return run_convert(co, std::cout);
-    if (*eval) return run_eval(ev.resolve(argc, argv), std::cout);
+    if (*eval) return run_eval(ev.resolve(argc, argv, &std::cout), std::cout);
     if (*demo) {
       EvalOptions dm = demo_eval_options(demo_seed);
       dm.out = demo_out;
       dm.quiet = demo_quiet;
       dm.eval.train.update(demo_overrides, "command line");
+      fit_default_warmup(dm.eval.train, demo_overrides, std::cout);
       return run_eval(dm, std::cout);
     }
     return 0;

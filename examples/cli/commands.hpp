@@ -160,11 +160,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
                     : !o.resume.empty() ? load_trained_model(o.resume).config
                                         : TrainConfig{};
   run.update(o.overrides, "command line");
-  if (run.warmup_steps > run.steps && !o.overrides.contains("warmup_steps")) {
-    out << "note: " << run.steps << " steps are fewer than the default warm-up of " << run.warmup_steps
-        << "; warming up for " << run.steps / 10 << " steps (--warmup sets it)\n";
-    run.warmup_steps = run.steps / 10;
-  }
+  fit_default_warmup(run, o.overrides, out);
   run.validate();
   SkinSpec spec = SkinSpec::of(run);
   spec.strict = o.strict;

@@ -66,10 +66,13 @@ struct EvalCommand {
 
   // The options to run: config file, then flags, applied to the pre-training config; the command
   // line recorded for results.md.
-  EvalOptions resolve(int argc, const char* const* argv) const {
+  // notes: where the note of a shortened warm-up goes (nullptr: nowhere).
+  EvalOptions resolve(int argc, const char* const* argv, std::ostream* notes = nullptr) const {
     EvalOptions o = options;
     if (!config.empty()) o.eval.train.update_from_file(config);
     o.eval.train.update(overrides, "command line");
+    NullStream null;
+    fit_default_warmup(o.eval.train, overrides, notes ? *notes : null);
     o.command = "tjepa";
     for (int i = 1; i < argc; ++i) o.command += std::string(" ") + argv[i];
     return o;

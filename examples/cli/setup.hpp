@@ -41,6 +41,17 @@ struct SkinSpec {
   }
 };
 
+// Fewer steps than the default warm-up: the warm-up becomes a tenth of the run, with a note (a
+// warm-up the command line or config file set stays, and validate() names it).
+inline void fit_default_warmup(TrainConfig& run, const nlohmann::json& overrides, std::ostream& out) {
+  if (run.warmup_steps <= run.steps || overrides.contains("warmup_steps") ||
+      run.warmup_steps != TrainConfig{}.warmup_steps)
+    return;
+  out << "note: " << run.steps << " steps are fewer than the default warm-up of " << run.warmup_steps
+      << "; warming up for " << run.steps / 10 << " steps (--warmup sets it)\n";
+  run.warmup_steps = run.steps / 10;
+}
+
 inline Skin load_skin(const SkinSpec& s, std::ostream* warnings = nullptr) {
   InferredSkin r;
   const bool builtin = s.layout == "allegro" || s.layout == "grid" || s.layout == "two-part";

@@ -664,6 +664,7 @@ TEST_CASE("tjepa eval's command line: flags land in the options and the pre-trai
   CHECK(o.eval.heads.end_to_end_patience == 7);
   CHECK(o.eval.pretrain_cache == "cache/dir");
   CHECK(o.eval.train.steps == 11);
+  CHECK(o.eval.train.warmup_steps == 1);  // the default warm-up of 60 cut to a tenth of the run
   CHECK(o.eval.train.precision == "bf16");
   CHECK_FALSE(o.eval.mae);
   CHECK_FALSE(o.eval.dino);
