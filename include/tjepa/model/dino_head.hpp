@@ -66,7 +66,6 @@ struct DinoHead {
     fc2 = LinearParams::add(ps, prefix + "mlp.4", c.hidden, c.bottleneck, true);
     weight_v = ps.add(prefix + "last_layer.weight_v", {c.prototypes, c.bottleneck}, ParamInit::trunc_normal);
   }
-  int prototypes() const { return config.prototypes; }
 
   // x [M, in] → out [M, prototypes]; the cache keeps what backward needs.
   template <class T>

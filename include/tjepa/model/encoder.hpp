@@ -113,8 +113,6 @@ struct Encoder {
   }
   int dim() const { return config.dim; }
   int num_tokens() const { return config.num_tokens; }
-  // Rows of each sample's output before its tokens (config.register_tokens).
-  int register_rows() const { return config.register_tokens; }
   // The position table (the predictor reads the target encoder's rows by default).
   ParamId pos_embed() const { return pos.table; }
 

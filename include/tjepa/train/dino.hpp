@@ -424,14 +424,14 @@ DinoStepStats dino_update(DinoModel<T>& model, AdamW<T>& opt, const TrainingSche
   const int P = model.config.head.prototypes, GB = model.config.global_views * w.views.B;
   const int Mp = static_cast<int>(w.views.ibot_rows.size());
   const double m = model.config.center_momentum;
-  auto move = [&](ParamId id, const T* rows, int M) {
+  std::vector<double> sum(static_cast<std::size_t>(P));
+  auto move = [&](ParamId id, const T* rows, int M) {  // rows in order, each summed along (no strided reads)
     if (M <= 0) return;
+    std::fill(sum.begin(), sum.end(), 0.0);
+    for (int i = 0; i < M; ++i)
+      for (int k = 0; k < P; ++k) sum[std::size_t(k)] += double(rows[std::size_t(i) * P + k]);
     T* cen = model.centers.value(id);
-    for (int k = 0; k < P; ++k) {
-      double mean = 0;
-      for (int i = 0; i < M; ++i) mean += double(rows[std::size_t(i) * P + k]);
-      cen[k] = T(m * double(cen[k]) + (1 - m) * mean / M);
-    }
+    for (int k = 0; k < P; ++k) cen[k] = T(m * double(cen[k]) + (1 - m) * sum[std::size_t(k)] / M);
   };
   move(model.center, w.teacher_logits.data(), GB);
   move(model.patch_center, w.teacher_logits.data() + std::size_t(GB) * P, Mp);

@@ -16,7 +16,6 @@
 #include <limits>
 #include <vector>
 
-#include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
 
 namespace tjepa {
