@@ -32,6 +32,7 @@ inline EvalOptions demo_eval_options(std::uint64_t seed) {
   c.head_seeds = 1;
   c.mae = false;
   c.dino = false;
+  c.byol = false;
   c.ablation = false;
   c.linear_readout = false;
   c.heads.end_to_end_max_epochs = 2;

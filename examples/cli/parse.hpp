@@ -112,6 +112,8 @@ inline CLI::App* add_eval_command(CLI::App& app, EvalCommand& ev) {
                             "arithmetic of the pre-training products: fp32 or bf16 (AVX512-BF16)");
   eval->add_flag("--no-mae", [&e](std::int64_t) { e.mae = false; }, "skip the MAE row");
   eval->add_flag("--no-dino", [&e](std::int64_t) { e.dino = false; }, "skip the DINO row");
+  eval->add_flag("--no-byol", [&e](std::int64_t) { e.byol = false; }, "skip the BYOL row");
+  eval->add_option("--byol-image-size", e.byol_image_size, "side of BYOL's images (T-DEX: 224, at least 63)");
   eval->add_flag("--no-ablation", [&e](std::int64_t) { e.ablation = false; }, "skip the mask ablation");
   eval->add_flag("--no-end-to-end", [&e](std::int64_t) { e.end_to_end = false; }, "skip the end-to-end row");
   eval->add_flag("--no-random", [&e](std::int64_t) { e.random = false; }, "skip the random-init row");

@@ -9,3 +9,4 @@
 #include "tjepa/model/kernels/layer_norm.hpp"
 #include "tjepa/model/kernels/linear.hpp"
 #include "tjepa/model/kernels/softmax.hpp"
+#include "tjepa/model/kernels/conv2d.hpp"

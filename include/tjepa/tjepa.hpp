@@ -53,6 +53,7 @@
 #include "tjepa/data/text_reader.hpp"
 #include "tjepa/data/window.hpp"
 #include "tjepa/data/window_source.hpp"
+#include "tjepa/data/taxel_image.hpp"
 
 #include "tjepa/masks/collator.hpp"
 #include "tjepa/masks/config.hpp"
@@ -78,6 +79,8 @@
 #include "tjepa/model/tokenizer.hpp"
 #include "tjepa/model/workspace.hpp"
 #include "tjepa/model/dino_head.hpp"
+#include "tjepa/model/alexnet.hpp"
+#include "tjepa/model/projection_mlp.hpp"
 
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
@@ -100,6 +103,7 @@
 #include "tjepa/train/mae.hpp"
 #include "tjepa/train/dino_loss.hpp"
 #include "tjepa/train/dino.hpp"
+#include "tjepa/train/byol.hpp"
 
 #include "tjepa/downstream/causal_attention.hpp"
 #include "tjepa/downstream/cross_entropy.hpp"

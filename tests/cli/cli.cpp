@@ -583,6 +583,7 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK(o.eval.data_seed == 3);
   CHECK_FALSE(o.eval.mae);
   CHECK_FALSE(o.eval.dino);
+  CHECK_FALSE(o.eval.byol);
   CHECK_FALSE(o.eval.ablation);
   CHECK(o.eval.heads.probe.max_epochs == GraspHeadConfig{}.probe.max_epochs);  // the protocol's probe limits
   CHECK(o.eval.heads.probe.patience == GraspHeadConfig{}.probe.patience);
@@ -652,7 +653,8 @@ TEST_CASE("tjepa eval's command line: flags land in the options and the pre-trai
   CLI::App* eval = add_eval_command(app, ev);
   const char* argv[] = {"tjepa", "eval", "--seeds", "4", "5", "--head-seeds", "2", "--end-to-end-epochs", "30",
                         "--end-to-end-patience", "7", "--pretrain-cache", "cache/dir", "--steps", "11",
-                        "--precision", "bf16", "--no-mae", "--no-dino", "--no-ablation", "--sequence-pooling", "attentive",
+                        "--precision", "bf16", "--no-mae", "--no-dino", "--no-byol", "--byol-image-size", "96", "--no-ablation",
+                        "--sequence-pooling", "attentive",
                         "--stop-on-error", "--out", "runs/x", "--force"};
   const int argc = static_cast<int>(std::size(argv));
   app.parse(argc, argv);
@@ -668,6 +670,8 @@ TEST_CASE("tjepa eval's command line: flags land in the options and the pre-trai
   CHECK(o.eval.train.precision == "bf16");
   CHECK_FALSE(o.eval.mae);
   CHECK_FALSE(o.eval.dino);
+  CHECK_FALSE(o.eval.byol);
+  CHECK(o.eval.byol_image_size == 96);
   CHECK_FALSE(o.eval.ablation);
   CHECK(o.eval.end_to_end);
   CHECK(o.eval.heads.sequence_pooling.kind == PoolingKind::attentive);

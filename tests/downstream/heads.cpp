@@ -1073,6 +1073,9 @@ GraspEvalConfig toy_grasp_eval_config() {
   c.heads.probe.max_epochs = 2;
   c.heads.sequence.max_epochs = 2;
   c.heads.end_to_end_max_epochs = 1;
+  c.byol_image_size = 63;
+  c.byol_widths = {4, 6, 6, 4, 4};
+  c.byol_projection = 8, c.byol_hidden = 16;
   return c;
 }
 
@@ -1083,11 +1086,13 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation - seed 1 alone
   int lines = 0;
   const GraspEvalResult r = run_grasp_eval(c, [&](const std::string&) { ++lines; });
   CHECK(lines > 10);
-  REQUIRE(r.main.rows.size() == 7);
+  REQUIRE(r.main.rows.size() == 8);
   REQUIRE(r.ablation.rows.size() == 5);
   CHECK(r.main.rows[5].name == "DINO, frozen");
+  CHECK(r.main.rows[6].name == "BYOL, frozen (random-init AlexNet)");
   // The linear read-outs: the ridge row (the same runs as the main table's) and two rows per frozen
-  // encoder of the main table (pad means, token components), one read-out per pre-training seed.
+  // encoder of the main table (pad means, token components), one read-out per pre-training seed;
+  // none for BYOL, whose tokens are image cells, not taxels.
   REQUIRE(r.linear.rows.size() == 9);
   CHECK(r.linear.rows[0].name == r.main.rows[1].name);
   CHECK(r.linear.rows[0].runs == r.main.rows[1].runs);
@@ -1110,7 +1115,7 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation - seed 1 alone
         for (const GraspScores& s : heads)
           for (double v : s) CHECK(std::isfinite(v));
     }
-  CHECK(r.info["pretraining"].size() == 2 * 7);  // JEPA, MAE, DINO and 4 mask variants per seed
+  CHECK(r.info["pretraining"].size() == 2 * 8);  // JEPA, MAE, DINO, BYOL and 4 mask variants per seed
   {
     // Seed 1 alone gives seed 1's scores of the two-seed run, row by row: the same seed, the same
     // numbers, and nothing of seed 0 leaks into seed 1.
@@ -1150,7 +1155,7 @@ TEST_CASE("run_grasp_eval at toy size: standardized features and the other pooli
   // other inputs.
   GraspEvalConfig c = toy_grasp_eval_config();
   c.seeds = {0};
-  c.end_to_end = c.mae = c.dino = c.ablation = false;
+  c.end_to_end = c.mae = c.dino = c.byol = c.ablation = false;
   const GraspEvalResult r = run_grasp_eval(c);
   GraspEvalConfig cs = c;
   cs.heads.standardize_features = true;
@@ -1189,14 +1194,14 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the tables and pre-training
   };
   const GraspEvalResult first = run_grasp_eval(c);  // pre-trains and writes
   const auto written = files();
-  REQUIRE(written.size() == 7);  // Tactile-JEPA, MAE, DINO and the 4 mask variants at seed 0
+  REQUIRE(written.size() == 8);  // Tactile-JEPA, MAE, DINO, BYOL and the 4 mask variants at seed 0
   auto written_as = [&](const std::string& prefix) {
     const auto it = std::find_if(written.begin(), written.end(),
                                  [&](const auto& p) { return p.filename().string().starts_with(prefix); });
     REQUIRE(it != written.end());
     return *it;
   };
-  for (const char* prefix : {"tactile-jepa-seed0-", "mae-seed0-", "dino-seed0-", "4l-seed0-", "4g-seed0-", "4-i-jepa-blocks-seed0-",
+  for (const char* prefix : {"tactile-jepa-seed0-", "mae-seed0-", "dino-seed0-", "byol-seed0-", "4l-seed0-", "4g-seed0-", "4-i-jepa-blocks-seed0-",
                              "2l-2g-local-context-seed0-"})
     CHECK(written_as(prefix).extension() == ".safetensors");
   for (const auto& p : first.info["pretraining"]) CHECK_FALSE(p.contains("cached"));
@@ -1210,8 +1215,8 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the tables and pre-training
   CHECK(second.linear.to_json() == first.linear.to_json());
   CHECK(second.ablation_linear.to_json() == first.ablation_linear.to_json());
   CHECK(files() == written);
-  REQUIRE(second.info["pretraining"].size() == 7);
-  for (std::size_t i = 0; i < 7; ++i) {
+  REQUIRE(second.info["pretraining"].size() == 8);
+  for (std::size_t i = 0; i < 8; ++i) {
     const auto& p = second.info["pretraining"][i];
     CHECK(p.contains("cached"));
     CHECK(p["last_loss"] == first.info["pretraining"][i]["last_loss"]);
@@ -1219,21 +1224,21 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the tables and pre-training
   }
   CHECK(std::count_if(lines.begin(), lines.end(), [](const std::string& l) {
           return l.find("pre-trained encoder read from") != std::string::npos;
-        }) == 7);
+        }) == 8);
 
   // Another pre-training config is another key: pre-trained again, beside the old files.
   GraspEvalConfig other = c;
   other.train.steps = 3;
-  other.mae = other.dino = other.ablation = false;
+  other.mae = other.dino = other.byol = other.ablation = false;
   const GraspEvalResult third = run_grasp_eval(other);
   CHECK_FALSE(third.info["pretraining"][0].contains("cached"));
-  CHECK(files().size() == 8);
+  CHECK(files().size() == 9);
 
   // A truncated file, and a file under another key's name: errors that name the file. The
   // Tactile-JEPA row alone reads the same file (the rows left out are not in its key) and fails
   // before any head is trained.
   GraspEvalConfig jepa_only = c;
-  jepa_only.ridge = jepa_only.mae = jepa_only.dino = jepa_only.ablation = jepa_only.linear_readout = false;
+  jepa_only.ridge = jepa_only.mae = jepa_only.dino = jepa_only.byol = jepa_only.ablation = jepa_only.linear_readout = false;
   const std::filesystem::path jepa = written_as("tactile-jepa-seed0-"), four_l = written_as("4l-seed0-");
   const auto size = std::filesystem::file_size(jepa);
   std::filesystem::copy_file(jepa, dir / "jepa.bak");

@@ -26,6 +26,22 @@ template <class Vec>
 void fill_normal(Vec& v, Rng& rng, double std = 1.0) {
   for (auto& x : v) x = static_cast<typename Vec::value_type>(rng.normal(0.0, std));
 }
+template <class T>
+std::vector<T> random_vector(std::size_t n, Rng& rng, double std = 1.0) {
+  std::vector<T> v(n);
+  fill_normal(v, rng, std);
+  return v;
+}
+// max |a − b| / max(1, max |b|): a fast kernel's output against its reference's.
+template <class T>
+double max_scaled_diff(const std::vector<T>& a, const std::vector<T>& b) {
+  double d = 0, s = 1;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    d = std::max(d, std::abs(double(a[i]) - double(b[i])));
+    s = std::max(s, std::abs(double(b[i])));
+  }
+  return d / s;
+}
 inline std::vector<double> normal_vector(std::size_t n, Rng& rng, double std = 1.0) {
   std::vector<double> v(n);
   fill_normal(v, rng, std);

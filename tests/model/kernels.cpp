@@ -18,15 +18,10 @@
 using namespace tjepa;
 using test::gradient_error;
 using test::grad_tolerance;
+using test::max_scaled_diff;
+using test::random_vector;
 
 namespace {
-
-template <class T>
-std::vector<T> random_vector(std::size_t n, Rng& rng, double std = 1.0) {
-  std::vector<T> v(n);
-  test::fill_normal(v, rng, std);
-  return v;
-}
 
 // The operands of a GEMM test of shape M × K × N: x [M, K], W [N, K], b [N], g and r [M, N].
 struct GemmOperands {
@@ -47,17 +42,6 @@ std::vector<GemmOperands> gemm_cases(std::initializer_list<std::array<int, 3>> s
   std::vector<GemmOperands> cases;
   for (const auto& s : shapes) cases.emplace_back(s[0], s[1], s[2], rng);
   return cases;
-}
-
-// max |a - b| / max(1, max |b|)
-template <class T>
-double max_scaled_diff(const std::vector<T>& a, const std::vector<T>& b) {
-  double d = 0, s = 1;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    d = std::max(d, std::abs(double(a[i]) - double(b[i])));
-    s = std::max(s, std::abs(double(b[i])));
-  }
-  return d / s;
 }
 
 template <class T>

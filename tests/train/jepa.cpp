@@ -16,6 +16,7 @@
 #include <limits>
 #include <memory>
 #include <sstream>
+#include <span>
 #include <thread>
 #include <vector>
 
@@ -137,6 +138,42 @@ struct TempPath {
   ~TempPath() {
     std::error_code ec;
     std::filesystem::remove(path, ec);
+  }
+};
+
+// R ranks as R threads (rank 0 on the caller's): sums over a barrier, the ranks' values added in
+// rank order (in T), as an allreduce would.
+template <int R>
+struct ThreadRanks {
+  std::barrier<> sync{R};
+  std::vector<float> slot[R];
+  std::vector<double> stat_slot[R];
+
+  template <class Slots, class V>
+  void sum(Slots& slots, int rank, std::span<V> v) {
+    slots[rank].assign(v.begin(), v.end());
+    sync.arrive_and_wait();
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      V acc = slots[0][i];
+      for (int q = 1; q < R; ++q) acc = static_cast<V>(acc + slots[q][i]);
+      v[i] = acc;
+    }
+    sync.arrive_and_wait();
+  }
+  DataParallel<float> parallel(int r) {
+    DataParallel<float> dp;
+    dp.rank = r;
+    dp.ranks = R;
+    dp.sum = [this, r](std::span<float> v) { sum(slot, r, v); };
+    dp.sum_stats = [this, r](std::span<double> v) { sum(stat_slot, r, v); };
+    return dp;
+  }
+  template <class F>
+  void run(F&& rank_main) {
+    std::vector<std::thread> others;
+    for (int r = 1; r < R; ++r) others.emplace_back(rank_main, r);
+    rank_main(0);
+    for (auto& t : others) t.join();
   }
 };
 
@@ -604,6 +641,63 @@ TEST_SUITE("train") {
     CHECK_THROWS_WITH_AS(resumed.resume(jepa_ckpt.path), doctest::Contains("a checkpoint of a 'jepa' run"), ConfigError);
   }
 
+  TEST_CASE("BYOL through the Trainer: save then resume is bitwise / images of the middle frame / a DINO file is refused") {
+    const auto source = blob_source(200, 1);
+    const TrainConfig tc = blob_trainer_config(6, 1, 3);
+    ByolConfig bc = byol_config(tc, 2);
+    CHECK(bc.projection == 1024);
+    CHECK(bc.hidden == 4096);
+    CHECK(bc.momentum == 0.99);
+    bc.encoder.image_size = bc.image.image_size = 63;
+    bc.encoder.widths = {4, 6, 6, 4, 4};
+    bc.encoder.pooled = 2;
+    bc.projection = 8, bc.hidden = 16;
+    TaxelCanvas canvas{6, 6, {}};
+    for (int n = 0; n < 36; ++n) canvas.pixel.push_back(n);
+    ByolModel<float> straight_model(bc, 7);
+    ByolTrainer<float> straight(straight_model, source, canvas, tc);
+    const auto stats = straight.run();
+    REQUIRE(stats.size() == 6);
+    for (const auto& st : stats) {
+      CHECK(std::isfinite(st.loss));
+      CHECK(st.loss >= 0);
+      CHECK(st.loss <= 8);
+    }
+    TempPath ckpt("byol_resume");
+    ByolModel<float> first_model(bc, 7);
+    ByolTrainer<float> first(first_model, source, canvas, tc);
+    first.checkpoint = ckpt.path;
+    first.checkpoint_every = 4;
+    REQUIRE(first.run(5).size() == 5);
+    ByolModel<float> resumed_model(bc, 999);
+    ByolTrainer<float> resumed(resumed_model, source, canvas, tc);
+    resumed.resume(ckpt.path);
+    CHECK(resumed.step() == 4);
+    const auto tail = resumed.run();
+    REQUIRE(tail.size() == 2);
+    for (std::size_t k = 0; k < tail.size(); ++k) CHECK(tail[k].loss == stats[4 + k].loss);  // bitwise
+    for (auto [a, b] : {std::pair{&resumed_model.online, &straight_model.online},
+                        {&resumed_model.target_projector, &straight_model.target_projector},
+                        {&resumed_model.predictor_params, &straight_model.predictor_params}})
+      CHECK(std::ranges::equal(a->values(), b->values()));
+    const nlohmann::json meta = nlohmann::json::parse(load_safetensors(ckpt.path).metadata.at("config"));
+    CHECK(meta["objective"] == "byol");
+    // The frozen features: one token per cell of the pooled map, the last conv's channels.
+    const std::vector<std::int64_t> ids{0, 5, 9};
+    const AlignedVector<float> f = byol_embed(straight_model, straight_model.online, canvas, source, ids, 2);
+    CHECK(f.size() == 3u * 4 * 4);
+    CHECK(std::all_of(f.begin(), f.end(), [](float v) { return std::isfinite(v); }));
+    TempPath dino_ckpt("byol_vs_dino");
+    DinoModel<float> dm(dino_config(tc, 36, 2), 7);
+    DinoTrainer<float> dt(dm, source, tc);
+    dt.save(dino_ckpt.path);
+    CHECK_THROWS_WITH_AS(resumed.resume(dino_ckpt.path), doctest::Contains("a checkpoint of a 'dino' run"), ConfigError);
+    TaxelCanvas small{5, 5, {}};
+    for (int n = 0; n < 25; ++n) small.pixel.push_back(n);
+    CHECK_THROWS_WITH_AS(ByolTrainer<float>(resumed_model, source, small, tc), doctest::Contains("places 25 taxels"),
+                         ShapeError);
+  }
+
   TEST_CASE("one default per setting: TrainConfig's module keys default to the modules' configs") {
     const TrainConfig tc;
     const MaskConfig m = tc.masks(), m0;
@@ -687,20 +781,7 @@ TEST_SUITE("train") {
         src.gather(w, out);
       }
     };
-    std::barrier sync(R);
-    std::vector<float> slot[R];
-    std::vector<double> stat_slot[R];
-    auto sum = [&](auto& slots, int rank, auto v) {
-      using V = typename decltype(v)::value_type;
-      slots[rank].assign(v.begin(), v.end());
-      sync.arrive_and_wait();
-      for (std::size_t i = 0; i < v.size(); ++i) {
-        V acc = slots[0][i];
-        for (int q = 1; q < R; ++q) acc = static_cast<V>(acc + slots[q][i]);
-        v[i] = acc;
-      }
-      sync.arrive_and_wait();
-    };
+    ThreadRanks<R> ranks;
     std::vector<std::unique_ptr<JepaModel<float>>> models;
     std::vector<GatherLog> logs;
     for (int r = 0; r < R; ++r) {
@@ -710,19 +791,13 @@ TEST_SUITE("train") {
     std::vector<double> loss[R], spread;
     auto rank_main = [&](int r) {
       JepaTrainer<float, GatherLog> t(*models[static_cast<std::size_t>(r)], logs[static_cast<std::size_t>(r)], graph, tc);
-      t.parallel.rank = r;
-      t.parallel.ranks = R;
-      t.parallel.sum = [&, r](std::span<float> v) { sum(slot, r, v); };
-      t.parallel.sum_stats = [&, r](std::span<double> v) { sum(stat_slot, r, v); };
+      t.parallel = ranks.parallel(r);
       for (const auto& st : t.run()) {
         loss[r].push_back(st.loss);
         if (r == 0) spread.push_back(st.target_sample_std);
       }
     };
-    std::vector<std::thread> others;
-    for (int r = 1; r < R; ++r) others.emplace_back(rank_main, r);
-    rank_main(0);
-    for (auto& t : others) t.join();
+    ranks.run(rank_main);
     REQUIRE(loss[0].size() == single_loss.size());
     for (std::size_t s = 0; s < single_loss.size(); ++s) {
       for (int r = 1; r < R; ++r) CHECK(loss[r][s] == loss[0][s]);
@@ -754,6 +829,48 @@ TEST_SUITE("train") {
     CHECK(dp.shard(16).first == 10);
     CHECK(dp.shard(16).count == 6);
     CHECK_THROWS_AS(dp.shard(2), ConfigError);
+  }
+
+  TEST_CASE("BYOL data parallel: 2 ranks (threads) average their shards' losses and gradients as DDP does") {
+    // Each rank's BatchNorm reads its own shard (no SyncBatchNorm): the global loss of a step is
+    // the mean of the shards' losses, which one process gets by running each shard as a batch.
+    constexpr int R = 2;
+    const auto source = blob_source(200, 1);
+    const TrainConfig tc = blob_trainer_config(3, 1, 5);
+    ByolConfig bc = byol_config(tc, 2);
+    bc.encoder.image_size = bc.image.image_size = 63;
+    bc.encoder.widths = {4, 6, 6, 4, 4};
+    bc.encoder.pooled = 2;
+    bc.projection = 8, bc.hidden = 16;
+    TaxelCanvas canvas{6, 6, {}};
+    for (int n = 0; n < 36; ++n) canvas.pixel.push_back(n);
+    double expect = 0;
+    {
+      ByolModel<float> m(bc, 7);
+      ByolObjective<float> o(m, source, canvas, tc);
+      const auto order = o.epoch_order(0);
+      for (int r = 0; r < R; ++r) {
+        const int first = 16 * r / R, last = 16 * (r + 1) / R;
+        const std::span<const std::int64_t> ids(order.data() + first, std::size_t(last - first));
+        expect += o.forward(StepBatch{ids, 16, first, 0}) * (last - first) / 16.0;
+      }
+    }
+    ThreadRanks<R> ranks;
+    std::vector<std::unique_ptr<ByolModel<float>>> models;
+    for (int r = 0; r < R; ++r) models.push_back(std::make_unique<ByolModel<float>>(bc, 7));
+    std::vector<double> loss[R];
+    ranks.run([&](int r) {
+      ByolTrainer<float> t(*models[std::size_t(r)], source, canvas, tc);
+      t.parallel = ranks.parallel(r);
+      for (const auto& st : t.run()) loss[r].push_back(st.loss);
+    });
+    REQUIRE(loss[0].size() == 3);
+    CHECK(loss[1] == loss[0]);
+    CHECK(loss[0][0] == doctest::Approx(expect).epsilon(1e-6));
+    for (const auto& [a, b] : {std::pair{&models[0]->online, &models[1]->online},
+                               std::pair{&models[0]->target_projector, &models[1]->target_projector},
+                               std::pair{&models[0]->predictor_params, &models[1]->predictor_params}})
+      CHECK(std::memcmp(a->values().data(), b->values().data(), a->values().size_bytes()) == 0);
   }
 
   TEST_CASE("a NaN stops the trainer with NumericError and leaves the last checkpoint intact") {

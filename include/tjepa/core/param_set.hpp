@@ -9,6 +9,7 @@
 // makes the buffers (values 0). A module keeps only ParamIds, so the same module code runs on any
 // ParamSet of the same layout: that is how the EMA target encoder shares the context encoder's code.
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -35,6 +36,7 @@ enum class ParamInit {
   zeros,         // biases, the predictor's mask token (zero_init_mask_tokens)
   ones,          // LayerNorm weights
   trunc_normal,  // Linear weights, position table, query token: N(0, 0.02²) truncated at ±2
+  uniform,       // U(−bound, bound): PyTorch's default for Conv2d and Linear (bound 1/√fan_in)
 };
 
 struct ParamInfo {
@@ -45,6 +47,7 @@ struct ParamInfo {
   // AdamW weight decay applies (I-JEPA's rule: not a bias and not 1-D).
   bool decay = false;
   ParamInit init = ParamInit::zeros;
+  double bound = 0;  // ParamInit::uniform's bound
 };
 
 // I-JEPA's parameter-group rule: weight decay on everything except biases and 1-D tensors.
@@ -59,7 +62,7 @@ class ParamSet {
   using Scalar = T;
 
   // Registers a tensor. Offsets are padded to 64 bytes so every view is aligned.
-  ParamId add(std::string name, std::vector<std::int64_t> shape, ParamInit init = ParamInit::zeros) {
+  ParamId add(std::string name, std::vector<std::int64_t> shape, ParamInit init = ParamInit::zeros, double bound = 0) {
     require<ConfigError>(!allocated(), "ParamSet::add('", name, "'): the set is already allocated");
     require<ConfigError>(!name.empty(), "ParamSet::add: empty name");
     require<ConfigError>(!by_name_.contains(name), "ParamSet::add: duplicate name '", name, "'");
@@ -70,7 +73,9 @@ class ParamSet {
     }
     constexpr std::size_t pad = alignment / sizeof(T) > 0 ? alignment / sizeof(T) : 1;
     const std::size_t offset = (total_ + pad - 1) / pad * pad;
-    ParamInfo info{std::move(name), std::move(shape), offset, n, false, init};
+    require<ConfigError>(init != ParamInit::uniform || (std::isfinite(bound) && bound > 0), "ParamSet::add('", name,
+                         "'): uniform bound ", bound, ", expected a finite value > 0");
+    ParamInfo info{std::move(name), std::move(shape), offset, n, false, init, bound};
     info.decay = default_decay(info.name, info.shape);
     const ParamId id{infos_.size(), offset, n};
     by_name_.emplace(info.name, id.index);

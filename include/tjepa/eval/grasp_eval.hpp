@@ -10,8 +10,9 @@
 //            recordings
 //   rows     constant; ridge on hand-crafted features; the random initial encoder, frozen; the same
 //            encoder trained end to end with each head; MAE pre-trained on the same windows with the
-//            same budget, frozen; Tactile-JEPA, frozen (the target encoder). End to end and MAE are
-//            two of the paper's baselines (Sec. IV-C)
+//            same budget, frozen; DINO (the teacher) and BYOL (T-DEX's image encoder, the online
+//            network) likewise; Tactile-JEPA, frozen (the target encoder). End to end, MAE, DINO
+//            and BYOL are the paper's baselines (Sec. IV-C, Table 3)
 //   linear   the linear read-outs of each frozen encoder of the main rows (ridge on its pad-mean
 //            embeddings and on its token components, score_linear_readouts; one per pre-training
 //            seed), beside the ridge row: what the embeddings hold linearly, apart from what the
@@ -45,6 +46,7 @@
 #include "tjepa/sensors/allegro_xela.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/sim/grasping_hand.hpp"
+#include "tjepa/train/byol.hpp"
 #include "tjepa/train/config.hpp"
 #include "tjepa/train/dino.hpp"
 #include "tjepa/train/mae.hpp"
@@ -76,10 +78,16 @@ struct GraspEvalConfig {
   GraspSimConfig sim;
   TrainConfig train = grasp_pretrain_config();  // Tactile-JEPA (and MAE's budget: steps, batch, schedule)
   double mae_mask_ratio = 0.75;
+  // BYOL's sizes (T-DEX's by default): image side (AlexNet needs >= 63), AlexNet's widths, the
+  // projection and the MLPs' hidden width.
+  int byol_image_size = 224;
+  std::array<int, 5> byol_widths = AlexNetConfig{}.widths;
+  int byol_projection = 1024, byol_hidden = 4096;
   GraspTaskConfig tasks{.max_object_windows = 1500, .max_force_windows = 1500, .max_pose_sequences = 300};
   GraspHeadConfig heads;
   // Rows to run.
-  bool ridge = true, random = true, end_to_end = true, mae = true, dino = true, jepa = true, ablation = true;
+  bool ridge = true, random = true, end_to_end = true, mae = true, dino = true, byol = true, jepa = true,
+       ablation = true;
   bool linear_readout = true;  // the linear read-out table of the frozen main rows
   int readout_components = 3;  // k of its token components (as many numbers per taxel as its 3 axes)
   // Directory of pre-trained encoders kept between runs (eval/pretrain_cache.hpp; empty: none):
@@ -94,6 +102,8 @@ struct GraspEvalConfig {
                          "GraspEvalConfig: frame counts must be > 0");
     require<ConfigError>(jepa || !ablation, "GraspEvalConfig: the mask ablation needs the Tactile-JEPA row (its 2L+2G "
                          "row); run with jepa or without the ablation");
+    require<ConfigError>(!byol || byol_image_size >= 63, "GraspEvalConfig: byol_image_size = ", byol_image_size,
+                         ", expected >= 63 (AlexNet's smallest input)");
     sim.validate();
     train.validate();
     tasks.validate();
@@ -121,6 +131,8 @@ struct GraspEvalConfig {
                         {"test", test_frames}}},
             {"train", train.to_json()},
             {"mae_mask_ratio", mae_mask_ratio},
+            {"byol", {{"image_size", byol_image_size}, {"widths", byol_widths}, {"projection", byol_projection},
+                      {"hidden", byol_hidden}}},
             {"tasks", {{"label_pad", tasks.label_pad}, {"sequence_length", tasks.sequence_length},
                        {"sequence_stride", tasks.sequence_stride}, {"max_object_windows", tasks.max_object_windows},
                        {"max_force_windows", tasks.max_force_windows}, {"max_pose_sequences", tasks.max_pose_sequences}}},
@@ -138,7 +150,7 @@ struct GraspEvalConfig {
                        {"probe_pooling", to_string(heads.probe_pooling.kind)},
                        {"sequence_pooling", to_string(heads.sequence_pooling.kind)},
                        {"pooling_components", heads.sequence_pooling.components}}},
-            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"dino", dino}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}, {"readout_components", readout_components}}}};
+            {"rows", {{"ridge", ridge}, {"random", random}, {"end_to_end", end_to_end}, {"mae", mae}, {"dino", dino}, {"byol", byol}, {"jepa", jepa}, {"ablation", ablation}, {"linear_readout", linear_readout}, {"readout_components", readout_components}}}};
   }
 };
 
@@ -367,6 +379,25 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
     return model;
   };
 
+  // A baseline's pre-training (or its encoder `keep` read from the cache): the Trainer that
+  // make() builds runs, a progress line every tenth of the run (detail(st) adds to it), its log
+  // entry is recorded and `keep` cached.
+  auto pretrain_baseline = [&](const std::string& name, std::uint64_t s, std::int64_t steps, const nlohmann::json& key,
+                               ParamSet<float>& keep, auto&& make, auto&& detail) {
+    if (from_cache(name, s, key, keep)) return;
+    const auto t = clock::now();
+    auto trainer = make();
+    trainer.on_step = [&](const auto& st) {
+      if ((st.step + 1) % std::max<std::int64_t>(1, steps / 10) == 0)
+        say("  " + name + " seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
+            std::to_string(steps) + ", loss " + std::to_string(st.loss) + detail(st));
+    };
+    const auto log = trainer.run();
+    pretrained(key, keep,
+               {{"row", name}, {"seed", s}, {"first_loss", log.front().loss}, {"last_loss", log.back().loss},
+                {"seconds", seconds(t)}});
+  };
+
   {  // the baselines without an encoder
     const auto t = clock::now();
     row(res.main, "constant").runs.assign(c.seeds.size(), {score_constant(tr, te)});
@@ -422,19 +453,8 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       if (cfg.position_eigenvectors > 0)  // as make_jepa_model: both start from the same encoder
         mae.set_positions(graph_positions(graph, cfg.dim, cfg.position_eigenvectors, cfg.position_scale, s));
       const nlohmann::json key = cache.key("MAE", s, {{"train", cfg.to_json()}, {"mae_mask_ratio", c.mae_mask_ratio}});
-      if (!from_cache("MAE", s, key, mae.context)) {
-        const auto t = clock::now();
-        MaeTrainer<float> trainer(mae, *d.pretrain, cfg);
-        trainer.on_step = [&](const MaeStepStats& st) {
-          if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
-            say("  MAE seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
-                std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss));
-        };
-        const auto log = trainer.run();
-        pretrained(key, mae.context,
-                   {{"row", "MAE"}, {"seed", s}, {"first_loss", log.front().loss}, {"last_loss", log.back().loss},
-                    {"seconds", seconds(t)}});
-      }
+      pretrain_baseline("MAE", s, cfg.steps, key, mae.context, [&] { return MaeTrainer<float>(mae, *d.pretrain, cfg); },
+                        [](const MaeStepStats&) { return std::string(); });
       frozen_row(res.main, res.linear, "MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
     }
     if (c.dino) {  // the teacher encoder, as DINO evaluates (its register row left out of the features)
@@ -444,21 +464,31 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       if (cfg.position_eigenvectors > 0)  // as make_jepa_model: every method starts from the same encoder
         dino.set_positions(graph_positions(graph, cfg.dim, cfg.position_eigenvectors, cfg.position_scale, s));
       const nlohmann::json key = cache.key("DINO", s, {{"train", cfg.to_json()}});
-      if (!from_cache("DINO", s, key, dino.teacher)) {
-        const auto t = clock::now();
-        DinoTrainer<float> trainer(dino, *d.pretrain, cfg);
-        trainer.on_step = [&](const DinoStepStats& st) {
-          if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
-            say("  DINO seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
-                std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss) + " (dino " + std::to_string(st.dino) +
-                ", ibot " + std::to_string(st.ibot) + ", koleo " + std::to_string(st.koleo) + ")");
-        };
-        const auto log = trainer.run();
-        pretrained(key, dino.teacher,
-                   {{"row", "DINO"}, {"seed", s}, {"first_loss", log.front().loss}, {"last_loss", log.back().loss},
-                    {"seconds", seconds(t)}});
-      }
+      pretrain_baseline("DINO", s, cfg.steps, key, dino.teacher, [&] { return DinoTrainer<float>(dino, *d.pretrain, cfg); },
+                        [](const DinoStepStats& st) {
+                          return " (dino " + std::to_string(st.dino) + ", ibot " + std::to_string(st.ibot) + ", koleo " +
+                                 std::to_string(st.koleo) + ")";
+                        });
       frozen_row(res.main, res.linear, "DINO, frozen", "DINO", s, dino.teacher, dino.tokenizer, dino.encoder);
+    }
+    if (c.byol) {  // the online encoder, as T-DEX evaluates; its features one token per cell of the pooled map
+      TrainConfig cfg = c.train;
+      cfg.seed = s;
+      ByolConfig bc = byol_config(cfg, axes);
+      bc.encoder.image_size = bc.image.image_size = c.byol_image_size;
+      bc.encoder.widths = c.byol_widths;
+      bc.projection = c.byol_projection, bc.hidden = c.byol_hidden;
+      ByolModel<float> byol(bc, s);
+      const TaxelCanvas canvas = TaxelCanvas::from_layout(d.skin.layout);
+      const nlohmann::json key = cache.key("BYOL", s, {{"train", cfg.to_json()}, {"byol", byol.config.to_json()}});
+      pretrain_baseline("BYOL", s, cfg.steps, key, byol.online,
+                        [&] { return ByolTrainer<float>(byol, *d.pretrain, canvas, cfg); },
+                        [](const ByolStepStats&) { return std::string(); });
+      const int cells = byol.config.encoder.pooled * byol.config.encoder.pooled, C = byol.config.encoder.widths[4];
+      AlignedVector<float> etr = byol_embed(byol, byol.online, canvas, *d.train, tr.windows);
+      AlignedVector<float> ete = byol_embed(byol, byol.online, canvas, *d.test, te.windows);
+      record(score_frozen_embeddings(std::move(etr), std::move(ete), cells, C, tr, te, hc, seeds_of(s), stage("BYOL, frozen")),
+             res.main, res.linear, "BYOL, frozen (random-init AlexNet)", "BYOL");
     }
     if (c.jepa) {
       auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);

@@ -439,20 +439,15 @@ struct FrozenEncoderScores {
   std::optional<LinearReadoutScores> linear;
 };
 
-// A frozen encoder: embeds every window of each split once, fits its linear read-outs (readout
-// given) on those embeddings, then (c.standardize_features) standardizes them per channel and
-// trains the heads of `head_seeds` on them.
-inline FrozenEncoderScores score_frozen_encoder(const ParamSet<float>& params, const Tokenizer& tokenizer,
-                                                const Encoder& encoder, const WindowSource& train_src,
-                                                const GraspTasks& tr, const WindowSource& test_src,
-                                                const GraspTasks& te, const GraspHeadConfig& c,
-                                                std::span<const std::uint64_t> head_seeds,
-                                                const GraspProgress& progress = {},
-                                                const std::optional<LinearReadoutConfig>& readout = std::nullopt) {
-  const int N = encoder.num_tokens(), d = encoder.dim();
-  AlignedVector<float> etr = embed_windows(params, tokenizer, encoder, train_src, tr.windows);
-  AlignedVector<float> ete = embed_windows(params, tokenizer, encoder, test_src, te.windows);
-  if (progress) progress("embedded " + std::to_string(tr.windows.size()) + " + " + std::to_string(te.windows.size()) + " windows");
+// Frozen embeddings [windows, N, d] of each split (rows: tr.windows, te.windows): fits the
+// linear read-outs (readout given; they need taxel tokens, N of the layout's), then
+// (c.standardize_features) standardizes them per channel and trains the heads of `head_seeds`
+// on them.
+inline FrozenEncoderScores score_frozen_embeddings(AlignedVector<float> etr, AlignedVector<float> ete, int N, int d,
+                                                   const GraspTasks& tr, const GraspTasks& te, const GraspHeadConfig& c,
+                                                   std::span<const std::uint64_t> head_seeds,
+                                                   const GraspProgress& progress = {},
+                                                   const std::optional<LinearReadoutConfig>& readout = std::nullopt) {
   FrozenEncoderScores out;
   if (readout) {  // on the embeddings as the encoder gives them
     out.linear = score_linear_readouts(std::span<const float>(etr), tr, std::span<const float>(ete), te, N, d, *readout);
@@ -470,6 +465,21 @@ inline FrozenEncoderScores score_frozen_encoder(const ParamSet<float>& params, c
   for (std::uint64_t h : head_seeds)
     out.heads.push_back(score_heads<float>([&](int) { return std::pair{&ftr, &fte}; }, tr, te, c, false, h, progress));
   return out;
+}
+
+// A frozen encoder: embeds every window of each split once, then score_frozen_embeddings.
+inline FrozenEncoderScores score_frozen_encoder(const ParamSet<float>& params, const Tokenizer& tokenizer,
+                                                const Encoder& encoder, const WindowSource& train_src,
+                                                const GraspTasks& tr, const WindowSource& test_src,
+                                                const GraspTasks& te, const GraspHeadConfig& c,
+                                                std::span<const std::uint64_t> head_seeds,
+                                                const GraspProgress& progress = {},
+                                                const std::optional<LinearReadoutConfig>& readout = std::nullopt) {
+  AlignedVector<float> etr = embed_windows(params, tokenizer, encoder, train_src, tr.windows);
+  AlignedVector<float> ete = embed_windows(params, tokenizer, encoder, test_src, te.windows);
+  if (progress) progress("embedded " + std::to_string(tr.windows.size()) + " + " + std::to_string(te.windows.size()) + " windows");
+  return score_frozen_embeddings(std::move(etr), std::move(ete), encoder.num_tokens(), encoder.dim(), tr, te, c,
+                                 head_seeds, progress, readout);
 }
 
 // End to end: for each head seed and task, a copy of `params` (the encoder's start) trained with

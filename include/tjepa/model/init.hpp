@@ -32,6 +32,11 @@ void init_params(ParamSet<T>& ps, std::uint64_t seed) {
         for (auto& x : v) x = T(rng.truncated_normal(0.0, init_std, -init_bound, init_bound));
         break;
       }
+      case ParamInit::uniform: {
+        Rng rng(seed, i);
+        for (auto& x : v) x = T(rng.uniform(-info.bound, info.bound));
+        break;
+      }
     }
   }
 }

@@ -409,15 +409,9 @@ void dino_backward(DinoModel<T>& model, DinoWorkspace<T>& w) {
 template <class T>
 DinoStepStats dino_update(DinoModel<T>& model, AdamW<T>& opt, const TrainingSchedule& schedule, std::int64_t s,
                           double loss, DinoWorkspace<T>& w) {
-  const auto parts = model.trainable();
   DinoStepStats st;
-  st.step = s;
-  st.loss = loss;
   st.dino = w.dino, st.ibot = w.ibot, st.koleo = w.koleo;
-  st.grad_norm = clip_or_stop<T>(parts, model.config.clip_grad_norm, loss, s, "DINO");
-  st.lr = schedule.lr_at(s);
-  st.weight_decay = schedule.wd_at(s);
-  opt.step(st.lr, st.weight_decay);
+  clipped_adamw_step<T>(st, model.trainable(), opt, schedule, s, loss, model.config.clip_grad_norm, "DINO");
   st.momentum = schedule.momentum_at(s);
   ema_update(model.teacher, model.student, st.momentum);
   ema_update(model.teacher_head, model.student_head, st.momentum);

@@ -293,19 +293,12 @@ class JepaStep {
   // schedule's rate and weight decay at s, the target encoder's EMA. Returns the step's stats.
   JepaStepStats update(AdamW<T>& opt, const TrainingSchedule& schedule, std::int64_t s) {
     const JepaLossResult& r = result_;
-    const auto parts = model_.trainable();
-    const double norm = clip_or_stop<T>(parts, cfg_.clip_grad_norm, r.loss, s, "JEPA");
     JepaStepStats st;
-    st.step = s;
-    st.loss = r.loss;
-    st.lr = schedule.lr_at(s);
-    st.weight_decay = schedule.wd_at(s);
+    clipped_adamw_step<T>(st, model_.trainable(), opt, schedule, s, r.loss, cfg_.clip_grad_norm, "JEPA");
     st.momentum = schedule.momentum_at(s);
-    st.grad_norm = norm;
     st.target_std = r.target_std;
     st.target_sample_std = r.target_sample_std;
     st.target_losses = r.target_losses;
-    opt.step(st.lr, st.weight_decay);
     ema_update(model_.target, model_.context, st.momentum);
     return st;
   }

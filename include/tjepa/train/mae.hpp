@@ -266,14 +266,8 @@ struct MaeStepStats : StepStats {};
 template <class T>
 MaeStepStats mae_update(MaeModel<T>& model, AdamW<T>& opt, const TrainingSchedule& schedule, std::int64_t s,
                         double loss) {
-  const auto parts = model.trainable();
   MaeStepStats st;
-  st.step = s;
-  st.loss = loss;
-  st.grad_norm = clip_or_stop<T>(parts, model.config.clip_grad_norm, loss, s, "MAE");
-  st.lr = schedule.lr_at(s);
-  st.weight_decay = schedule.wd_at(s);
-  opt.step(st.lr, st.weight_decay);
+  clipped_adamw_step<T>(st, model.trainable(), opt, schedule, s, loss, model.config.clip_grad_norm, "MAE");
   return st;
 }
 

@@ -41,6 +41,7 @@
 #include "tjepa/data/window_source.hpp"
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
+#include "tjepa/optim/schedule.hpp"
 #include "tjepa/train/data_parallel.hpp"
 #include "tjepa/train/health.hpp"
 
@@ -113,6 +114,20 @@ double clip_or_stop(std::span<const PrefixedParams<T>> parts, double max_norm, d
     fail<NumericError>(who, " step ", s, ": the gradient norm is ", norm, " (loss ", loss,
                        "); training stopped before the update (parameters and checkpoints are unchanged)");
   return norm;
+}
+
+// The update every objective's step starts with: the NaN stop and clipping (clip_or_stop), then
+// AdamW at the schedule's rate and weight decay for step s. Fills st's step, loss, grad_norm, lr
+// and weight_decay; what follows (an EMA, say) is the objective's.
+template <class T>
+void clipped_adamw_step(StepStats& st, std::span<const PrefixedParams<T>> parts, AdamW<T>& opt,
+                        const TrainingSchedule& schedule, std::int64_t s, double loss, double max_norm, const char* who) {
+  st.step = s;
+  st.loss = loss;
+  st.grad_norm = clip_or_stop<T>(parts, max_norm, loss, s, who);
+  st.lr = schedule.lr_at(s);
+  st.weight_decay = schedule.wd_at(s);
+  opt.step(st.lr, st.weight_decay);
 }
 
 // Data parallel, for an objective whose loss is a mean over the samples: this rank's gradients
