@@ -348,9 +348,9 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--min-time", type=float, default=2.0)
-    ap.add_argument("--only", choices=("all", "kernels", "jepa", "probe"), default="all",
+    ap.add_argument("--only", choices=("all", "kernels", "jepa", "probe", "alexnet"), default="all",
                     help="kernels: encoder and attention; jepa: the whole JEPA steps; probe: the attentive "
-                         "probe's training step")
+                         "probe's training step; alexnet: BYOL's AlexNet trunk (bench/cnn.cpp)")
     # The JEPA step's masks: the sizes tjepa's collator draws in bench/train.cpp (seed 3, batch 0).
     ap.add_argument("--jepa-batch", type=int, default=8)
     ap.add_argument("--jepa-k", type=int, default=163, help="context tokens, N = 368 (BM_JepaTrainStep)")
@@ -405,6 +405,31 @@ def main():
                 name = f"jepa_step/{N}" if style == "timm" else f"jepa_step_{style}/{N}"
                 emit(name, ms, jepa_step_gflop(B, N, K, sizes), windows_per_s=round(B / (ms / 1e3), 3),
                      B=B, K=K, targets=sizes, drop_path=args.drop_path, drop_path_style=style)
+    if args.only in ("all", "alexnet"):
+        # torchvision's alexnet().features + avgpool, built here (no torchvision needed), on
+        # [8, 3, 224, 224] (bench/cnn.cpp: BM_AlexNetForward/BM_AlexNetTrain, NHWC there).
+        nn = torch.nn
+        trunk = nn.Sequential(
+            nn.Conv2d(3, 64, 11, 4, 2), nn.ReLU(inplace=True), nn.MaxPool2d(3, 2),
+            nn.Conv2d(64, 192, 5, padding=2), nn.ReLU(inplace=True), nn.MaxPool2d(3, 2),
+            nn.Conv2d(192, 384, 3, padding=1), nn.ReLU(inplace=True),
+            nn.Conv2d(384, 256, 3, padding=1), nn.ReLU(inplace=True),
+            nn.Conv2d(256, 256, 3, padding=1), nn.ReLU(inplace=True), nn.MaxPool2d(3, 2),
+            nn.AdaptiveAvgPool2d(6), nn.Flatten())
+        B = 8
+        x = torch.randn(B, 3, 224, 224)
+        gflop = 2 * 655566528 * B / 1e9  # AlexNet::flops
+        with torch.no_grad():
+            ms = timeit(lambda: trunk(x), args.min_time)
+        emit(f"alexnet_forward/{B}", ms, gflop, images_per_s=round(B / (ms / 1e3), 2))
+        df = torch.full((B, 9216), 1e-3)
+
+        def train_step():
+            trunk.zero_grad(set_to_none=False)
+            trunk(x).backward(df)
+
+        ms = timeit(train_step, args.min_time)
+        emit(f"alexnet_train/{B}", ms, 3 * gflop, images_per_s=round(B / (ms / 1e3), 2))
     if args.only in ("all", "probe"):
         B, L = 32, 368  # BM_ProbeTrainStep/368/32/{0,1}
         probe = AttentiveProbe()

@@ -1074,7 +1074,7 @@ GraspEvalConfig toy_grasp_eval_config() {
   c.heads.sequence.max_epochs = 2;
   c.heads.end_to_end_max_epochs = 1;
   c.byol_image_size = 63;
-  c.byol_widths = {4, 6, 6, 4, 4};
+  c.byol_widths = {4, 6, 6, 4, 3};  // 3 channels: its probes take 1 attention head, not 2
   c.byol_projection = 8, c.byol_hidden = 16;
   return c;
 }

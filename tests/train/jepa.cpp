@@ -129,6 +129,22 @@ TrainConfig blob_trainer_config(std::int64_t steps, std::int64_t warmup, std::ui
   return tc;
 }
 
+// BYOL on the blob sheet: 63 x 63 images of its 2 axes, a narrow AlexNet, projection 8.
+ByolConfig blob_byol_config(const TrainConfig& tc) {
+  ByolConfig bc = byol_config(tc, 2);
+  bc.encoder.image_size = bc.image.image_size = 63;
+  bc.encoder.widths = {4, 6, 6, 4, 4};
+  bc.encoder.pooled = 2;
+  bc.projection = 8, bc.hidden = 16;
+  return bc;
+}
+// The sheet's 6 x 6 taxels as its picture, row-major.
+TaxelCanvas blob_canvas() {
+  TaxelCanvas canvas{6, 6, {}};
+  for (int n = 0; n < 36; ++n) canvas.pixel.push_back(n);
+  return canvas;
+}
+
 struct TempPath {
   std::filesystem::path path;
   explicit TempPath(const std::string& name)
@@ -644,16 +660,11 @@ TEST_SUITE("train") {
   TEST_CASE("BYOL through the Trainer: save then resume is bitwise / images of the middle frame / a DINO file is refused") {
     const auto source = blob_source(200, 1);
     const TrainConfig tc = blob_trainer_config(6, 1, 3);
-    ByolConfig bc = byol_config(tc, 2);
-    CHECK(bc.projection == 1024);
-    CHECK(bc.hidden == 4096);
-    CHECK(bc.momentum == 0.99);
-    bc.encoder.image_size = bc.image.image_size = 63;
-    bc.encoder.widths = {4, 6, 6, 4, 4};
-    bc.encoder.pooled = 2;
-    bc.projection = 8, bc.hidden = 16;
-    TaxelCanvas canvas{6, 6, {}};
-    for (int n = 0; n < 36; ++n) canvas.pixel.push_back(n);
+    CHECK(byol_config(tc, 2).projection == 1024);
+    CHECK(byol_config(tc, 2).hidden == 4096);
+    CHECK(byol_config(tc, 2).momentum == 0.99);
+    const ByolConfig bc = blob_byol_config(tc);
+    const TaxelCanvas canvas = blob_canvas();
     ByolModel<float> straight_model(bc, 7);
     ByolTrainer<float> straight(straight_model, source, canvas, tc);
     const auto stats = straight.run();
@@ -837,13 +848,8 @@ TEST_SUITE("train") {
     constexpr int R = 2;
     const auto source = blob_source(200, 1);
     const TrainConfig tc = blob_trainer_config(3, 1, 5);
-    ByolConfig bc = byol_config(tc, 2);
-    bc.encoder.image_size = bc.image.image_size = 63;
-    bc.encoder.widths = {4, 6, 6, 4, 4};
-    bc.encoder.pooled = 2;
-    bc.projection = 8, bc.hidden = 16;
-    TaxelCanvas canvas{6, 6, {}};
-    for (int n = 0; n < 36; ++n) canvas.pixel.push_back(n);
+    const ByolConfig bc = blob_byol_config(tc);
+    const TaxelCanvas canvas = blob_canvas();
     double expect = 0;
     {
       ByolModel<float> m(bc, 7);

@@ -487,7 +487,9 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       const int cells = byol.config.encoder.pooled * byol.config.encoder.pooled, C = byol.config.encoder.widths[4];
       AlignedVector<float> etr = byol_embed(byol, byol.online, canvas, *d.train, tr.windows);
       AlignedVector<float> ete = byol_embed(byol, byol.online, canvas, *d.test, te.windows);
-      record(score_frozen_embeddings(std::move(etr), std::move(ete), cells, C, tr, te, hc, seeds_of(s), stage("BYOL, frozen")),
+      GraspHeadConfig bh = hc;  // attention heads that split its C channels: at most the protocol's
+      while (C % bh.probe_heads != 0) --bh.probe_heads;
+      record(score_frozen_embeddings(std::move(etr), std::move(ete), cells, C, tr, te, bh, seeds_of(s), stage("BYOL, frozen")),
              res.main, res.linear, "BYOL, frozen (random-init AlexNet)", "BYOL");
     }
     if (c.jepa) {
