@@ -209,7 +209,7 @@ TEST_SUITE("train") {
     ic.image_size = 16;
     TaxelImager big(c, 1, ic);
     std::vector<float> a(256), b(256), d(256);
-    Rng r1(9, 1), r2(9, 1), r3(9, 2);
+    Rng r1(9, 1), r2(9, 1);
     big.image(a.data(), frame, 1, 1, &r1);
     big.image(b.data(), frame, 1, 1, &r2);
     CHECK(a == b);
