@@ -446,7 +446,7 @@ def main():
             ms = timeit(probe_step, args.min_time)
             emit(f"probe_train_step/B{B}/L{L}/{int(to_tokens)}", ms, probe_gflop(B, L, to_tokens),
                  windows_per_s=round(B / (ms / 1e3), 3))
-    if args.only in ("jepa", "probe"):
+    if args.only in ("jepa", "probe", "alexnet"):
         return
 
     enc = Encoder().eval()
