@@ -222,6 +222,17 @@ TEST_SUITE("train") {
     CHECK(differs);
     CHECK_THROWS_WITH_AS(TaxelImager(c, 2, TaxelImageConfig{}), doctest::Contains("3 normalization values for 2 channels"),
                          ConfigError);
+    // One mean for both channels, a std per channel.
+    TaxelImageConfig two = TaxelImageConfig::for_channels(2);
+    two.image_size = 2, two.range = 2.0, two.mean = {0.5}, two.std = {0.25, 0.5};
+    TaxelImager im2(c, 2, two);
+    const float frame2[8] = {2.f, 2.f, 0.f, 0.f, -2.f, -2.f, 0.f, 0.f};  // taxel-major: 4 taxels × 2 axes
+    float out2[8];
+    im2.image(out2, frame2, 2, 1, nullptr);
+    CHECK(out2[0] == doctest::Approx(2.0));   // (1 − 0.5) / 0.25
+    CHECK(out2[1] == doctest::Approx(1.0));   // (1 − 0.5) / 0.5
+    CHECK(out2[4] == doctest::Approx(-2.0));  // (0 − 0.5) / 0.25
+    CHECK(out2[5] == doctest::Approx(-1.0));
   }
 
   TEST_CASE("ProjectionMlp: BatchNorm over the batch / gradients of input and parameters") {

@@ -410,9 +410,10 @@ class TaxelImager {
       gaussian_blur3(out, S, S, A_, rng->uniform(c_.blur_sigma[0], c_.blur_sigma[1]), tmp_);
     for (std::size_t p = 0; p < std::size_t(S) * std::size_t(S); ++p)
       for (int a = 0; a < A_; ++a) {
-        const std::size_t k = c_.mean.size() == 1 ? 0 : std::size_t(a);
+        const double mean = c_.mean[c_.mean.size() == 1 ? 0 : std::size_t(a)];
+        const double sd = c_.std[c_.std.size() == 1 ? 0 : std::size_t(a)];
         float& v = out[p * std::size_t(A_) + std::size_t(a)];
-        v = float((v - c_.mean[k]) / c_.std[std::min(k, c_.std.size() - 1)]);
+        v = float((v - mean) / sd);
       }
   }
 

@@ -32,7 +32,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <optional>
+#include <ostream>
 #include <span>
 #include <string>
 #include <vector>
