@@ -60,8 +60,8 @@ int main(int argc, char** argv) {
   pre.fit(std::span<const Recording>(&rec, 1));
   const WindowSource source(rec, WindowSpec{10}, {}, pre);
   TrainConfig cfg;
-  cfg.dim = 32, cfg.depth = 2, cfg.heads = 2, cfg.predictor_depth = 1, cfg.batch = 8, cfg.steps = steps;
-  cfg.warmup_steps = steps / 4, cfg.drop_path = 0.1;
+  cfg.model.dim = 32, cfg.model.depth = 2, cfg.model.heads = 2, cfg.model.predictor_depth = 1, cfg.batch = 8, cfg.schedule.steps = steps;
+  cfg.schedule.warmup_steps = steps / 4, cfg.step.drop_path = 0.1;
   auto run = [&](std::uint64_t init, bool resume, std::int64_t max_steps) {
     auto model = make_jepa_model(cfg, skin.graph, rec.axes(), init);
     Trainer<VarianceJepa> trainer(*model, source, skin.graph, cfg);

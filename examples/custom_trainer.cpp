@@ -34,17 +34,17 @@ int main(int argc, char** argv) {
   pre.fit_baseline(baseline);
   pre.fit(std::span<const Recording>(&rec, 1));
   TrainConfig cfg;
-  cfg.dim = 32, cfg.depth = 2, cfg.heads = 2, cfg.predictor_depth = 1, cfg.batch = 8, cfg.steps = steps;
-  cfg.warmup_steps = steps / 10;
-  const WindowSource source(rec, WindowSpec{cfg.tau}, {}, pre);
+  cfg.model.dim = 32, cfg.model.depth = 2, cfg.model.heads = 2, cfg.model.predictor_depth = 1, cfg.batch = 8, cfg.schedule.steps = steps;
+  cfg.schedule.warmup_steps = steps / 10;
+  const WindowSource source(rec, WindowSpec{cfg.data.tau}, {}, pre);
   auto model = make_jepa_model(cfg, skin.graph, rec.axes(), cfg.seed);
-  const MaskCollator collator(skin.graph, cfg.masks());
-  JepaStep<float> step(*model, cfg.step(), cosine_loss);
-  AdamW<float> opt(model->trainable(), cfg.adamw());
-  const TrainingSchedule schedule = cfg.schedule();
+  const MaskCollator collator(skin.graph, cfg.masks);
+  JepaStep<float> step(*model, cfg.step, cosine_loss);
+  AdamW<float> opt(model->trainable(), cfg.adamw);
+  const TrainingSchedule schedule = cfg.schedule.build();
   WindowBatch batch;
   AlignedVector<float> x;
-  for (std::int64_t s = 0; s < cfg.steps; ++s) {
+  for (std::int64_t s = 0; s < cfg.schedule.steps; ++s) {
     const auto order = source.epoch_order(cfg.seed, static_cast<std::uint64_t>(s));  // one batch per "epoch"
     source.gather(std::span<const std::int64_t>(order).first(static_cast<std::size_t>(cfg.batch)), batch);
     windows_to_tokens(batch, x);

@@ -297,9 +297,9 @@ int main(int argc, char** argv) {
       model = std::move(lm.model);
       pre = std::move(lm.pre);
       drift = std::move(lm.drift);
-      tau = lm.config.tau;
+      tau = lm.config.data.tau;
     } else {
-      model = std::make_unique<JepaModel<float>>(TrainConfig{}.model(N, m), 0);
+      model = std::make_unique<JepaModel<float>>(TrainConfig{}.model_config(N, m), 0);
       pre = cli::fit_preprocessor("xela", &baseline, std::span<const Recording>(&stream.recording, 1));
       drift = DriftTracker(DriftTrackerConfig::magnetic());
       drift->fit(baseline);

@@ -169,7 +169,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
   std::optional<Recording> baseline;
   std::string mode = o.preprocess;
   if (o.data.empty()) {
-    require<ConfigError>(o.simulate_frames >= run.tau, "--simulate ", o.simulate_frames, " frames, expected >= tau");
+    require<ConfigError>(o.simulate_frames >= run.data.tau, "--simulate ", o.simulate_frames, " frames, expected >= tau");
     SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, run.seed);
     baseline = sim.record_baseline(300);
     recs.push_back(sim.record(o.simulate_frames, o.simulate_contacts).recording);
@@ -184,7 +184,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
   }
   for (std::size_t r = 0; r < recs.size(); ++r)
     require<ShapeError>(recs[r].taxels() == skin.size(), o.data.empty() ? "simulated" : o.data[r], ": ",
-                        recs[r].taxels(), " taxels, the layout '", run.layout, "' has ", skin.size());
+                        recs[r].taxels(), " taxels, the layout '", run.data.layout, "' has ", skin.size());
   std::vector<Recording*> rec_ptrs;
   for (auto& r : recs) rec_ptrs.push_back(&r);
   const PreprocessChoice picked = choose_preprocessing(mode, recs);
@@ -195,7 +195,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
       picked.mode == "xela" && baseline ? track_drift(run, *baseline, rec_ptrs) : std::nullopt;
   const Preprocessor pre = fit_preprocessor(picked.mode, baseline ? &*baseline : nullptr, recs);
   const int axes = recs[0].axes();
-  const WindowSource src(recs, window_spec(run.tau, o.format), {}, pre);
+  const WindowSource src(recs, window_spec(run.data.tau, o.format), {}, pre);
   note_dropped(src, "pre-training data", out);
 
   OutputFiles files;
@@ -215,9 +215,9 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
   if (!o.resume.empty()) trainer.resume(o.resume);
   require<ConfigError>(o.stop_after < 0 || o.stop_after > trainer.step(), "--stop-after ", o.stop_after,
                        ", expected a step after the run's current ", trainer.step());
-  out << "pre-training on " << src.size() << " windows (" << skin.size() << " taxels, tau " << run.tau << "), "
+  out << "pre-training on " << src.size() << " windows (" << skin.size() << " taxels, tau " << run.data.tau << "), "
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
-      << run.steps << " steps of " << run.batch
+      << run.schedule.steps << " steps of " << run.batch
       << (o.parallel.active() ? " on " + std::to_string(o.parallel.ranks) + " MPI ranks" : std::string()) << "\n";
   const PretrainOutcome r = pretrain(trainer, o.quiet || !lead, o.stop_after);
   if (!lead) return 0;
@@ -463,9 +463,9 @@ struct ProbeOptions {
 // Throws unless rec has the checkpoint's taxels and axes per frame.
 inline void require_fits(const Recording& rec, const TrainedModel& m) {
   const JepaModel<float>& model = *m.model;
-  require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.config.tau == model.config.in_dim,
+  require<ShapeError>(rec.taxels() == model.num_tokens() && rec.axes() * m.config.data.tau == model.config.in_dim,
                       rec.source(), ": ", rec.taxels(), " taxels x ", rec.axes(), " axes; the checkpoint expects ",
-                      model.num_tokens(), " taxels x ", model.config.in_dim / m.config.tau, " axes");
+                      model.num_tokens(), " taxels x ", model.config.in_dim / m.config.data.tau, " axes");
 }
 
 // tjepa probe --task: the user's own labels (label_probe.hpp).
@@ -489,8 +489,8 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
     const Recording rec = in_layout_order(read_recording(o.data, o.format), skin, o.data);
     const Recording lab = read_label_frames(o.labels, o.label_columns, rec.frames());
     const int cut = static_cast<int>(std::lround(rec.frames() * (1.0 - o.test_fraction)));
-    require<DataError>(cut >= 2 * m.config.tau && rec.frames() - cut >= 2 * m.config.tau, o.data, ": ", rec.frames(),
-                       " frames split at ", cut, " leave fewer than two windows of ", m.config.tau, " frames on a side");
+    require<DataError>(cut >= 2 * m.config.data.tau && rec.frames() - cut >= 2 * m.config.data.tau, o.data, ": ", rec.frames(),
+                       " frames split at ", cut, " leave fewer than two windows of ", m.config.data.tau, " frames on a side");
     train_rec = rec.frames_range(0, cut), test_rec = rec.frames_range(cut, rec.frames());
     train_frames = lab.frames_range(0, cut), test_frames = lab.frames_range(cut, rec.frames());
     train_labels = test_labels = o.labels;
@@ -511,8 +511,8 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
                      ": class ids up to ", classes - 1, ", expected at least two classes");
   m.track(train_rec);
   m.track(test_rec);
-  const WindowSource train_src(train_rec, window_spec(m.config.tau, o.format), {}, m.pre);
-  const WindowSource test_src(test_rec, window_spec(m.config.tau, o.format), {}, m.pre);
+  const WindowSource train_src(train_rec, window_spec(m.config.data.tau, o.format), {}, m.pre);
+  const WindowSource test_src(test_rec, window_spec(m.config.data.tau, o.format), {}, m.pre);
   note_dropped(train_src, "training recording", out);
   note_dropped(test_src, "held-out recording", out);
   WindowLabels train = window_labels(train_src, train_frames, task, classes, train_labels);
@@ -593,8 +593,8 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   for (const Recording* r : {&train_rec, &test_rec}) require_fits(*r, m);
   m.track(train_rec);
   m.track(test_rec);
-  const WindowSource train_src(train_rec, window_spec(m.config.tau, o.format), train_lab, m.pre);
-  const WindowSource test_src(test_rec, window_spec(m.config.tau, o.format), test_lab, m.pre);
+  const WindowSource train_src(train_rec, window_spec(m.config.data.tau, o.format), train_lab, m.pre);
+  const WindowSource test_src(test_rec, window_spec(m.config.data.tau, o.format), test_lab, m.pre);
   note_dropped(train_src, "training recording", out);
   note_dropped(test_src, "held-out recording", out);
   const ProbeLabels train = ProbeLabels::from_source(
@@ -609,7 +609,7 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   const ParamSet<float>& ps = o.encoder == "target" ? model.target : model.context;
   std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes),
                              frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
-                                          train_src, train, test_src, test, o.probe, m.config.heads, o.quiet,
+                                          train_src, train, test_src, test, o.probe, m.config.model.heads, o.quiet,
                                           o.repeats, o.center_tokens)};
   for (const auto& [labels, which] : {std::pair{&train, "training"}, std::pair{&test, "held-out"}})
     if (distinct_classes(labels->indenter) < 2)
@@ -650,7 +650,7 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
   Recording rec = in_layout_order(read_recording(o.data, o.format), load_skin(SkinSpec::of(m.config)), o.data);
   require_fits(rec, m);
   m.track(rec);
-  const WindowSource src(rec, window_spec(m.config.tau, o.format, o.stride), {}, m.pre);
+  const WindowSource src(rec, window_spec(m.config.data.tau, o.format, o.stride), {}, m.pre);
   std::vector<std::int64_t> ids(static_cast<std::size_t>(src.size()));
   for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = static_cast<std::int64_t>(i);
   ProgressLine bar("embed", src.size(), o.quiet);
@@ -661,7 +661,7 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
             {src.size(), model.num_tokens(), model.dim()});
   files.commit();
   out << "wrote " << o.out << ": [" << src.size() << ", " << model.num_tokens() << ", " << model.dim()
-      << "] embeddings of windows of " << m.config.tau << " frames\n";
+      << "] embeddings of windows of " << m.config.data.tau << " frames\n";
   return 0;
 }
 

@@ -152,16 +152,16 @@ inline int run_convert_from_reference(const ConvertOptions& o, const Safetensors
   load_reference_state(f, model, opt);
 
   TrainConfig tc = TrainConfig::reference(1);
-  tc.layout = spec.layout;
-  tc.layout_edges = spec.edges;
-  tc.layout_columns = spec.columns;
-  tc.bridges = spec.bridges;
-  tc.taxel_order = spec.order;
-  tc.tau = c.in_dim / c.axes;
-  tc.dim = c.encoder.dim;
-  tc.depth = c.encoder.depth;
-  tc.heads = c.encoder.heads;
-  tc.predictor_depth = c.predictor.depth;
+  tc.data.layout = spec.layout;
+  tc.data.layout_edges = spec.edges;
+  tc.data.layout_columns = spec.columns;
+  tc.data.bridges = spec.bridges;
+  tc.data.taxel_order = spec.order;
+  tc.data.tau = c.in_dim / c.axes;
+  tc.model.dim = c.encoder.dim;
+  tc.model.depth = c.encoder.depth;
+  tc.model.heads = c.encoder.heads;
+  tc.model.predictor_depth = c.predictor.depth;
   tc.validate();
   const Preprocessor pre = facts.mean.empty() ? Preprocessor{} : Preprocessor::with_statistics(facts.mean, facts.std);
   CheckpointState st = data_state(pre);
@@ -181,7 +181,7 @@ inline int run_convert_from_reference(const ConvertOptions& o, const Safetensors
   save_checkpoint(files.add(o.out), std::span<const PrefixedParams<float>>(parts), static_cast<const AdamW<float>*>(nullptr), st);
   files.commit();
   out << "wrote " << o.out << ": " << c.encoder.num_tokens << " taxels (layout " << spec.layout
-      << (spec.order.empty() ? "" : ", order " + spec.order) << "), windows of " << tc.tau << " frames x " << c.axes
+      << (spec.order.empty() ? "" : ", order " + spec.order) << "), windows of " << tc.data.tau << " frames x " << c.axes
       << " axes, d " << c.encoder.dim << ", depth " << c.encoder.depth << ", heads " << c.encoder.heads
       << ", predictor depth " << c.predictor.depth << ", temporal padding " << c.temporal_padding
       << (c.encoder.token_types > 0 ? ", taxel types " + std::to_string(c.encoder.token_types) : std::string())

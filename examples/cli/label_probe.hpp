@@ -302,7 +302,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     for (int rep = 0; rep < repeats; ++rep) {
       HeadTrainConfig c_rep = cfg;
       c_rep.seed = cfg.seed + static_cast<std::uint64_t>(rep);
-      ProbeHead<float> head(model.dim(), m.config.heads, R, C, c_rep.seed);
+      ProbeHead<float> head(model.dim(), m.config.model.heads, R, C, c_rep.seed);
       const HeadTrainResult fit = train_head(head, ftr, tr, c_rep);
       LabelProbeRow row;
       row.name = name;
@@ -364,7 +364,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return row;
   };
-  const auto random = make_jepa_model(m.config, skin.graph, m.model->config.in_dim / m.config.tau,
+  const auto random = make_jepa_model(m.config, skin.graph, m.model->config.in_dim / m.config.data.tau,
                                       m.config.seed ^ 0x72616e646f6dull);  // "random"
   rows.push_back(head_row("random encoder (frozen)", random->target));
   rows.push_back(head_row(encoder_name + " encoder (frozen)", encoder_params));

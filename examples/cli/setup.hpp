@@ -37,19 +37,19 @@ struct SkinSpec {
   std::string order;             // "", "xserver", "reference" (Allegro) or an id,column CSV
   bool strict = false;
   static SkinSpec of(const TrainConfig& c) {
-    return {c.layout, c.layout_edges, c.layout_columns, c.bridges, c.taxel_order, false};
+    return {c.data.layout, c.data.layout_edges, c.data.layout_columns, c.data.bridges, c.data.taxel_order, false};
   }
 };
 
 // Fewer steps than the default warm-up: the warm-up becomes a tenth of the run, with a note (a
 // warm-up the command line or config file set stays, and validate() names it).
 inline void fit_default_warmup(TrainConfig& run, const nlohmann::json& overrides, std::ostream& out) {
-  if (run.warmup_steps <= run.steps || overrides.contains("warmup_steps") ||
-      run.warmup_steps != TrainConfig{}.warmup_steps)
+  if (run.schedule.warmup_steps <= run.schedule.steps || overrides.contains("warmup_steps") ||
+      run.schedule.warmup_steps != TrainConfig{}.schedule.warmup_steps)
     return;
-  out << "note: " << run.steps << " steps are fewer than the default warm-up of " << run.warmup_steps
-      << "; warming up for " << run.steps / 10 << " steps (--warmup sets it)\n";
-  run.warmup_steps = run.steps / 10;
+  out << "note: " << run.schedule.steps << " steps are fewer than the default warm-up of " << run.schedule.warmup_steps
+      << "; warming up for " << run.schedule.steps / 10 << " steps (--warmup sets it)\n";
+  run.schedule.warmup_steps = run.schedule.steps / 10;
 }
 
 inline Skin load_skin(const SkinSpec& s, std::ostream* warnings = nullptr) {

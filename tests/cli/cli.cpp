@@ -185,7 +185,7 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
 
   // The checkpoint restores the run's config, the model and the fitted preprocessing.
   const TrainedModel m = load_trained_model(ck);
-  CHECK(m.config.dim == 8);
+  CHECK(m.config.model.dim == 8);
   CHECK(m.step == 3);
   CHECK(m.model->num_tokens() == 192);
   CHECK(m.pre.ready());
@@ -193,7 +193,7 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
   // checkpoint carries the tracker (fitted rest readings and noise of the 192 taxels x 3 axes).
   REQUIRE(m.drift.has_value());
   CHECK(m.drift->taxels() == 192);
-  CHECK(m.drift->config().time_constant == m.config.drift_time_constant);
+  CHECK(m.drift->config().time_constant == m.config.data.drift_time_constant);
   CHECK(m.drift->noise()[2] == doctest::Approx(SimConfig{}.noise_std).epsilon(0.15));
 
   // Running again into the same directory needs --force.
@@ -302,7 +302,7 @@ TEST_CASE("resume across programs: tjepa pretrain to a user Trainer and back giv
   Preprocessor pre(PreprocessConfig::xela_counts());
   pre.fit_baseline(baseline);
   pre.fit(std::span<const Recording>(&rec, 1));
-  const WindowSource src(rec, WindowSpec{cfg.tau}, {}, pre);
+  const WindowSource src(rec, WindowSpec{cfg.data.tau}, {}, pre);
   auto to_text = [](double v) {  // as CsvTable writes a number
     CsvTable c;
     c.header = {"v"};
@@ -352,7 +352,7 @@ TEST_CASE("resume across programs: tjepa pretrain to a user Trainer and back giv
 
 TEST_CASE("checkpoint metadata that no run could have throws FileError naming the key") {
   TempDir t;
-  JepaConfig mc = TrainConfig{}.model(4, 1);
+  JepaConfig mc = TrainConfig{}.model_config(4, 1);
   mc.encoder.dim = 8, mc.encoder.heads = 2, mc.encoder.depth = 1;
   mc.predictor.in_dim = mc.predictor.dim = 8, mc.predictor.heads = 2, mc.predictor.depth = 1;
   JepaModel<float> model(mc, 0);
@@ -365,7 +365,7 @@ TEST_CASE("checkpoint metadata that no run could have throws FileError naming th
     return p;
   };
   TrainConfig tc;
-  tc.dim = 8, tc.heads = 2, tc.depth = 1, tc.predictor_depth = 1;
+  tc.model.dim = 8, tc.model.heads = 2, tc.model.depth = 1, tc.model.predictor_depth = 1;
   auto error_of = [&](const nlohmann::json& config) {
     try {
       load_trained_model(write(config));
@@ -414,7 +414,7 @@ TEST_CASE("pretrain: drift tracking off (drift_time_constant 0 / the default) le
   REQUIRE(run_pretrain(po, out) == 0);
   const TrainedModel m = load_trained_model(t.path / "run" / "checkpoint.safetensors");
   CHECK_FALSE(m.drift.has_value());
-  CHECK(m.config.drift_time_constant == 0);
+  CHECK(m.config.data.drift_time_constant == 0);
   TrainConfig bad;
   bad.update({{"drift_time_constant", 0.5}}, "test");
   CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("drift_time_constant"), ConfigError);
@@ -446,7 +446,7 @@ TEST_CASE("run config: masks from JSON / round trip and bad values named") {
   r.update({{"local_targets", 0}, {"global_targets", 4}, {"target_ratio", {0.05, 0.08}},
             {"context_ratio", {0.6, 0.7}}},
            "test");
-  const MaskConfig m = r.masks();
+  const MaskConfig m = r.masks;
   CHECK(m.num_local == 0);
   CHECK(m.num_global == 4);
   CHECK(m.target_ratio == RatioRange{0.05, 0.08});
@@ -487,34 +487,34 @@ TEST_CASE("run config: masks from JSON / round trip and bad values named") {
 TEST_CASE("run config: graph positions / AdamW betas / standardized targets reach the model and the step") {
   const Skin skin = layouts::allegro_xela();
   TrainConfig r;
-  r.dim = 12;
-  r.heads = 2;
-  r.depth = 1;
-  r.predictor_depth = 1;
+  r.model.dim = 12;
+  r.model.heads = 2;
+  r.model.depth = 1;
+  r.model.predictor_depth = 1;
   // The defaults are the reference's: a random table, β = (0.9, 0.999), plain targets.
   const auto plain = make_jepa_model(r, skin.graph, 3, 4);
-  CHECK(r.adamw().beta1 == 0.9);
-  CHECK(r.adamw().beta2 == 0.999);
-  CHECK_FALSE(r.step().standardize_targets);
+  CHECK(r.adamw.beta1 == 0.9);
+  CHECK(r.adamw.beta2 == 0.999);
+  CHECK_FALSE(r.step.standardize_targets);
   const auto same = make_jepa_model(r, skin.graph, 3, 4);
   CHECK(std::ranges::equal(plain->context.values(), same->context.values()));
   r.update({{"position_eigenvectors", 16}, {"position_scale", 0.5}, {"beta2", 0.99}, {"standardize_targets", true}},
            "test");
   r.validate();
-  CHECK(r.adamw().beta2 == 0.99);
-  CHECK(r.step().standardize_targets);
+  CHECK(r.adamw.beta2 == 0.99);
+  CHECK(r.step.standardize_targets);
   const auto graph = make_jepa_model(r, skin.graph, 3, 4);
   const std::vector<double> rows = graph_positions(skin.graph, 12, 16, 0.5, 4);
   const auto e = graph->target.value_span(graph->encoder.pos_embed());
   REQUIRE(e.size() == rows.size());
   for (std::size_t i = 0; i < rows.size(); ++i) CHECK(e[i] == static_cast<float>(rows[i]));
-  r.position_eigenvectors = 400;
+  r.model.position_eigenvectors = 400;
   CHECK_THROWS_WITH_AS(make_jepa_model(r, skin.graph, 3, 4), doctest::Contains("368 tokens"), ConfigError);
 }
 
 TEST_CASE("run config: the objective's reference options reach the training step") {
   TrainConfig r;
-  const JepaStepConfig d = r.step();
+  const JepaStepConfig d = r.step;
   CHECK(d.loss == JepaLossKind::mse);  // the reference's defaults
   CHECK_FALSE(d.normalize_targets);
   CHECK_FALSE(d.predictor_pos_from_context);
@@ -522,7 +522,7 @@ TEST_CASE("run config: the objective's reference options reach the training step
             {"drop_path", 0.1}},
            "test");
   r.validate();
-  const JepaStepConfig c = r.step();
+  const JepaStepConfig c = r.step;
   CHECK(c.loss == JepaLossKind::smooth_l1);
   CHECK(c.normalize_targets);
   CHECK(c.predictor_pos_from_context);
@@ -605,7 +605,7 @@ TEST_CASE("demo and eval: the grasp protocol at toy size prints the tables and w
   CHECK(end_to_end_name(impatient) == "end to end (at most 200 epochs, patience 2)");
   o.out = (t.path / "demo").string();
   o.eval.train.update(tiny_run("allegro"), "test");
-  o.eval.train.drift_time_constant = 200;
+  o.eval.train.data.drift_time_constant = 200;
   o.eval.pretrain_frames = 1000;
   o.eval.train_frames = 3000;
   o.eval.test_frames = 2000;
@@ -665,9 +665,9 @@ TEST_CASE("tjepa eval's command line: flags land in the options and the pre-trai
   CHECK(o.eval.heads.end_to_end_max_epochs == 30);
   CHECK(o.eval.heads.end_to_end_patience == 7);
   CHECK(o.eval.pretrain_cache == "cache/dir");
-  CHECK(o.eval.train.steps == 11);
-  CHECK(o.eval.train.warmup_steps == 1);  // the default warm-up of 60 cut to a tenth of the run
-  CHECK(o.eval.train.precision == "bf16");
+  CHECK(o.eval.train.schedule.steps == 11);
+  CHECK(o.eval.train.schedule.warmup_steps == 1);  // the default warm-up of 60 cut to a tenth of the run
+  CHECK(o.eval.train.step.precision == Precision::bf16);
   CHECK_FALSE(o.eval.mae);
   CHECK_FALSE(o.eval.dino);
   CHECK_FALSE(o.eval.byol);

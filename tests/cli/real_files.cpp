@@ -98,7 +98,7 @@ TEST_CASE("a 10-taxel magnetometer skin pre-trains with default masks from a tex
   CHECK(text.find("10 taxels, tau 10") != std::string::npos);
   const TrainedModel m = load_trained_model(t / "run" / "checkpoint.safetensors");
   CHECK(m.model->num_tokens() == 10);
-  CHECK(m.config.min_context_tokens == -1);
+  CHECK(m.config.masks.min_context_tokens == -1);
 
   // Without --columns the motor columns are refused, with the way out named.
   po.format.columns.clear();
@@ -306,7 +306,7 @@ TEST_CASE("docs/formats.md lists every run configuration key with its default") 
   std::string table = "| key | default |\n|---|---|\n";
   const tjepa::TrainConfig defaults;
   tjepa::TrainConfig::for_each_field(defaults, [&](const char* key, const auto& v) {
-    table += std::string("| `") + key + "` | `" + nlohmann::json(v).dump() + "` |\n";
+    table += std::string("| `") + key + "` | `" + tjepa::json_value(v).dump() + "` |\n";
   });
   const std::string want = text.substr(0, b + begin.size()) + table + text.substr(e);
   if (std::getenv("TJEPA_UPDATE_DOCS")) std::ofstream(doc, std::ios::binary) << want;

@@ -45,9 +45,9 @@ int main(int argc, char** argv) {
     pre.fit_baseline(baseline);
     pre.fit(std::span<const Recording>(&rec, 1));
     TrainConfig cfg;
-    cfg.dim = 32, cfg.depth = 2, cfg.heads = 2, cfg.predictor_depth = 1, cfg.batch = 8, cfg.steps = steps;
-    cfg.warmup_steps = 4, cfg.drop_path = 0.3, cfg.seed = 5;
-    const WindowSource source(rec, WindowSpec{cfg.tau}, {}, pre);
+    cfg.model.dim = 32, cfg.model.depth = 2, cfg.model.heads = 2, cfg.model.predictor_depth = 1, cfg.batch = 8, cfg.schedule.steps = steps;
+    cfg.schedule.warmup_steps = 4, cfg.step.drop_path = 0.3, cfg.seed = 5;
+    const WindowSource source(rec, WindowSpec{cfg.data.tau}, {}, pre);
     auto model = make_jepa_model(cfg, skin.graph, rec.axes(), cfg.seed);
     JepaTrainer<float> trainer(*model, source, skin.graph, cfg);
     trainer.parallel = dist::mpi_data_parallel<float>(mpi.comm());

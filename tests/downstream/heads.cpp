@@ -1058,12 +1058,12 @@ GraspEvalConfig toy_grasp_eval_config() {
   c.pretrain_frames = 2000;
   c.train_frames = 3000;
   c.test_frames = 2000;
-  c.train.dim = 12;
-  c.train.heads = 2;
-  c.train.depth = 1;
-  c.train.predictor_depth = 1;
-  c.train.steps = 2;
-  c.train.warmup_steps = 1;
+  c.train.model.dim = 12;
+  c.train.model.heads = 2;
+  c.train.model.depth = 1;
+  c.train.model.predictor_depth = 1;
+  c.train.schedule.steps = 2;
+  c.train.schedule.warmup_steps = 1;
   c.train.batch = 4;
   c.tasks.sequence_length = 3;
   c.tasks.max_object_windows = 40;
@@ -1144,7 +1144,7 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation - seed 1 alone
   CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("needs the Tactile-JEPA row"), ConfigError);
   c.ablation = false;
   CHECK_NOTHROW(c.validate());
-  c.readout_components = c.train.dim + 1;
+  c.readout_components = c.train.model.dim + 1;
   CHECK_THROWS_WITH_AS(c.validate(), doctest::Contains("readout_components"), ConfigError);
 }
 
@@ -1228,7 +1228,7 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the tables and pre-training
 
   // Another pre-training config is another key: pre-trained again, beside the old files.
   GraspEvalConfig other = c;
-  other.train.steps = 3;
+  other.train.schedule.steps = 3;
   other.mae = other.dino = other.byol = other.ablation = false;
   const GraspEvalResult third = run_grasp_eval(other);
   CHECK_FALSE(third.info["pretraining"][0].contains("cached"));
@@ -1319,15 +1319,22 @@ TEST_CASE("PretrainCache: round trip and keys and errors that leave the paramete
   for (std::size_t i = 0; i < c.count(); ++i)
     for (float v : c.value_span(c.id(i))) CHECK(v == -2.0f);
 
-  // The mask ablation's variants: each its own masks in the key, so that a variant changed under
-  // its old name does not read the old encoder.
+  // The mask ablation's variants: each its own masks in the run config and so in the key, so that
+  // a variant changed under its old name does not read the old encoder.
   const std::vector<MaskVariant> variants = grasp_mask_ablation(TrainConfig{});
-  for (std::size_t i = 0; i < variants.size(); ++i)
-    for (std::size_t j = i + 1; j < variants.size(); ++j) CHECK(to_json(variants[i]) != to_json(variants[j]));
+  auto run_of = [](const MaskVariant& v) {
+    TrainConfig t;
+    t.masks = v.masks;
+    return t.to_json();
+  };
+  for (std::size_t i = 0; i < variants.size(); ++i) {
+    CHECK(run_of(variants[i]) != TrainConfig{}.to_json());
+    for (std::size_t j = i + 1; j < variants.size(); ++j) CHECK(run_of(variants[i]) != run_of(variants[j]));
+  }
   MaskVariant changed = variants.front();
   changed.masks.num_local += 1;
-  CHECK(cache.path(cache.key("4L", 0, {{"masks", to_json(changed)}})) !=
-        cache.path(cache.key("4L", 0, {{"masks", to_json(variants.front())}})));
+  CHECK(cache.path(cache.key("4L", 0, {{"train", run_of(changed)}})) !=
+        cache.path(cache.key("4L", 0, {{"train", run_of(variants.front())}})));
 
   // A directory that cannot be one.
   std::ofstream(dir / "plain_file") << "x";

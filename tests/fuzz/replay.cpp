@@ -43,7 +43,7 @@ void write_corpus(const fs::path& root) {
   {
     const tjepa::Skin skin = grid4();
     tjepa::TrainConfig c;
-    c.dim = 8, c.depth = 1, c.heads = 2, c.predictor_depth = 1, c.tau = 2, c.min_context_tokens = 4;
+    c.model.dim = 8, c.model.depth = 1, c.model.heads = 2, c.model.predictor_depth = 1, c.data.tau = 2, c.masks.min_context_tokens = 4;
     const auto model = tjepa::make_jepa_model<float>(c, skin.graph, 3, 0);
     tjepa::CheckpointState st;
     st.step = 3;

@@ -334,9 +334,9 @@ TEST_SUITE("train") {
     Rng rng(2);
     const auto images = test::normal_vector(std::size_t(2) * B * 63 * 63 * 2, rng);
     TrainConfig tc;
-    tc.steps = 10, tc.warmup_steps = 2, tc.batch = B;
-    AdamW<double> opt(model.trainable(), tc.adamw());
-    const TrainingSchedule sch = tc.schedule();
+    tc.schedule.steps = 10, tc.schedule.warmup_steps = 2, tc.batch = B;
+    AdamW<double> opt(model.trainable(), tc.adamw);
+    const TrainingSchedule sch = tc.schedule.build();
     ByolWorkspace<double> w;
     for (const auto& part : model.trainable()) part.params->zero_grad();
     const double l = byol_forward(model, images.data(), B, w);

@@ -116,16 +116,16 @@ JepaConfig blob_config() {
 // the model keys match blob_config().
 TrainConfig blob_trainer_config(std::int64_t steps, std::int64_t warmup, std::uint64_t seed) {
   TrainConfig tc;
-  tc.tau = 2;
-  tc.dim = 16, tc.depth = 2, tc.heads = 2, tc.predictor_depth = 1;
-  tc.min_context_tokens = 6;
-  tc.steps = steps;
-  tc.warmup_steps = warmup;
+  tc.data.tau = 2;
+  tc.model.dim = 16, tc.model.depth = 2, tc.model.heads = 2, tc.model.predictor_depth = 1;
+  tc.masks.min_context_tokens = 6;
+  tc.schedule.steps = steps;
+  tc.schedule.warmup_steps = warmup;
   tc.batch = 16;
-  tc.lr = 1e-3, tc.start_lr = 1e-5, tc.final_lr = 1e-6;
-  tc.ema_start = 0.994;
+  tc.schedule.lr = 1e-3, tc.schedule.start_lr = 1e-5, tc.schedule.final_lr = 1e-6;
+  tc.schedule.ema_start = 0.994;
   tc.seed = seed;
-  tc.drop_path = 0.0;
+  tc.step.drop_path = 0.0;
   return tc;
 }
 
@@ -502,7 +502,7 @@ TEST_SUITE("train") {
     const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
     const auto graph = blob_graph();
     TrainConfig tc = blob_trainer_config(18, 6, 5);
-    tc.drop_path = 0.1;  // exercises the per-step noise seeds
+    tc.step.drop_path = 0.1;  // exercises the per-step noise seeds
     TempPath ckpt("resume");
     auto arm = [&](JepaTrainer<float>& t) {
       t.checkpoint = ckpt.path;
@@ -543,7 +543,7 @@ TEST_SUITE("train") {
 
     // A run with another shape or schedule refuses the checkpoint.
     TrainConfig other = tc;
-    other.steps = 24;
+    other.schedule.steps = 24;
     JepaModel<float> m2(blob_config(), 1);
     JepaTrainer<float> t2(m2, source, graph, other);
     CHECK_THROWS_WITH_AS(t2.resume(ckpt.path), doctest::Contains("was written with train.steps = 18"), ConfigError);
@@ -552,22 +552,22 @@ TEST_SUITE("train") {
   TEST_CASE("MAE through the Trainer: the verbs' loop step for step / save then resume is bitwise / no JEPA file") {
     const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
     TrainConfig tc = blob_trainer_config(14, 4, 3);
-    tc.drop_path = 0.1;  // exercises the per-step noise seeds
+    tc.step.drop_path = 0.1;  // exercises the per-step noise seeds
     const MaeConfig mc = mae_config(tc, 36, 2);
     CHECK(mc.drop_path == 0.1);
 
     // The loop by hand from the verbs: the shared data order, uniform masks and noise streams.
     MaeModel<float> by_hand(mc, 7);
     {
-      AdamW<float> opt(by_hand.trainable(), tc.adamw());
-      const TrainingSchedule schedule = tc.schedule();
+      AdamW<float> opt(by_hand.trainable(), tc.adamw);
+      const TrainingSchedule schedule = tc.schedule.build();
       const UniformMasking masking(36, mc.mask_ratio);
       MaeWorkspace<float> w;
       MaskBatch masks;
       WindowBatch batch;
       AlignedVector<float> x;
       std::vector<double> losses;
-      for (std::int64_t s = 0; s < tc.steps; ++s) {
+      for (std::int64_t s = 0; s < tc.schedule.steps; ++s) {
         const auto order = source.epoch_order(streams::data(tc.seed), static_cast<std::uint64_t>(s / 6));
         source.gather(std::span<const std::int64_t>(order).subspan(static_cast<std::size_t>(s % 6) * 16, 16), batch);
         windows_to_tokens(batch, x);
@@ -615,10 +615,10 @@ TEST_SUITE("train") {
   TEST_CASE("DINO through the Trainer: the loss falls / save then resume is bitwise / a JEPA file is refused") {
     const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
     TrainConfig tc = blob_trainer_config(12, 2, 3);
-    tc.drop_path = 0.1;
+    tc.step.drop_path = 0.1;
     DinoConfig dc = dino_config(tc, 36, 2);
     dc.local_views = 2;
-    CHECK(dc.head.prototypes == 16 * tc.dim);
+    CHECK(dc.head.prototypes == 16 * tc.model.dim);
     DinoModel<float> straight_model(dc, 7);
     DinoTrainer<float> straight(straight_model, source, tc);
     const auto stats = straight.run();
@@ -709,25 +709,75 @@ TEST_SUITE("train") {
                          ShapeError);
   }
 
-  TEST_CASE("one default per setting: TrainConfig's module keys default to the modules' configs") {
+  TEST_CASE("TrainConfig is the modules' configs with one flat JSON key per setting") {
+    // One default per setting: the members are the modules' own configs.
     const TrainConfig tc;
-    const MaskConfig m = tc.masks(), m0;
-    CHECK(m.context_ratio.lo == m0.context_ratio.lo);
-    CHECK(m.context_ratio.hi == m0.context_ratio.hi);
-    CHECK(m.target_ratio.lo == m0.target_ratio.lo);
-    CHECK(m.target_ratio.hi == m0.target_ratio.hi);
-    CHECK(m.num_local == m0.num_local);
-    CHECK(m.num_global == m0.num_global);
-    CHECK(m.min_context_tokens == m0.min_context_tokens);
-    const JepaStepConfig s = tc.step(), s0;
-    CHECK(s.to_json() == s0.to_json());  // loss, target options, drop-path, clipping, precision
-    const AdamWConfig a = tc.adamw(), a0;
-    CHECK(a.beta1 == a0.beta1);
-    CHECK(a.beta2 == a0.beta2);
-    CHECK(a.eps == a0.eps);
-    // The reference's values come from TrainConfig::reference.
-    CHECK(TrainConfig::reference(10).drop_path == 0.3);
+    const MaskConfig m0;
+    CHECK(tc.to_json()["context_ratio"] == nlohmann::json::array({m0.context_ratio.lo, m0.context_ratio.hi}));
+    CHECK(tc.to_json()["block_targets"] == m0.blocks.num_targets);
+    CHECK(tc.step.to_json() == JepaStepConfig{}.to_json());
+    CHECK(TrainConfig::reference(10).step.drop_path == 0.3);  // the reference's values: TrainConfig::reference
+    // Every kind of setting through the flat view: enums by name, ranges as [lo, hi].
+    TrainConfig c;
+    c.update({{"precision", "bf16"}, {"mask_scheme", "ijepa_blocks"}, {"weight_decay_timing", "ijepa"},
+              {"loss", "smooth_l1"}, {"block_target_scale", {0.1, 0.3}}, {"local_targets", 3}, {"beta2", 0.95},
+              {"steps", 7}, {"warmup_steps", 2}, {"tau", 5}, {"dim", 12}, {"part_targets", "whole"}},
+             "test");
+    CHECK(c.step.precision == Precision::bf16);
+    CHECK(c.masks.scheme == TargetScheme::ijepa_blocks);
+    CHECK(c.schedule.wd_timing == WeightDecayTiming::ijepa);
+    CHECK(c.step.loss == JepaLossKind::smooth_l1);
+    CHECK(c.masks.blocks.target_scale == RatioRange{0.1, 0.3});
+    CHECK(c.masks.part_targets == PartTargets::whole);
+    CHECK(c.masks.num_local == 3);
+    CHECK(c.adamw.beta2 == 0.95);
+    CHECK(c.schedule.steps == 7);
+    CHECK(c.data.tau == 5);
+    CHECK(c.model.dim == 12);
+    const nlohmann::json j = c.to_json();
+    CHECK(j["precision"] == "bf16");
+    CHECK(j["mask_scheme"] == "ijepa_blocks");
+    CHECK(j["block_target_scale"] == nlohmann::json::array({0.1, 0.3}));
+    CHECK(TrainConfig::from_json(j, "round trip").to_json() == j);
+    CHECK(c.schedule.build().wd_timing == WeightDecayTiming::ijepa);
+    // A name or shape that is no setting's is refused by key, and nothing changes.
+    CHECK_THROWS_WITH_AS(c.update({{"precision", "fp16"}, {"steps", 9}}, "run.json"),
+                         doctest::Contains("run.json: key 'precision' = \"fp16\", expected one of 'fp32', 'bf16'"),
+                         ConfigError);
+    CHECK_THROWS_WITH_AS(c.update({{"context_ratio", {0.5}}}, "run.json"),
+                         doctest::Contains("key 'context_ratio' = [0.5], expected an array [lo, hi]"), ConfigError);
+    CHECK(c.step.precision == Precision::bf16);
+    CHECK(c.schedule.steps == 7);
+    // validate() checks the masks without a graph.
+    TrainConfig bad;
+    bad.masks.max_tries = 0;
+    CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("max_tries = 0"), ConfigError);
+    bad = TrainConfig{};
+    bad.masks.scheme = TargetScheme::ijepa_blocks;
+    bad.masks.blocks.target_scale = {0.5, 0.2};
+    CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("blocks.target_scale"), ConfigError);
+    // The checkpoints that predate the mask keys ran at today's mask defaults.
+    const nlohmann::json now = TrainConfig{}.to_json();
+    for (const char* key : {"local_targets_per_part", "global_targets_per_part", "part_targets", "global_sampling",
+                            "context_sampling", "mask_scheme", "block_target_scale", "block_target_aspect",
+                            "block_context_scale", "block_context_aspect", "block_targets", "min_context_ratio",
+                            "mask_max_tries"}) {
+      CAPTURE(key);
+      CHECK(checkpoint_legacy_defaults().at(key) == now.at(key));
+    }
+    // A trainer given a sampler of its own records that sampler's masks in its checkpoints.
+    const auto source = blob_source(100, 2);
+    const TrainConfig run = blob_trainer_config(6, 2, 4);
+    MaskConfig four = run.masks;
+    four.num_local = 4;
+    four.num_global = 0;
+    JepaModel<float> model(blob_config(), 3);
+    JepaTrainer<float> trainer(model, source, MaskCollator(blob_graph(), four), run);
+    CHECK(trainer.metadata()["train"]["local_targets"] == 4);
+    CHECK(trainer.metadata()["train"]["global_targets"] == 0);
+    CHECK(trainer.objective().config().masks.num_local == 4);
   }
+
 
   TEST_CASE("a checkpoint without a metadata version (version 1) is a JEPA run's and resumes") {
     const auto source = blob_source(100, 2);
@@ -749,15 +799,15 @@ TEST_SUITE("train") {
     // Read back, the file gives the behaviour it was written with: I-JEPA's weight-decay timing.
     const TrainedModel loaded = load_trained_model(ckpt.path);
     CHECK(loaded.step == 3);
-    CHECK(loaded.config.weight_decay_timing == "ijepa");
-    CHECK(loaded.config.taxel_order.empty());
+    CHECK(loaded.config.schedule.wd_timing == WeightDecayTiming::ijepa);
+    CHECK(loaded.config.data.taxel_order.empty());
     // A run with today's default timing is refused, by name; the file's own config resumes.
     JepaModel<float> m2(blob_config(), 3);
     JepaTrainer<float> fresh(m2, source, blob_graph(), tc);
     CHECK_THROWS_WITH_AS(fresh.resume(ckpt.path), doctest::Contains("train.wd_initial = -1.0"), ConfigError);
     TrainConfig old = tc;
-    old.weight_decay_timing = "ijepa";
-    old.wd_initial = -1;
+    old.schedule.wd_timing = WeightDecayTiming::ijepa;
+    old.schedule.wd_initial = -1;
     JepaModel<float> m3(blob_config(), 3);
     JepaTrainer<float> t2(m3, source, blob_graph(), old);
     t2.resume(ckpt.path);
@@ -772,7 +822,7 @@ TEST_SUITE("train") {
     const auto source = blob_source(200, 1);  // 100 windows: 6 batches of 16 per epoch
     const auto graph = blob_graph();
     TrainConfig tc = blob_trainer_config(8, 2, 5);
-    tc.drop_path = 0.2;  // per-sample noise must not depend on the shard
+    tc.step.drop_path = 0.2;  // per-sample noise must not depend on the shard
     JepaModel<float> single_model(blob_config(), 7);
     JepaTrainer<float> single(single_model, source, graph, tc);
     std::vector<double> single_loss, single_spread;
@@ -826,7 +876,7 @@ TEST_SUITE("train") {
     for (int r = 0; r < R; ++r) {
       std::vector<std::int64_t> expect;
       const int first = 16 * r / R, last = 16 * (r + 1) / R;
-      for (std::int64_t s = 0; s < tc.steps; ++s) {
+      for (std::int64_t s = 0; s < tc.schedule.steps; ++s) {
         const auto order = source.epoch_order(tc.seed ^ streams::data_salt, static_cast<std::uint64_t>(s / 6));
         const auto b = static_cast<std::ptrdiff_t>((s % 6) * 16);
         expect.insert(expect.end(), order.begin() + b + first, order.begin() + b + last);
@@ -930,16 +980,16 @@ TEST_SUITE("train") {
     // 0.06 %; the loss falls from 1.01 to 0.17 in both). Without AVX512-BF16 bf16 is fp32: the
     // curves are equal.
     const auto source = blob_source(1200, 3);
-    auto run = [&](const char* precision) {
+    auto run = [&](Precision precision) {
       JepaModel<float> model(blob_config(), 13);
       TrainConfig tc = blob_trainer_config(300, 37, 11);
-      tc.precision = precision;
+      tc.step.precision = precision;
       JepaTrainer<float> trainer(model, source, blob_graph(), tc);
       std::vector<double> loss;
       for (const auto& st : trainer.run()) loss.push_back(st.loss);
       return loss;
     };
-    const std::vector<double> fp32 = run("fp32"), bf16 = run("bf16");
+    const std::vector<double> fp32 = run(Precision::fp32), bf16 = run(Precision::bf16);
     REQUIRE(fp32.size() == 300);
     REQUIRE(bf16.size() == 300);
     if (!detail::bgemm::native) {

@@ -110,7 +110,7 @@ TEST_SUITE("train") {
     // optimizer's constructor value; unset: wd(0) = wd_start).
     CHECK(s.wd_timing == tjepa::WeightDecayTiming::reference);
     CHECK(s.wd_at(0) == doctest::Approx(0.04).epsilon(1e-15));
-    CHECK(tjepa::TrainConfig{}.schedule().wd_at(0) == 0.05);
+    CHECK(tjepa::TrainConfig{}.schedule.build().wd_at(0) == 0.05);
     auto ijepa = s;
     ijepa.wd_timing = tjepa::WeightDecayTiming::ijepa;
     for (std::int64_t step : {0, 10, 1234, 4999}) {

@@ -5,12 +5,20 @@
 //
 //   const int d = json_get<int>(meta, "dim", "run.safetensors: config.model");
 //   json_read(j, "betas", cfg.betas, "config.json");          // into an existing field
+//
+// Besides numbers, strings, booleans, arrays and vectors, two kinds of config types convert:
+// - an enum E with a `json_names(E)` found by ADL that returns its (name, value) pairs, as its
+//   name ("fp32"); a string that names no value is an error that lists the names;
+// - a struct with double members lo and hi (RatioRange), as [lo, hi].
+// json_value(v) is v's JSON in the same form.
 #include <array>
+#include <concepts>
 #include <cstdint>
 #include <limits>
 #include <string>
 #include <string_view>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -18,6 +26,32 @@
 #include "tjepa/core/error.hpp"
 
 namespace tjepa {
+
+// An enum whose values have JSON names (see above).
+template <class E>
+concept JsonNamedEnum = std::is_enum_v<E> && requires(E e) {
+  { json_names(e) };
+};
+// A range [lo, hi] of two doubles.
+template <class R>
+concept JsonRange = std::is_class_v<R> && requires(R r) {
+  { r.lo } -> std::convertible_to<double>;
+  { r.hi } -> std::convertible_to<double>;
+};
+
+// v as JSON: a named enum as its name, a range as [lo, hi], anything else as nlohmann converts it.
+template <class T>
+nlohmann::json json_value(const T& v) {
+  if constexpr (JsonNamedEnum<T>) {
+    for (const auto& [name, value] : json_names(v))
+      if (value == v) return std::string(name);
+    return static_cast<std::int64_t>(v);  // not a named value: only from a cast
+  } else if constexpr (JsonRange<T>) {
+    return nlohmann::json::array({v.lo, v.hi});
+  } else {
+    return nlohmann::json(v);
+  }
+}
 
 namespace detail {
 
@@ -34,6 +68,11 @@ struct is_std_vector<std::vector<T>> : std::true_type {};
 template <class T>
 std::string json_kind() {
   if constexpr (std::is_same_v<T, bool>) return "a boolean";
+  else if constexpr (JsonNamedEnum<T>) {
+    std::string names;
+    for (const auto& [name, value] : json_names(T{})) names += (names.empty() ? "'" : ", '") + std::string(name) + "'";
+    return "one of " + names;
+  } else if constexpr (JsonRange<T>) return "an array [lo, hi] of 2 numbers";
   else if constexpr (std::is_integral_v<T>) return std::is_unsigned_v<T> ? "a non-negative integer" : "an integer";
   else if constexpr (std::is_floating_point_v<T>) return "a number";
   else if constexpr (std::is_same_v<T, std::string>) return "a string";
@@ -49,6 +88,19 @@ bool json_convert(const nlohmann::json& v, T& out) {
   if constexpr (std::is_same_v<T, bool>) {
     if (!v.is_boolean()) return false;
     out = v.get<bool>();
+  } else if constexpr (JsonNamedEnum<T>) {
+    if (!v.is_string()) return false;
+    for (const auto& [name, value] : json_names(out))
+      if (name == v.get<std::string>()) {
+        out = value;
+        return true;
+      }
+    return false;
+  } else if constexpr (JsonRange<T>) {
+    std::array<double, 2> lohi{};
+    if (!json_convert(v, lohi)) return false;
+    out.lo = lohi[0];
+    out.hi = lohi[1];
   } else if constexpr (std::is_integral_v<T>) {
     if (v.is_number_unsigned()) {
       const auto u = v.get<std::uint64_t>();

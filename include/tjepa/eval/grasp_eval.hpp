@@ -61,8 +61,8 @@ namespace tjepa {
 // session) and AdamW's beta2 at 0.99.
 inline TrainConfig grasp_pretrain_config() {
   TrainConfig c;
-  c.drift_time_constant = 200;
-  c.beta2 = 0.99;
+  c.data.drift_time_constant = 200;
+  c.adamw.beta2 = 0.99;
   return c;
 }
 
@@ -107,8 +107,8 @@ struct GraspEvalConfig {
     sim.validate();
     train.validate();
     tasks.validate();
-    require<ConfigError>(readout_components > 0 && readout_components <= train.dim, "GraspEvalConfig: readout_components = ",
-                         readout_components, ", expected in [1, dim = ", train.dim, "]");
+    require<ConfigError>(readout_components > 0 && readout_components <= train.model.dim, "GraspEvalConfig: readout_components = ",
+                         readout_components, ", expected in [1, dim = ", train.model.dim, "]");
     // The tasks carry episodes: validation by episodes excludes blocks (validation_split).
     for (const HeadTrainConfig* h : {&heads.probe, &heads.sequence})
       require<ConfigError>(!h->validation_groups || h->validation_blocks == 0, "GraspEvalConfig: heads validate by ",
@@ -168,9 +168,9 @@ struct GraspEvalData {
 // baseline, then run over recs in order: one continuous session of one sensor.
 inline std::optional<DriftTracker> track_drift(const TrainConfig& run, const Recording& baseline,
                                                std::span<Recording* const> recs) {
-  if (run.drift_time_constant <= 0) return std::nullopt;
+  if (run.data.drift_time_constant <= 0) return std::nullopt;
   DriftTrackerConfig c = DriftTrackerConfig::magnetic();
-  c.time_constant = run.drift_time_constant;
+  c.time_constant = run.data.drift_time_constant;
   DriftTracker tracker(c);
   tracker.fit(baseline);
   for (Recording* r : recs) tracker.apply(*r);
@@ -199,7 +199,7 @@ inline GraspEvalData simulate_grasp_eval_data(const GraspEvalConfig& c) {
     for (const GraspLabel& l : recs[r]->labels) touched += l.contact_mask != 0;
     d.contact_share[static_cast<std::size_t>(r)] = static_cast<double>(touched) / static_cast<double>(recs[r]->labels.size());
   }
-  const WindowSpec spec{c.train.tau};
+  const WindowSpec spec{c.train.data.tau};
   d.pretrain.emplace(std::move(pre.recording), spec, std::vector<FrameLabel>{}, d.pre);
   d.train.emplace(std::move(tr.recording), spec, std::vector<FrameLabel>{}, d.pre);
   d.test.emplace(std::move(te.recording), spec, std::vector<FrameLabel>{}, d.pre);
@@ -208,52 +208,25 @@ inline GraspEvalData simulate_grasp_eval_data(const GraspEvalConfig& c) {
   return d;
 }
 
-// A mask variant of the ablation.
+// A mask variant of the ablation: its name and masks (the rest of the run is the main row's).
+// A variant's masks are part of its TrainConfig, so the pre-training cache keys them.
 struct MaskVariant {
   std::string name;
   MaskConfig masks;
-  bool ijepa_blocks = false;  // draws on the layout's grid placement
 };
 
-// What a variant changes in the masks, for the pre-training cache's key (the row name alone would
-// let a changed variant read an encoder pre-trained with other masks).
-inline nlohmann::json to_json(const MaskVariant& v) {
-  const MaskConfig& m = v.masks;
-  auto range = [](const RatioRange& r) { return nlohmann::json::array({r.lo, r.hi}); };
-  return {{"context_ratio", range(m.context_ratio)},
-          {"target_ratio", range(m.target_ratio)},
-          {"num_local", m.num_local},
-          {"num_global", m.num_global},
-          {"num_local_per_part", m.num_local_per_part},
-          {"num_global_per_part", m.num_global_per_part},
-          {"part_targets", static_cast<int>(m.part_targets)},
-          {"global_sampling", static_cast<int>(m.global_sampling)},
-          {"context_sampling", static_cast<int>(m.context_sampling)},
-          {"scheme", static_cast<int>(m.scheme)},
-          {"blocks",
-           {{"target_scale", range(m.blocks.target_scale)},
-            {"target_aspect", range(m.blocks.target_aspect)},
-            {"context_scale", range(m.blocks.context_scale)},
-            {"context_aspect", range(m.blocks.context_aspect)},
-            {"num_targets", m.blocks.num_targets}}},
-          {"min_context_tokens", m.min_context_tokens},
-          {"min_context_ratio", m.min_context_ratio},
-          {"max_tries", m.max_tries},
-          {"ijepa_blocks", v.ijepa_blocks}};
-}
-
 inline std::vector<MaskVariant> grasp_mask_ablation(const TrainConfig& c) {
-  const MaskConfig base = c.masks();
+  const MaskConfig base = c.masks;
   std::vector<MaskVariant> v;
   auto with = [&](std::string name, int local, int global) {
-    MaskVariant m{std::move(name), base, false};
+    MaskVariant m{std::move(name), base};
     m.masks.num_local = local;
     m.masks.num_global = global;
     return m;
   };
   v.push_back(with("4L", 4, 0));
   v.push_back(with("4G", 0, 4));
-  MaskVariant blocks{"4 I-JEPA blocks", base, true};
+  MaskVariant blocks{"4 I-JEPA blocks", base};
   blocks.masks.scheme = TargetScheme::ijepa_blocks;
   blocks.masks.blocks.num_targets = 4;
   v.push_back(blocks);
@@ -352,23 +325,22 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
   auto pretrain_jepa = [&](const std::string& name, std::uint64_t s, const MaskVariant* v) {
     TrainConfig cfg = c.train;
     cfg.seed = s;
+    if (v) cfg.masks = v->masks;
     auto model = make_jepa_model<float>(cfg, graph, axes, s);
-    nlohmann::json what{{"train", cfg.to_json()}};
-    if (v) what["masks"] = to_json(*v);
-    const nlohmann::json key = cache.key(name, s, what);
+    const nlohmann::json key = cache.key(name, s, {{"train", cfg.to_json()}});
     if (from_cache(name, s, key, model->target)) return model;
-    std::optional<GridPlacement> grid;
-    if (v && v->ijepa_blocks) grid = GridPlacement::from_layout(d.skin.layout, layouts::allegro::kPhalanxPitch);
-    MaskCollator collator(graph, v ? v->masks : cfg.masks(), grid);
-    JepaTrainer<float> trainer(*model, *d.pretrain, std::move(collator), cfg);
+    std::optional<GridPlacement> grid;  // I-JEPA blocks draw on the layout's grid placement
+    if (cfg.masks.scheme == TargetScheme::ijepa_blocks)
+      grid = GridPlacement::from_layout(d.skin.layout, layouts::allegro::kPhalanxPitch);
+    JepaTrainer<float> trainer(*model, *d.pretrain, graph, cfg, JepaLoss<float>{}, std::move(grid));
     const auto t = clock::now();
     JepaStepStats first, last;
     trainer.on_step = [&](const JepaStepStats& st) {
       if (st.step == 0) first = st;
       last = st;
-      if ((st.step + 1) % std::max<std::int64_t>(1, cfg.steps / 10) == 0)
+      if ((st.step + 1) % std::max<std::int64_t>(1, cfg.schedule.steps / 10) == 0)
         say("  " + name + " seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
-            std::to_string(cfg.steps) + ", loss " + std::to_string(st.loss) + ", target std over samples " +
+            std::to_string(cfg.schedule.steps) + ", loss " + std::to_string(st.loss) + ", target std over samples " +
             std::to_string(st.target_sample_std));
     };
     trainer.run();
@@ -450,10 +422,10 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       TrainConfig cfg = c.train;
       cfg.seed = s;
       MaeModel<float> mae(mae_config(cfg, graph.num_nodes(), axes, c.mae_mask_ratio), s);
-      if (cfg.position_eigenvectors > 0)  // as make_jepa_model: both start from the same encoder
-        mae.set_positions(graph_positions(graph, cfg.dim, cfg.position_eigenvectors, cfg.position_scale, s));
+      if (cfg.model.position_eigenvectors > 0)  // as make_jepa_model: both start from the same encoder
+        mae.set_positions(graph_positions(graph, cfg.model.dim, cfg.model.position_eigenvectors, cfg.model.position_scale, s));
       const nlohmann::json key = cache.key("MAE", s, {{"train", cfg.to_json()}, {"mae_mask_ratio", c.mae_mask_ratio}});
-      pretrain_baseline("MAE", s, cfg.steps, key, mae.context, [&] { return MaeTrainer<float>(mae, *d.pretrain, cfg); },
+      pretrain_baseline("MAE", s, cfg.schedule.steps, key, mae.context, [&] { return MaeTrainer<float>(mae, *d.pretrain, cfg); },
                         [](const MaeStepStats&) { return std::string(); });
       frozen_row(res.main, res.linear, "MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
     }
@@ -461,10 +433,10 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       TrainConfig cfg = c.train;
       cfg.seed = s;
       DinoModel<float> dino(dino_config(cfg, graph.num_nodes(), axes), s);
-      if (cfg.position_eigenvectors > 0)  // as make_jepa_model: every method starts from the same encoder
-        dino.set_positions(graph_positions(graph, cfg.dim, cfg.position_eigenvectors, cfg.position_scale, s));
+      if (cfg.model.position_eigenvectors > 0)  // as make_jepa_model: every method starts from the same encoder
+        dino.set_positions(graph_positions(graph, cfg.model.dim, cfg.model.position_eigenvectors, cfg.model.position_scale, s));
       const nlohmann::json key = cache.key("DINO", s, {{"train", cfg.to_json()}});
-      pretrain_baseline("DINO", s, cfg.steps, key, dino.teacher, [&] { return DinoTrainer<float>(dino, *d.pretrain, cfg); },
+      pretrain_baseline("DINO", s, cfg.schedule.steps, key, dino.teacher, [&] { return DinoTrainer<float>(dino, *d.pretrain, cfg); },
                         [](const DinoStepStats& st) {
                           return " (dino " + std::to_string(st.dino) + ", ibot " + std::to_string(st.ibot) + ", koleo " +
                                  std::to_string(st.koleo) + ")";
@@ -481,7 +453,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
       ByolModel<float> byol(bc, s);
       const TaxelCanvas canvas = TaxelCanvas::from_layout(d.skin.layout);
       const nlohmann::json key = cache.key("BYOL", s, {{"train", cfg.to_json()}, {"byol", byol.config.to_json()}});
-      pretrain_baseline("BYOL", s, cfg.steps, key, byol.online,
+      pretrain_baseline("BYOL", s, cfg.schedule.steps, key, byol.online,
                         [&] { return ByolTrainer<float>(byol, *d.pretrain, canvas, cfg); },
                         [](const ByolStepStats&) { return std::string(); });
       const int cells = byol.config.encoder.pooled * byol.config.encoder.pooled, C = byol.config.encoder.widths[4];

@@ -45,8 +45,9 @@ inline constexpr std::string_view encoder_export_format = "tjepa.encoder.v1";
 
 // The version of a checkpoint's config metadata: 1 (no "version" key) is a JEPA run's
 // {"train", "model"}; 2 adds "version" and "objective"; 3 adds the run keys of
-// checkpoint_legacy_defaults; 4 adds wd_initial.
-inline constexpr int checkpoint_metadata_version = 4;
+// checkpoint_legacy_defaults; 4 adds wd_initial; 5 adds the mask sampler's other settings
+// (local_targets_per_part ... mask_max_tries), which every earlier file ran at these defaults.
+inline constexpr int checkpoint_metadata_version = 5;
 
 // The run ("train") keys added after the first checkpoints, with the values that give the
 // behaviour of a file written without them: a checkpoint that lacks one is read with this value
@@ -54,7 +55,20 @@ inline constexpr int checkpoint_metadata_version = 4;
 inline const nlohmann::json& checkpoint_legacy_defaults() {
   static const nlohmann::json j = {{"layout_edges", ""},     {"layout_columns", ""}, {"bridges", "connect"},
                                    {"taxel_order", ""},      {"weight_decay_timing", "ijepa"},
-                                   {"wd_initial", -1.0}};
+                                   {"wd_initial", -1.0},
+                                   {"local_targets_per_part", 1},
+                                   {"global_targets_per_part", 1},
+                                   {"part_targets", "automatic"},
+                                   {"global_sampling", "stratified"},
+                                   {"context_sampling", "uniform"},
+                                   {"mask_scheme", "graph"},
+                                   {"block_target_scale", {0.15, 0.2}},
+                                   {"block_target_aspect", {0.75, 1.5}},
+                                   {"block_context_scale", {0.85, 1.0}},
+                                   {"block_context_aspect", {1.0, 1.0}},
+                                   {"block_targets", 4},
+                                   {"min_context_ratio", 0.15},
+                                   {"mask_max_tries", 32}};
   return j;
 }
 

@@ -380,16 +380,10 @@ class MaskCollator {
   void validate(bool has_grid) {
     const int n = num_tokens();
     const MaskConfig& c = cfg_;
-    require<ConfigError>(c.max_tries >= 1, "MaskConfig: max_tries = ", c.max_tries, ", expected >= 1");
-    require<ConfigError>(c.num_threads >= 0, "MaskConfig: num_threads = ", c.num_threads,
-                         ", expected >= 0 (0: OpenMP's default)");
-    require<ConfigError>(c.min_context_tokens >= -1, "MaskConfig: min_context_tokens = ",
-                         c.min_context_tokens, ", expected >= 0 (or -1: automatic)");
-    require<ConfigError>(c.min_context_ratio >= 0.0 && c.min_context_ratio < 1.0,
-                         "MaskConfig: min_context_ratio = ", c.min_context_ratio, ", expected in [0, 1)");
+    validate_mask_config(c);
     // Automatic (-1): 32, capped at half the smallest context draw so that a small skin keeps room
     // for its targets.
-    const bool ratio_ok = c.context_ratio.lo > 0 && c.context_ratio.lo < 1;  // checked below
+    const bool ratio_ok = c.context_ratio.lo > 0 && c.context_ratio.lo < 1;  // unchecked under ijepa_blocks
     const int automatic = ratio_ok ? std::min(32, static_cast<int>(std::floor(n * c.context_ratio.lo)) / 2) : 32;
     const int tokens = c.min_context_tokens >= 0 ? c.min_context_tokens : automatic;
     min_context_ = std::max({tokens, static_cast<int>(std::ceil(c.min_context_ratio * n - 1e-9)), 1});
@@ -401,19 +395,13 @@ class MaskCollator {
                            n, " tokens");
       require<ShapeError>(blocks_.grid().size() == n, "MaskCollator: the grid placement has ",
                           blocks_.grid().size(), " tokens, expected ", n);
-      detail::check_ratio_range(c.blocks.target_scale, "blocks.target_scale", true);
-      detail::check_ratio_range(c.blocks.context_scale, "blocks.context_scale", true);
-      detail::check_positive_range(c.blocks.target_aspect, "blocks.target_aspect");
-      detail::check_positive_range(c.blocks.context_aspect, "blocks.context_aspect");
-      require<ConfigError>(c.blocks.num_targets >= 1 && c.blocks.num_targets <= n,
+      require<ConfigError>(c.blocks.num_targets <= n,
                            "MaskConfig: blocks.num_targets = ", c.blocks.num_targets,
                            ", expected in [1, N = ", n, "]");
       for (int j = 0; j < c.blocks.num_targets; ++j) specs_.push_back({TargetKind::block, 0, 0});
       return;
     }
 
-    detail::check_ratio_range(c.context_ratio, "context_ratio");
-    detail::check_ratio_range(c.target_ratio, "target_ratio");
     per_part_ = c.part_targets == PartTargets::per_part ||
                 (c.part_targets == PartTargets::automatic && graph_.num_parts() >= 2);
     const int nl = per_part_ ? c.num_local_per_part : c.num_local;

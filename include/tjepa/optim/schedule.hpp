@@ -11,9 +11,12 @@
 // Let T be the total number of optimizer steps (epochs × steps per epoch) and W the warm-up
 // steps (warm-up epochs × steps per epoch).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <numbers>
+#include <string_view>
+#include <utility>
 
 #include "tjepa/core/error.hpp"
 
@@ -73,6 +76,11 @@ struct LinearMomentum {
 enum class WeightDecayTiming { reference, ijepa };
 
 inline const char* to_string(WeightDecayTiming t) { return t == WeightDecayTiming::ijepa ? "ijepa" : "reference"; }
+// The JSON names (core/json.hpp).
+constexpr auto json_names(WeightDecayTiming) {
+  return std::array{std::pair<std::string_view, WeightDecayTiming>{"reference", WeightDecayTiming::reference},
+                    std::pair<std::string_view, WeightDecayTiming>{"ijepa", WeightDecayTiming::ijepa}};
+}
 
 // The three schedules of a run, indexed by the optimizer step s = 0, 1, ..., T − 1.
 struct TrainingSchedule {

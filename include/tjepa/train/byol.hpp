@@ -105,7 +105,7 @@ inline ByolConfig byol_config(const TrainConfig& cfg, int axes) {
   c.encoder.in_channels = axes;
   c.image = TaxelImageConfig::for_channels(axes);
   c.image.range = 3.0;
-  c.clip_grad_norm = cfg.clip_grad_norm;
+  c.clip_grad_norm = cfg.step.clip_grad_norm;
   return c;
 }
 
@@ -282,7 +282,7 @@ class ByolObjective {
   ByolObjective(ByolModel<T>& model, const WindowSource& source, TaxelCanvas canvas, TrainConfig config)
       : data((config.validate(), source), config.seed, config.batch), model_(model), cfg_(std::move(config)),
         imager_(std::move(canvas), model.config.encoder.in_channels, model.config.image),
-        optimizer_(model.trainable(), cfg_.adamw()), schedule_(cfg_.schedule()) {
+        optimizer_(model.trainable(), cfg_.adamw), schedule_(cfg_.schedule.build()) {
     require<ShapeError>(source.axes() == model.config.encoder.in_channels, "ByolObjective: the windows have ",
                         source.axes(), " axes, the encoder takes ", model.config.encoder.in_channels, " channels");
     require<ShapeError>(imager_.canvas().taxels() == source.taxels(), "ByolObjective: the canvas places ",

@@ -126,17 +126,17 @@ struct DinoConfig : ContextEncoderConfig {
 };
 
 // The DINO config of a Tactile-JEPA run's encoder: the same tokenizer and encoder as
-// cfg.model(num_tokens, axes) plus a class row and a mask token; a head of hidden 4d, bottleneck
+// cfg.model_config(num_tokens, axes) plus a class row and a mask token; a head of hidden 4d, bottleneck
 // d and 16d prototypes (the reference: 2048, 256, 65536 at d = 192).
 inline DinoConfig dino_config(const TrainConfig& cfg, int num_tokens, int axes) {
-  const JepaConfig j = cfg.model(num_tokens, axes);
+  const JepaConfig j = cfg.model_config(num_tokens, axes);
   DinoConfig c = DinoConfig::reference(num_tokens, j.in_dim, axes);
   static_cast<ContextEncoderConfig&>(c) = static_cast<const ContextEncoderConfig&>(j);
   c.encoder.register_tokens = 1;
   c.encoder.mask_token = true;
   c.head = DinoHeadConfig{j.encoder.dim, 4 * j.encoder.dim, j.encoder.dim, 16 * j.encoder.dim};
-  c.drop_path = cfg.drop_path;
-  c.clip_grad_norm = cfg.clip_grad_norm;
+  c.drop_path = cfg.step.drop_path;
+  c.clip_grad_norm = cfg.step.clip_grad_norm;
   return c;
 }
 
@@ -443,7 +443,7 @@ class DinoObjective {
 
   DinoObjective(DinoModel<T>& model, const Source& source, TrainConfig config)
       : data((config.validate(), source), config.seed, config.batch), model_(model), cfg_(std::move(config)),
-        optimizer_(model.trainable(), cfg_.adamw()), schedule_(cfg_.schedule()) {}
+        optimizer_(model.trainable(), cfg_.adamw), schedule_(cfg_.schedule.build()) {}
   DinoObjective(const DinoObjective&) = delete;
   DinoObjective& operator=(const DinoObjective&) = delete;
 

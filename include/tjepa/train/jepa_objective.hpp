@@ -12,7 +12,7 @@
 //   masks  = collator.sample(B, streams::masks(seed), s)             sample i from stream s·B + i,
 //                                                                    then this shard's rows
 //   loss   = JepaStep::forward(x, masks, streams::noise(seed, s), first)
-//   update = JepaStep::update(AdamW, cfg.schedule(), s)              clip, AdamW, EMA
+//   update = JepaStep::update(AdamW, cfg.schedule.build(), s)        clip, AdamW, EMA
 // The config metadata of its checkpoints: {"objective": "jepa", "train": TrainConfig::to_json(),
 // "model": JepaConfig::to_json()}, which load_trained_model (train/trained_model.hpp) reads.
 #include <cstdint>
@@ -47,30 +47,32 @@ class JepaObjective {
   using stats_type = JepaStepStats;
 
   // The model and source must outlive the objective. The masks are drawn over `graph` (one node
-  // per token) as config.masks() says; `grid` places the tokens on a grid for
+  // per token) as config.masks says; `grid` places the tokens on a grid for
   // MaskConfig::scheme = ijepa_blocks. loss: JepaStep's loss (empty: config.loss).
   JepaObjective(JepaModel<T>& model, const Source& source, const TaxelGraph& graph, TrainConfig config,
                 JepaLoss<T> loss = {}, std::optional<GridPlacement> grid = std::nullopt)
-      : JepaObjective(model, source, MaskCollator(graph, (config.validate(), config.masks()), std::move(grid)),
+      : JepaObjective(model, source, MaskCollator(graph, (config.validate(), config.masks), std::move(grid)),
                       config, std::move(loss)) {}
 
-  // With a collator of the caller's (mask ablations beyond TrainConfig's keys).
+  // With a collator of the caller's: the run's masks become the collator's, so that its
+  // checkpoints record the masks drawn.
   JepaObjective(JepaModel<T>& model, const Source& source, MaskCollator collator, TrainConfig config,
                 JepaLoss<T> loss = {})
       : data((config.validate(), source), config.seed, config.batch), model_(model), collator_(std::move(collator)),
-        cfg_(std::move(config)), step_(model, cfg_.step(), std::move(loss)), optimizer_(model.trainable(), cfg_.adamw()),
-        schedule_(cfg_.schedule()) {
+        cfg_(std::move(config)), step_(model, cfg_.step, std::move(loss)), optimizer_(model.trainable(), cfg_.adamw),
+        schedule_(cfg_.schedule.build()) {
+    cfg_.masks = collator_.config();
     require<ConfigError>(collator_.num_tokens() == model_.num_tokens(), "JepaObjective: the mask graph has ",
                          collator_.num_tokens(), " tokens, the model ", model_.num_tokens());
     // One truth for the model's shape: the config's keys describe the model being trained.
     const JepaConfig& mc = model_.config;
-    require<ConfigError>(mc.encoder.dim == cfg_.dim && mc.encoder.depth == cfg_.depth &&
-                             mc.encoder.heads == cfg_.heads && mc.predictor.depth == cfg_.predictor_depth,
+    require<ConfigError>(mc.encoder.dim == cfg_.model.dim && mc.encoder.depth == cfg_.model.depth &&
+                             mc.encoder.heads == cfg_.model.heads && mc.predictor.depth == cfg_.model.predictor_depth,
                          "JepaObjective: the model has dim ", mc.encoder.dim, ", depth ", mc.encoder.depth, ", heads ",
-                         mc.encoder.heads, ", predictor_depth ", mc.predictor.depth, "; the config says ", cfg_.dim,
-                         ", ", cfg_.depth, ", ", cfg_.heads, ", ", cfg_.predictor_depth);
-    require<ConfigError>(mc.in_dim % cfg_.tau == 0, "JepaObjective: the model reads windows of ", mc.in_dim,
-                         " values per taxel, not a multiple of the config's tau = ", cfg_.tau);
+                         mc.encoder.heads, ", predictor_depth ", mc.predictor.depth, "; the config says ", cfg_.model.dim,
+                         ", ", cfg_.model.depth, ", ", cfg_.model.heads, ", ", cfg_.model.predictor_depth);
+    require<ConfigError>(mc.in_dim % cfg_.data.tau == 0, "JepaObjective: the model reads windows of ", mc.in_dim,
+                         " values per taxel, not a multiple of the config's tau = ", cfg_.data.tau);
   }
   JepaObjective(const JepaObjective&) = delete;
   JepaObjective& operator=(const JepaObjective&) = delete;
@@ -102,7 +104,7 @@ class JepaObjective {
   }
   void backward() { step_.backward(); }
   void all_reduce(const DataParallel<T>& dp, int count, int B) {
-    require<ConfigError>(!cfg_.standardize_targets, "JepaObjective: standardize_targets uses the whole batch's "
+    require<ConfigError>(!cfg_.step.standardize_targets, "JepaObjective: standardize_targets uses the whole batch's "
                          "statistics, which a data-parallel shard does not have");
     step_.all_reduce(dp, count, B);
   }

@@ -9,10 +9,13 @@
 // I-JEPA, re-normalizing the targets by a LayerNorm without affine (F.layer_norm(h, (d,)),
 // eps 1e-5), is normalize_rows.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <functional>
 #include <span>
+#include <string_view>
+#include <utility>
 
 #include "tjepa/core/detail/parallel.hpp"
 #include "tjepa/optim/detail/deterministic_sum.hpp"
@@ -22,6 +25,11 @@ namespace tjepa {
 enum class JepaLossKind { mse, smooth_l1 };
 
 inline const char* to_string(JepaLossKind k) { return k == JepaLossKind::mse ? "mse" : "smooth_l1"; }
+// The JSON names (core/json.hpp).
+constexpr auto json_names(JepaLossKind) {
+  return std::array{std::pair<std::string_view, JepaLossKind>{"mse", JepaLossKind::mse},
+                    std::pair<std::string_view, JepaLossKind>{"smooth_l1", JepaLossKind::smooth_l1}};
+}
 
 // PyTorch's F.layer_norm default eps.
 inline constexpr double target_norm_eps = 1e-5;

@@ -285,15 +285,15 @@ MaeStepStats mae_train_step(MaeModel<T>& model, AdamW<T>& opt, const TrainingSch
 }
 
 // The MAE config of a Tactile-JEPA run's encoder: the same tokenizer and encoder as
-// cfg.model(num_tokens, axes), Tactile-JEPA's predictor shape as the decoder.
+// cfg.model_config(num_tokens, axes), Tactile-JEPA's predictor shape as the decoder.
 inline MaeConfig mae_config(const TrainConfig& cfg, int num_tokens, int axes, double mask_ratio = 0.75) {
-  const JepaConfig j = cfg.model(num_tokens, axes);
+  const JepaConfig j = cfg.model_config(num_tokens, axes);
   MaeConfig m = MaeConfig::reference(num_tokens, j.in_dim, axes);
   static_cast<ContextEncoderConfig&>(m) = static_cast<const ContextEncoderConfig&>(j);
   m.decoder = j.predictor;
   m.mask_ratio = mask_ratio;
-  m.drop_path = cfg.drop_path;
-  m.clip_grad_norm = cfg.clip_grad_norm;
+  m.drop_path = cfg.step.drop_path;
+  m.clip_grad_norm = cfg.step.clip_grad_norm;
   return m;
 }
 
@@ -314,8 +314,8 @@ class MaeObjective {
   // The model and source must outlive the objective.
   MaeObjective(MaeModel<T>& model, const Source& source, TrainConfig config)
       : data((config.validate(), source), config.seed, config.batch), model_(model), cfg_(std::move(config)),
-        masking_(model.num_tokens(), model.config.mask_ratio), optimizer_(model.trainable(), cfg_.adamw()),
-        schedule_(cfg_.schedule()) {}
+        masking_(model.num_tokens(), model.config.mask_ratio), optimizer_(model.trainable(), cfg_.adamw),
+        schedule_(cfg_.schedule.build()) {}
   MaeObjective(const MaeObjective&) = delete;
   MaeObjective& operator=(const MaeObjective&) = delete;
 

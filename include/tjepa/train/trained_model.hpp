@@ -4,7 +4,7 @@
 //
 //   TrainedModel m = load_trained_model("runs/x/checkpoint.safetensors");
 //   m.track(recording);                                     // drift tracking, if the run used it
-//   WindowSource src(recording, WindowSpec{m.config.tau}, {}, m.pre);
+//   WindowSource src(recording, WindowSpec{m.config.data.tau}, {}, m.pre);
 //   embed_windows(m.model->target, m.model->tokenizer, m.model->encoder, src, ids);
 //
 // data_state() writes the statistics a Trainer stores with its checkpoints (Trainer::extras).

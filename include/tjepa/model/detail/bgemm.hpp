@@ -15,9 +15,12 @@
 // Where the translation unit is compiled without AVX512-BF16 (`native` is false), the bf16
 // products fall back to the float GEMM at compile time: Precision::bf16 then computes in fp32
 // (resolve()).
+#include <array>
 #include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <string_view>
+#include <utility>
 
 #include "tjepa/core/error.hpp"
 #include "tjepa/model/detail/sgemm.hpp"
@@ -36,6 +39,11 @@ namespace tjepa {
 enum class Precision { fp32, bf16 };
 
 inline const char* precision_name(Precision p) { return p == Precision::bf16 ? "bf16" : "fp32"; }
+// The JSON names (core/json.hpp).
+constexpr auto json_names(Precision) {
+  return std::array{std::pair<std::string_view, Precision>{"fp32", Precision::fp32},
+                    std::pair<std::string_view, Precision>{"bf16", Precision::bf16}};
+}
 
 // Whether this translation unit was compiled with AVX512-BF16 (-mavx512bf16, or a -march that has
 // it): only then does Precision::bf16 run bf16 products; elsewhere it runs fp32.
