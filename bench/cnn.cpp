@@ -51,10 +51,10 @@ void alexnet(benchmark::State& state, bool train) {
   std::vector<float> f(static_cast<std::size_t>(B) * c.out_dim()), df(f.size(), 1e-3f);
   tjepa::AlexNetCache<float> cache;
   net.forward(ps, x.data(), B, f.data(), cache);  // warm-up: the buffers grow once
-  if (train) net.backward(ps, df.data(), cache, static_cast<float*>(nullptr));
+  if (train) net.backward(ps, df.data(), cache);
   for (auto _ : state) {
     net.forward(ps, x.data(), B, f.data(), cache);
-    if (train) net.backward(ps, df.data(), cache, static_cast<float*>(nullptr));
+    if (train) net.backward(ps, df.data(), cache);
     benchmark::DoNotOptimize(f.data());
   }
   const double flops = (train ? 3.0 : 1.0) * tjepa::AlexNet::flops(c, B);

@@ -217,7 +217,7 @@ TEST_SUITE("nn") {
     };
     ps.zero_grad();
     enc.forward(ps, {tokens.data(), B, ctx, masked}, part.data(), cache, ws, tokens_only);
-    enc.backward(ps, wk.data(), static_cast<double*>(nullptr), cache, ws);
+    enc.backward(ps, wk.data(), cache, ws);
     test::check_param_gradients(ps, part_loss);
     // Masked flags must cover every context token.
     CHECK_THROWS_WITH_AS(enc.forward(ps, {tokens.data(), B, ctx, std::span<const std::uint8_t>(masked.data(), 4)},
@@ -681,6 +681,14 @@ TEST_SUITE("nn") {
     CHECK(gradient_error(x.data(), dx.data(), x.size(), loss) < grad_tolerance);
     for (int c = 0; c < d; ++c) CHECK(dx[std::size_t(2) * d + c] == 0.0);  // a padded token
     test::check_param_gradients(ps, loss);
+    // The pooling alone: inference equals the cached pass; a key_valid of the wrong size is named.
+    std::vector<double> q_inference(std::size_t(B) * d), q_cached(q_inference.size());
+    ProbeCache<double> pool_cache;
+    probe.pool(ps, {x.data(), B, L, valid}, q_inference.data(), ws);
+    probe.pool(ps, {x.data(), B, L, valid}, q_cached.data(), pool_cache, ws);
+    CHECK(q_inference == q_cached);
+    CHECK_THROWS_WITH_AS(probe.pool(ps, {x.data(), B, L, std::span(valid).first(3)}, q_inference.data(), ws),
+                         doctest::Contains("AttentiveProbe::pool: 3 key_valid entries"), ShapeError);
     // NaN in the padded tokens changes nothing: the same outputs and the same gradients.
     auto run = [&] {
       std::vector<double> out(y.size()), grads;

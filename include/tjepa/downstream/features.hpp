@@ -105,7 +105,7 @@ class EncoderFeatures {
     T* dtok = detail::grow(dtokens_, M);
     std::fill(dtok, dtok + M, T(0));
     enc_.backward(ps_, dx, dtok, enc_cache_, ws_);
-    tok_.backward(ps_, dtok, static_cast<T*>(nullptr), tok_cache_, ws_);
+    tok_.backward(ps_, dtok, tok_cache_, ws_);
   }
 
  private:

@@ -95,7 +95,7 @@ struct SequenceHead {
     const std::size_t M = std::size_t(B) * L, Md = M * d;
     c.B = B;
     T* h0 = detail::grow(c.h0, Md);
-    pool.pool(ps, x, int(M), N, nullptr, h0, &c.pool, ws);
+    pool.pool(ps, {x, int(M), N}, h0, c.pool, ws);
     const T* pe = ps.value(pos);
     for (std::size_t r = 0; r < M; ++r)
       for (int i = 0; i < d; ++i) h0[r * d + i] += pe[(r % L) * d + i];

@@ -193,7 +193,7 @@ struct AlexNet {
   // intact (a second backward adds the same gradients again); the images of that forward must
   // still be valid.
   template <class T>
-  void backward(ParamSet<T>& ps, const T* dfeatures, AlexNetCache<T>& c, T* dimages) const {
+  void backward(ParamSet<T>& ps, const T* dfeatures, AlexNetCache<T>& c, T* dimages = nullptr) const {
     check_params(ps, convs[4].bias, "AlexNet::backward");
     require<ConfigError>(c.B > 0 && c.images, "AlexNet::backward: the cache holds no forward pass");
     require<ShapeError>(dfeatures != nullptr, "AlexNet::backward: dfeatures is null");

@@ -83,11 +83,33 @@ struct AttentiveProbe {
   // The pooling's last parameter (checked to belong to the ParamSet a call gets).
   ParamId pool_last() const { return taxel_pooling() ? taxel.fc.weight : mlp.fc2.weight; }
 
-  // The pooling alone (the sequence head pools each window this way): x [B, L, d] → q₂ [B, d].
-  // key_valid [B, L] or nullptr. cache == nullptr: inference.
+  // The pooling alone (the sequence head pools each window this way): in.x [B, L, d] → q₂ [B, d];
+  // inference.
   template <class T>
-  void pool(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* q2,
-            std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
+  void pool(const ParamSet<T>& ps, const ProbeInput<std::type_identity_t<T>>& in, T* q2, Workspace<T>& ws) const {
+    pool_rows(ps, in.x, in.batch, in.length, key_valid_of(in, "AttentiveProbe::pool"), q2, nullptr, ws);
+  }
+  // The same, keeping in `cache` what pool_backward needs.
+  template <class T>
+  void pool(const ParamSet<T>& ps, const ProbeInput<std::type_identity_t<T>>& in, T* q2,
+            std::type_identity_t<ProbeCache<T>>& cache, Workspace<T>& ws) const {
+    pool_rows(ps, in.x, in.batch, in.length, key_valid_of(in, "AttentiveProbe::pool"), q2, &cache, ws);
+  }
+
+ private:
+  // in.key_valid as a pointer (nullptr: every token valid), checked to hold B·L entries.
+  template <class T>
+  static const std::uint8_t* key_valid_of(const ProbeInput<T>& in, const char* who) {
+    require<ShapeError>(in.key_valid.empty() || in.key_valid.size() == std::size_t(in.batch) * std::size_t(in.length),
+                        who, ": ", in.key_valid.size(), " key_valid entries, expected none or B·L = ",
+                        std::size_t(in.batch) * std::size_t(in.length));
+    return in.key_valid.empty() ? nullptr : in.key_valid.data();
+  }
+
+  // x [B, L, d] → q₂ [B, d]; key_valid [B, L] or nullptr; cache == nullptr: inference.
+  template <class T>
+  void pool_rows(const ParamSet<T>& ps, const T* x, int B, int L, const std::uint8_t* key_valid, T* q2,
+                 std::type_identity_t<ProbeCache<T>>* cache, Workspace<T>& ws) const {
     check_params(ps, pool_last(), "AttentiveProbe::pool");
     require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::pool: B = ", B, ", L = ", L, ", expected > 0");
     if (taxel_pooling()) {
@@ -143,6 +165,7 @@ struct AttentiveProbe {
     mlp.forward(ps, qn, h, detail::grow(ws.hidden2, std::size_t(B) * hid), q2, B, q2);
   }
 
+ public:
   // in.x [B, L, d] → y [B, out]: inference.
   template <class T>
   void forward(const ParamSet<T>& ps, const ProbeInput<std::type_identity_t<T>>& in, T* y, Workspace<T>& ws) const {
@@ -161,16 +184,13 @@ struct AttentiveProbe {
            Workspace<T>& ws) const {
     const T* x = in.x;
     const int B = in.batch, L = in.length;
-    require<ShapeError>(in.key_valid.empty() || in.key_valid.size() == std::size_t(B) * std::size_t(L),
-                        "AttentiveProbe::forward: ", in.key_valid.size(), " key_valid entries, expected none or B·L = ",
-                        std::size_t(B) * std::size_t(L));
-    const std::uint8_t* key_valid = in.key_valid.empty() ? nullptr : in.key_valid.data();
+    const std::uint8_t* key_valid = key_valid_of(in, "AttentiveProbe::forward");
     require<ConfigError>(has_head(), "AttentiveProbe::forward: the probe was built without a head (out_dim 0)");
     check_params(ps, head.fc2.weight, "AttentiveProbe::forward");
     require<ShapeError>(B > 0 && L > 0, "AttentiveProbe::forward: B = ", B, ", L = ", L, ", expected > 0");
     const int d = config.dim, hh = head.hidden();
     T* q2 = detail::grow(cache ? cache->q2 : ws.dx, std::size_t(B) * d);
-    pool(ps, x, B, L, key_valid, q2, cache, ws);
+    pool_rows(ps, x, B, L, key_valid, q2, cache, ws);
     T* z = detail::grow(cache ? cache->z : ws.dhidden, std::size_t(B) * hh);
     T* zact = detail::grow(ws.hidden2, std::size_t(B) * hh);
     head.forward(ps, q2, z, zact, y, B);

@@ -130,7 +130,12 @@ struct Encoder {
   }
 
   // dout (as out: [B, R + K, d], or [B, K, d] without the register rows) → parameter gradients
-  // (added to ps) and dtokens [B, N, d] += (may be nullptr).
+  // (added to ps) only.
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dout, const EncoderCache<T>& cache, Workspace<T>& ws) const {
+    backward(ps, dout, static_cast<T*>(nullptr), cache, ws);
+  }
+  // The same, and dtokens [B, N, d] += (may be nullptr).
   template <class T>
   void backward(ParamSet<T>& ps, const T* dout, std::type_identity_t<T>* dtokens, const EncoderCache<T>& cache, Workspace<T>& ws) const {
     check_params(ps, norm.bias, "Encoder::backward");

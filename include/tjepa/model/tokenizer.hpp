@@ -140,6 +140,11 @@ struct Tokenizer {
   }
 
  public:
+  // dout [B, G, dim] → parameter gradients only.
+  template <class T>
+  void backward(ParamSet<T>& ps, const T* dout, const TokenizerCache<T>& c, Workspace<T>& ws) const {
+    backward(ps, dout, static_cast<T*>(nullptr), c, ws);
+  }
   // dout [B, G, dim] → parameter gradients and dx [B, G, width] += (may be nullptr; padding
   // columns get nothing).
   template <class T>

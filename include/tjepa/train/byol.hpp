@@ -233,7 +233,7 @@ void byol_backward(ByolModel<T>& model, ByolWorkspace<T>& w) {
     model.predictor.backward(model.predictor_params, w.dp.data() + po, w.z.data() + po, dz + po, w.predictor_cache[v]);
     model.projector.backward(model.projector_params, dz + po, w.features.data() + fo, df + fo, w.projector_cache[v]);
   }
-  model.encoder.backward(model.online, df, w.encoder_cache, static_cast<T*>(nullptr));
+  model.encoder.backward(model.online, df, w.encoder_cache);
   w.B = 0;
 }
 

@@ -400,7 +400,7 @@ void dino_backward(DinoModel<T>& model, DinoWorkspace<T>& w) {
     for (int l = 0; l < L; ++l)
       for (std::size_t i = 0; i < BNd; ++i) dtokens[i] += dtl[BNd * std::size_t(l) + i];
   }
-  model.tokenizer.backward(model.student, dtokens, static_cast<T*>(nullptr), w.tokenizer_cache, w.ws);
+  model.tokenizer.backward(model.student, dtokens, w.tokenizer_cache, w.ws);
   w.B = 0;
 }
 

@@ -246,7 +246,7 @@ class JepaStep {
     T* dtokens = w_.tokens.data();
     std::fill(dtokens, dtokens + BN * d, T(0));
     model.encoder.backward(model.context, dz, dtokens, w_.context_cache, w_.ws);
-    model.tokenizer.backward(model.context, dtokens, static_cast<T*>(nullptr), w_.tokenizer_cache, w_.ws);
+    model.tokenizer.backward(model.context, dtokens, w_.tokenizer_cache, w_.ws);
     backward_ready_ = false;  // the token buffer now holds gradients
   }
 

@@ -254,7 +254,7 @@ void mae_backward(MaeModel<T>& model, MaeWorkspace<T>& w) {
   T* dtokens = w.tokens.data();
   std::fill(dtokens, dtokens + static_cast<std::size_t>(B) * N * d, T(0));
   model.encoder.backward(model.context, dz, dtokens, w.encoder_cache, w.ws);
-  model.tokenizer.backward(model.context, dtokens, static_cast<T*>(nullptr), w.tokenizer_cache, w.ws);
+  model.tokenizer.backward(model.context, dtokens, w.tokenizer_cache, w.ws);
 }
 
 // What one MAE training step reports: loss = the mean squared reconstruction error over the
