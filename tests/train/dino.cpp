@@ -145,8 +145,25 @@ TEST_SUITE("train") {
       const DinoViews again = sample_dino_views(c, 3, 5, s);  // deterministic in (seed, step)
       CHECK(again.global == v.global);
       CHECK(again.ibot == v.ibot);
+      // A shard (data parallel): samples [1, 3) of each view, in view-major order.
+      const DinoViews part = dino_views_shard(v, 1, 2);
+      REQUIRE(part.B == 2);
+      REQUIRE(part.global.size() == std::size_t(2 * 2 * v.Kg));
+      for (int g = 0; g < 2; ++g)
+        for (int b = 0; b < 2; ++b)
+          for (int k = 0; k < v.Kg; ++k) {
+            const std::size_t at = std::size_t((g * 2 + b) * v.Kg + k), from = std::size_t((g * 3 + 1 + b) * v.Kg + k);
+            CHECK(part.global[at] == v.global[from]);
+            CHECK(part.ibot[at] == v.ibot[from]);
+          }
+      for (int l = 0; l < 2; ++l)
+        for (int b = 0; b < 2; ++b)
+          CHECK(part.local[std::size_t((l * 2 + b) * v.Kl)] == v.local[std::size_t((l * 3 + 1 + b) * v.Kl)]);
+      CHECK(part.ibot_rows.size() == static_cast<std::size_t>(std::count(part.ibot.begin(), part.ibot.end(), 1)));
     }
     CHECK(sample_dino_views(c, 3, 5, 0).global != sample_dino_views(c, 3, 6, 0).global);
+    CHECK_THROWS_WITH_AS(dino_views_shard(sample_dino_views(c, 3, 5, 0), 2, 2), doctest::Contains("samples [2, 4) of 3"),
+                         ShapeError);
   }
 
   TEST_CASE("DINO loss: analytic gradient of every student parameter = central differences") {

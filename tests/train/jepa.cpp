@@ -929,6 +929,69 @@ TEST_SUITE("train") {
       CHECK(std::memcmp(a->values().data(), b->values().data(), a->values().size_bytes()) == 0);
   }
 
+  TEST_CASE("DINO data parallel: 2 ranks (threads) average their shards' losses / centers move toward the global mean") {
+    // Each rank keeps its shard of the global batch's views; KoLeo reads its shard (as DINOv2 under
+    // DDP), so the global loss of a step is the mean of the shards' losses. The centers' sums and
+    // counts are summed over the ranks: after step 0 the centers are the one-process run's.
+    constexpr int R = 2;
+    const auto source = blob_source(200, 1);
+    const TrainConfig tc = blob_trainer_config(3, 1, 5);
+    DinoConfig dc = dino_config(tc, 36, 2);
+    dc.local_views = 2;
+    double expect = 0;
+    std::vector<double> shard_sums;
+    {
+      DinoModel<float> m(dc, 7);
+      DinoObjective<float> o(m, source, tc);
+      const auto order = o.epoch_order(0);
+      for (int r = 0; r < R; ++r) {
+        const int first = 16 * r / R, last = 16 * (r + 1) / R;
+        const std::span<const std::int64_t> ids(order.data() + first, std::size_t(last - first));
+        expect += o.forward(StepBatch{ids, 16, first, 0}) * (last - first) / 16.0;
+        const std::vector<double>& cs = o.workspace().center_sums;
+        shard_sums.resize(cs.size(), 0.0);
+        for (std::size_t i = 0; i < cs.size(); ++i) shard_sums[i] += cs[i];
+      }
+      // The whole batch at once: the shards' views are its views, so the sums agree.
+      o.forward(StepBatch{std::span<const std::int64_t>(order.data(), 16), 16, 0, 0});
+      const std::vector<double>& whole = o.workspace().center_sums;
+      REQUIRE(whole.size() == shard_sums.size());
+      for (std::size_t i = 0; i < whole.size(); ++i) CHECK(shard_sums[i] == doctest::Approx(whole[i]).epsilon(1e-9));
+      const std::size_t P = whole.size() / 2 - 1;
+      CHECK(whole[P] == 2 * 16);  // the class rows: 2 global views of 16 samples
+      CHECK(whole[2 * P + 1] > 0);  // masked patches
+    }
+    DinoModel<float> single_model(dc, 7);
+    DinoTrainer<float> single(single_model, source, tc);
+    single.run(1);
+    ThreadRanks<R> ranks;
+    std::vector<std::unique_ptr<DinoModel<float>>> models;
+    for (int r = 0; r < R; ++r) models.push_back(std::make_unique<DinoModel<float>>(dc, 7));
+    std::vector<double> loss[R];
+    std::vector<float> centers_after_0[R];
+    ranks.run([&](int r) {
+      DinoTrainer<float> t(*models[std::size_t(r)], source, tc);
+      t.parallel = ranks.parallel(r);
+      for (const auto& st : t.run(1)) loss[r].push_back(st.loss);
+      const auto c = models[std::size_t(r)]->centers.values();
+      centers_after_0[r].assign(c.begin(), c.end());
+      for (const auto& st : t.run()) loss[r].push_back(st.loss);
+    });
+    REQUIRE(loss[0].size() == 3);
+    CHECK(loss[1] == loss[0]);
+    CHECK(loss[0][0] == doctest::Approx(expect).epsilon(1e-6));
+    const auto c1 = single_model.centers.values();
+    REQUIRE(centers_after_0[0].size() == c1.size());
+    double worst = 0;
+    for (std::size_t i = 0; i < c1.size(); ++i)
+      worst = std::max(worst, std::abs(double(centers_after_0[0][i]) - double(c1[i])) / (std::abs(double(c1[i])) + 1e-6));
+    CHECK(worst < 1e-5);
+    for (const auto& [a, b] : {std::pair{&models[0]->student, &models[1]->student},
+                               std::pair{&models[0]->teacher_head, &models[1]->teacher_head},
+                               std::pair{&models[0]->centers, &models[1]->centers}})
+      CHECK(std::memcmp(a->values().data(), b->values().data(), a->values().size_bytes()) == 0);
+  }
+
   TEST_CASE("a NaN stops the trainer with NumericError and leaves the last checkpoint intact") {
     const auto source = blob_source(100, 2);
     JepaModel<float> model(blob_config(), 3);

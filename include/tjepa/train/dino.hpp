@@ -231,6 +231,28 @@ inline DinoViews sample_dino_views(const DinoConfig& c, int B, std::uint64_t see
   return v;
 }
 
+// The views of samples [first, first + n) of v (a data-parallel rank's shard of the global batch).
+inline DinoViews dino_views_shard(const DinoViews& v, int first, int n) {
+  require<ShapeError>(first >= 0 && n > 0 && first + n <= v.B, "dino_views_shard: samples [", first, ", ",
+                      first + n, ") of ", v.B);
+  if (first == 0 && n == v.B) return v;
+  DinoViews out;
+  out.B = n, out.Kg = v.Kg, out.Kl = v.Kl;
+  auto rows = [&](const auto& all, auto& part, int K) {  // view-major [views·B, K] → [views·n, K]
+    const std::size_t views = all.size() / (std::size_t(v.B) * K);
+    for (std::size_t g = 0; g < views; ++g) {
+      const auto from = all.begin() + std::ptrdiff_t((g * v.B + first) * std::size_t(K));
+      part.insert(part.end(), from, from + std::ptrdiff_t(std::size_t(n) * K));
+    }
+  };
+  rows(v.global, out.global, v.Kg);
+  rows(v.local, out.local, v.Kl);
+  rows(v.ibot, out.ibot, v.Kg);
+  for (std::size_t i = 0; i < out.ibot.size(); ++i)
+    if (out.ibot[i]) out.ibot_rows.push_back(static_cast<int>(i));
+  return out;
+}
+
 struct DinoStepStats : StepStats {
   double momentum = 0;      // the teacher's EMA momentum this step used
   double teacher_temp = 0;  // τₜ this step used
@@ -257,6 +279,10 @@ struct DinoWorkspace {
   AlignedVector<T> dout_g, dout_l;
   DinoViews views;
   double dino = 0, ibot = 0, koleo = 0;
+  // The teacher's rows of the last forward summed per prototype, then their count: [P + 1] for
+  // the class center, then [P + 1] for the patch center. Data parallel, they are summed over the
+  // ranks, so that the centers move toward the global batch's mean.
+  std::vector<double> center_sums;
   int B = 0;  // the batch of the forward pass held; 0: none
 };
 
@@ -268,9 +294,11 @@ inline double dino_teacher_temp(const DinoConfig& c, std::int64_t s, std::int64_
 }
 
 // The DINO loss of batch x [B, N, W] with step s's views; keeps in w what dino_backward needs.
+// first_sample: the batch's offset in the global batch (data parallel), so that each rank's
+// drop-path noise is its own.
 template <class T>
 double dino_forward(DinoModel<T>& model, const T* x, int B, const DinoViews& v, double teacher_temp, DinoWorkspace<T>& w,
-                    std::uint64_t noise_seed) {
+                    std::uint64_t noise_seed, std::uint64_t first_sample = 0) {
   const DinoConfig& c = model.config;
   const int N = model.num_tokens(), d = model.dim(), G = c.global_views, L = c.local_views, P = c.head.prototypes;
   const int R = c.encoder.register_tokens, Kg = v.Kg, Kl = v.Kl;
@@ -289,13 +317,13 @@ double dino_forward(DinoModel<T>& model, const T* x, int B, const DinoViews& v, 
   const T* tg = repeat(w.tokens_g, tokens, G);
   T* out_g = detail::grow(w.out_g, std::size_t(G) * B * (R + Kg) * d);
   model.encoder.forward(model.student, {tg, G * B, v.global, v.ibot}, out_g, w.global_cache, w.ws,
-                        EncoderOptions{DropPath{c.drop_path, noise()}, nullptr});
+                        EncoderOptions{DropPath{c.drop_path, noise(), first_sample * std::uint64_t(G)}, nullptr});
   T* out_l = nullptr;
   if (L > 0) {
     const T* tl = repeat(w.tokens_l, tokens, L);
     out_l = detail::grow(w.out_l, std::size_t(L) * B * (R + Kl) * d);
     model.encoder.forward(model.student, {tl, L * B, v.local}, out_l, w.local_cache, w.ws,
-                          EncoderOptions{DropPath{c.drop_path, noise()}, nullptr});
+                          EncoderOptions{DropPath{c.drop_path, noise(), first_sample * std::uint64_t(L)}, nullptr});
   }
   // The teacher: its own tokenizer pass, the global views unmasked.
   T* ttok = detail::grow(w.teacher_tokens, BNd * std::size_t(G));
@@ -356,6 +384,15 @@ double dino_forward(DinoModel<T>& model, const T* x, int B, const DinoViews& v, 
       koleo += c.koleo_weight * koleo_loss(rows + std::size_t(g) * B * d, B, d, drows + std::size_t(g) * B * d,
                                            c.koleo_weight);
   w.dino = dino, w.ibot = ibot, w.koleo = koleo;
+  // The centers' sums: rows in order, each summed along (no strided reads).
+  w.center_sums.assign(2 * (std::size_t(P) + 1), 0.0);
+  auto sums = [&](const T* teacher, int M, double* sum) {
+    for (int i = 0; i < M; ++i)
+      for (int k = 0; k < P; ++k) sum[k] += double(teacher[std::size_t(i) * P + k]);
+    sum[P] = M;
+  };
+  sums(t, G * B, w.center_sums.data());
+  sums(t + std::size_t(G) * B * P, Mp, w.center_sums.data() + P + 1);
   w.views = v;
   w.B = B;
   return dino + ibot + koleo;
@@ -415,26 +452,28 @@ DinoStepStats dino_update(DinoModel<T>& model, AdamW<T>& opt, const TrainingSche
   st.momentum = schedule.momentum_at(s);
   ema_update(model.teacher, model.student, st.momentum);
   ema_update(model.teacher_head, model.student_head, st.momentum);
-  const int P = model.config.head.prototypes, GB = model.config.global_views * w.views.B;
-  const int Mp = static_cast<int>(w.views.ibot_rows.size());
+  const int P = model.config.head.prototypes;
+  require<ConfigError>(w.center_sums.size() == 2 * (std::size_t(P) + 1), "dino_update: no forward pass's center sums");
   const double m = model.config.center_momentum;
-  std::vector<double> sum(static_cast<std::size_t>(P));
-  auto move = [&](ParamId id, const T* rows, int M) {  // rows in order, each summed along (no strided reads)
+  auto move = [&](ParamId id, const double* sum) {
+    const double M = sum[P];
     if (M <= 0) return;
-    std::fill(sum.begin(), sum.end(), 0.0);
-    for (int i = 0; i < M; ++i)
-      for (int k = 0; k < P; ++k) sum[std::size_t(k)] += double(rows[std::size_t(i) * P + k]);
     T* cen = model.centers.value(id);
-    for (int k = 0; k < P; ++k) cen[k] = T(m * double(cen[k]) + (1 - m) * sum[std::size_t(k)] / M);
+    for (int k = 0; k < P; ++k) cen[k] = T(m * double(cen[k]) + (1 - m) * sum[k] / M);
   };
-  move(model.center, w.teacher_logits.data(), GB);
-  move(model.patch_center, w.teacher_logits.data() + std::size_t(GB) * P, Mp);
+  move(model.center, w.center_sums.data());
+  move(model.patch_center, w.center_sums.data() + P + 1);
   return st;
 }
 
 // DINO pre-training as an Objective (train/objective.hpp), with the data order, schedule and
-// AdamW of a JepaObjective of the same TrainConfig. Not data parallel: its centers and KoLeo term
-// read the whole batch. Checkpoint metadata: {"objective": "dino", "train": cfg, "dino": config}.
+// AdamW of a JepaObjective of the same TrainConfig. Checkpoint metadata: {"objective": "dino",
+// "train": cfg, "dino": config}.
+// Data parallel as the reference (DINOv2 under DistributedDataParallel) runs it: each rank draws
+// the global batch's views and keeps its shard's; the DINO and iBOT losses and KoLeo are its
+// shard's (KoLeo's neighbours are the shard's samples); gradients and losses are averaged over
+// the global batch; the centers move toward the global batch's teacher mean (the rows' sums and
+// counts summed over the ranks).
 template <class T, class Source = WindowSource>
 class DinoObjective {
  public:
@@ -465,12 +504,20 @@ class DinoObjective {
     require<ConfigError>(model_.config.group_size.empty() || data.to_tokens,
                          "DinoObjective: a grouped tokenizer needs its own data.to_tokens");
     const T* x = data.tokens(b.ids, model_.num_tokens(), model_.token_width());
-    const DinoViews v = sample_dino_views(model_.config, b.size(), streams::masks(cfg_.seed), static_cast<std::uint64_t>(b.step));
+    const DinoViews all = sample_dino_views(model_.config, b.batch, streams::masks(cfg_.seed), static_cast<std::uint64_t>(b.step));
     teacher_temp_ = dino_teacher_temp(model_.config, b.step, total_steps());
-    loss_ = dino_forward(model_, x, b.size(), v, teacher_temp_, w_, streams::noise(cfg_.seed, b.step));
+    loss_ = dino_forward(model_, x, b.size(), dino_views_shard(all, b.first, b.size()), teacher_temp_, w_,
+                         streams::noise(cfg_.seed, b.step), static_cast<std::uint64_t>(b.first));
     return loss_;
   }
   void backward() { dino_backward(model_, w_); }
+  void all_reduce(const DataParallel<T>& dp, int count, int B) {
+    double stats[4] = {loss_, w_.dino, w_.ibot, w_.koleo};
+    const auto parts = model_.trainable();
+    all_reduce_mean<T>(parts, stats, dp, count, B);
+    loss_ = stats[0], w_.dino = stats[1], w_.ibot = stats[2], w_.koleo = stats[3];
+    dp.sum_stats(w_.center_sums);
+  }
   DinoStepStats update(std::int64_t s) {
     DinoStepStats st = dino_update(model_, optimizer_, schedule_, s, loss_, w_);
     st.teacher_temp = teacher_temp_;
