@@ -232,20 +232,21 @@ struct ResampleAxis {
     first.resize(std::size_t(out)), count.resize(std::size_t(out));
     weight.assign(std::size_t(out) * std::size_t(span), 0.f);
     const int lo = static_cast<int>(std::floor(start)), hi = static_cast<int>(std::ceil(start + length));
+    std::vector<double> w(static_cast<std::size_t>(span));  // one output's taps: at most 2·support + 1 <= span
     for (int i = 0; i < out; ++i) {
       const double center = scale * (i + 0.5);  // in crop coordinates
       const int xmin = std::max(static_cast<int>(center - support + 0.5), 0);
       const int xmax = std::min(static_cast<int>(center + support + 0.5), hi - lo);
+      const int taps = std::max(xmax - xmin, 0);
+      require<ShapeError>(taps <= span, "ResampleAxis: ", taps, " taps, room for ", span);
       double total = 0;
-      std::vector<double> w;
       for (int j = xmin; j < xmax; ++j) {
         const double t = std::abs((j - center + 0.5) * inv);
-        w.push_back(t < 1 ? 1 - t : 0);
-        total += w.back();
+        w[std::size_t(j - xmin)] = t < 1 ? 1 - t : 0;
+        total += w[std::size_t(j - xmin)];
       }
       first[std::size_t(i)] = std::clamp(lo + xmin, 0, input_size - 1);
-      count[std::size_t(i)] = std::min<int>(static_cast<int>(w.size()), input_size - first[std::size_t(i)]);
-      require<ShapeError>(count[std::size_t(i)] <= span, "ResampleAxis: ", count[std::size_t(i)], " taps, room for ", span);
+      count[std::size_t(i)] = std::min<int>(taps, input_size - first[std::size_t(i)]);
       for (int k = 0; k < count[std::size_t(i)]; ++k)
         weight[std::size_t(i) * std::size_t(span) + std::size_t(k)] = total > 0 ? float(w[std::size_t(k)] / total) : 0.f;
     }

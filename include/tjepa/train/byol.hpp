@@ -35,6 +35,7 @@
 #include <ostream>
 #include <span>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -256,17 +257,28 @@ inline int byol_frame(const ByolConfig& c, int length) {
   return t;
 }
 
-// Images [n, S, S, A] of frame `frame` of each window of wb; rng (one stream per image, drawn in
-// order) augments, nullptr does not.
-template <class T>
-void byol_images(TaxelImager& imager, const WindowBatch& wb, int frame, T* out, Rng* rng) {
+// Images [n, S, S, A] of frame `frame` of each window of wb, written straight into out when T is
+// float; rng_of(b) is the stream that augments window b's image (nullptr: not augmented).
+template <class T, class RngOf>
+  requires std::is_invocable_r_v<Rng*, RngOf&, int>
+void byol_images(TaxelImager& imager, const WindowBatch& wb, int frame, T* out, RngOf&& rng_of) {
   const std::size_t per = imager.image_values();
-  std::vector<float> img(per);
+  std::vector<float> img(std::is_same_v<T, float> ? 0 : per);
   for (int b = 0; b < wb.batch; ++b) {
     const float* x = wb.x.data() + std::size_t(b) * wb.per_window() + std::size_t(frame) * std::size_t(wb.axes);
-    imager.image(img.data(), x, std::size_t(wb.length) * std::size_t(wb.axes), 1, rng);
-    std::copy(img.begin(), img.end(), out + std::size_t(b) * per);
+    T* dst = out + std::size_t(b) * per;
+    if constexpr (std::is_same_v<T, float>) {
+      imager.image(dst, x, std::size_t(wb.length) * std::size_t(wb.axes), 1, rng_of(b));
+    } else {
+      imager.image(img.data(), x, std::size_t(wb.length) * std::size_t(wb.axes), 1, rng_of(b));
+      std::copy(img.begin(), img.end(), dst);
+    }
   }
+}
+// The same with one stream for every image, drawn in order (nullptr: not augmented).
+template <class T>
+void byol_images(TaxelImager& imager, const WindowBatch& wb, int frame, T* out, Rng* rng) {
+  byol_images(imager, wb, frame, out, [rng](int) { return rng; });
 }
 
 // BYOL pre-training as an Objective (train/objective.hpp), with the data order, schedule and
@@ -312,17 +324,15 @@ class ByolObjective {
     const int B = b.size();
     const std::size_t per = imager_.image_values();
     T* images = detail::grow(w_.images, std::size_t(2) * B * per);
-    for (int v = 0; v < 2; ++v)
-      for (int i = 0; i < B; ++i) {
+    for (int v = 0; v < 2; ++v) {
+      Rng rng;
+      byol_images(imager_, windows_, frame_, images + std::size_t(v) * B * per, [&](int i) {
         const std::uint64_t g = std::uint64_t(b.first + i), global = std::uint64_t(b.batch);
-        Rng rng(streams::masks(cfg_.seed) ^ 0x62796f6c76696577ull,  // "byolview"
-                (static_cast<std::uint64_t>(b.step) * 2 + std::uint64_t(v)) * global + g);
-        const float* x = windows_.x.data() + std::size_t(i) * windows_.per_window() +
-                         std::size_t(frame_) * std::size_t(windows_.axes);
-        image_.resize(per);
-        imager_.image(image_.data(), x, std::size_t(windows_.length) * std::size_t(windows_.axes), 1, &rng);
-        std::copy(image_.begin(), image_.end(), images + (std::size_t(v) * B + std::size_t(i)) * per);
-      }
+        rng = Rng(streams::masks(cfg_.seed) ^ 0x62796f6c76696577ull,  // "byolview"
+                  (static_cast<std::uint64_t>(b.step) * 2 + std::uint64_t(v)) * global + g);
+        return &rng;
+      });
+    }
     loss_ = byol_forward(model_, images, B, w_);
     return loss_;
   }
@@ -350,7 +360,6 @@ class ByolObjective {
   TrainingSchedule schedule_;
   ByolWorkspace<T> w_;
   WindowBatch windows_;
-  std::vector<float> image_;
   int frame_ = 0;
   double loss_ = 0;
 };
