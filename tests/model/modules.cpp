@@ -311,8 +311,8 @@ TEST_SUITE("nn") {
     SUBCASE("drop-path 0.5") { dp = {0.5, 17}; }
     Workspace<double> ws;
     std::vector<double> full(x.size()), kept(std::size_t(B) * Lk * d);
-    stack.forward(ps, x.data(), full.data(), B, L, valid.data(), dp, nullptr, ws);
-    stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, nullptr, ws, kf);
+    stack.forward(ps, {x.data(), B, L, valid.data()}, full.data(), dp, ws);
+    stack.forward(ps, {x.data(), B, L, valid.data(), kf}, kept.data(), dp, ws);
     double diff = 0;
     for (int b = 0; b < B; ++b)
       for (std::size_t i = 0; i < std::size_t(Lk) * d; ++i)
@@ -320,12 +320,12 @@ TEST_SUITE("nn") {
     CHECK(diff < 1e-12);
     auto w = test::normal_vector(kept.size(), rng);
     auto loss = [&] {
-      stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, nullptr, ws, kf);
+      stack.forward(ps, {x.data(), B, L, valid.data(), kf}, kept.data(), dp, ws);
       return test::dot(w.data(), kept.data(), kept.size());
     };
     BlockStackCache<double> cache;
     ps.zero_grad();
-    stack.forward(ps, x.data(), kept.data(), B, L, valid.data(), dp, &cache, ws, kf);
+    stack.forward(ps, {x.data(), B, L, valid.data(), kf}, kept.data(), dp, cache, ws);
     CHECK(test::dot(w.data(), kept.data(), kept.size()) == doctest::Approx(loss()).epsilon(1e-13));
     std::vector<double> dx(x.size(), 0.0);
     std::copy(w.begin(), w.end(), dx.begin());
@@ -722,12 +722,12 @@ TEST_SUITE("nn") {
     std::vector<double> p(w.size()), q(w.size());
     Workspace<double> ws;
     auto loss = [&] {
-      tp.forward(ps, x.data(), M, N, q.data(), static_cast<TaxelPoolCache<double>*>(nullptr), ws);
+      tp.forward(ps, x.data(), M, N, q.data(), ws);
       return test::dot(w.data(), q.data(), q.size());
     };
     TaxelPoolCache<double> cache;
     ps.zero_grad();
-    tp.forward(ps, x.data(), M, N, p.data(), &cache, ws);
+    tp.forward(ps, x.data(), M, N, p.data(), cache, ws);
     loss();
     CHECK(p == q);
     std::vector<double> dx(x.size(), 0.0);

@@ -118,7 +118,10 @@ struct AttentiveProbe {
         cache->B = B;
         cache->L = L;
       }
-      taxel.forward(ps, x, B, L, q2, cache ? &cache->taxel : nullptr, ws);
+      if (cache)
+        taxel.forward(ps, x, B, L, q2, cache->taxel, ws);
+      else
+        taxel.forward(ps, x, B, L, q2, ws);
       return;
     }
     const int d = config.dim, H = config.heads, hid = mlp.hidden();

@@ -74,6 +74,16 @@ struct BlockStackCache {
   std::vector<std::uint8_t> key_valid;          // [B, L] copy, empty = every key valid
 };
 
+// The rows a BlockStack runs: x [B, L, d]; key_valid [B, L] (nonzero = a real token) or nullptr;
+// the block outputs kept are rows [keep_from, L) of each sample.
+template <class T>
+struct StackInput {
+  const T* x = nullptr;
+  int batch = 0, length = 0;
+  const std::uint8_t* key_valid = nullptr;
+  int keep_from = 0;
+};
+
 struct BlockStack {
   std::vector<Block> blocks;
   BlockConfig config;
@@ -88,14 +98,27 @@ struct BlockStack {
   }
   int depth() const { return static_cast<int>(blocks.size()); }
 
-  // x_in [B, L, d] → x_out [B, Lk, d], Lk = L - keep_from: the block outputs of rows
-  // [keep_from, L) of each sample (keep_from = 0: all rows, and x_out may alias x_in). The last
+  // in.x [B, L, d] → x_out [B, Lk, d], Lk = L - in.keep_from: the block outputs of rows
+  // [keep_from, L) of each sample (keep_from = 0: all rows, and x_out may alias in.x). The last
   // block then computes attention queries, proj and MLP for the kept rows only: the predictor keeps
-  // just its target rows. cache == nullptr: inference, nothing kept. key_valid [B, L] or nullptr.
+  // just its target rows. Nothing kept for a backward.
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x_in, T* x_out, int B, int L, const std::uint8_t* key_valid,
-               const DropPath& dp, std::type_identity_t<BlockStackCache<T>>* cache, Workspace<T>& ws,
-               int keep_from = 0) const {
+  void forward(const ParamSet<T>& ps, const StackInput<std::type_identity_t<T>>& in, T* x_out, const DropPath& dp,
+               Workspace<T>& ws) const {
+    run(ps, in.x, x_out, in.batch, in.length, in.key_valid, dp, static_cast<BlockStackCache<T>*>(nullptr), ws,
+        in.keep_from);
+  }
+  // The same, keeping in `cache` what backward needs.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const StackInput<std::type_identity_t<T>>& in, T* x_out, const DropPath& dp,
+               std::type_identity_t<BlockStackCache<T>>& cache, Workspace<T>& ws) const {
+    run(ps, in.x, x_out, in.batch, in.length, in.key_valid, dp, &cache, ws, in.keep_from);
+  }
+
+ private:
+  template <class T>
+  void run(const ParamSet<T>& ps, const T* x_in, T* x_out, int B, int L, const std::uint8_t* key_valid,
+           const DropPath& dp, BlockStackCache<T>* cache, Workspace<T>& ws, int keep_from) const {
     require<ShapeError>(keep_from >= 0 && keep_from < L, "BlockStack::forward: keep_from = ", keep_from,
                         ", expected [0, ", L, ")");
     const int d = config.dim, hid = config.hidden(), H = config.heads, D = depth(), Lk = L - keep_from;
@@ -163,6 +186,7 @@ struct BlockStack {
     if (x_out != y) detail::parallel_copy(y, y + Mk * d, x_out);
   }
 
+ public:
   // dx: on entry ∂L/∂x_out ([B, Lk, d] in its first B·Lk·d values), on return ∂L/∂x_in
   // [B, L, d] (dx holds B·L·d values). Parameter gradients are added to ps.
   template <class T>

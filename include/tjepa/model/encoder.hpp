@@ -238,7 +238,11 @@ struct Encoder {
         cache->context.clear();
       cache->masked.assign(in.masked.begin(), in.masked.end());
     }
-    stack.forward(ps, x, x, B, R + K, opt.key_valid, opt.drop_path, cache ? &cache->stack : nullptr, ws);
+    const StackInput<T> stack_rows{x, B, R + K, opt.key_valid};
+    if (cache)
+      stack.forward(ps, stack_rows, x, opt.drop_path, cache->stack, ws);
+    else
+      stack.forward(ps, stack_rows, x, opt.drop_path, ws);
     T* mean = cache ? detail::grow(cache->mean, ML) : nullptr;
     T* rstd = cache ? detail::grow(cache->rstd, ML) : nullptr;
     const bool all_rows = R == 0 || opt.register_rows;

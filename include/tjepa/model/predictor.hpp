@@ -141,7 +141,11 @@ struct Predictor {
     // Only the target rows leave the blocks (the last block computes nothing else), then go
     // through the final norm and the output projection.
     T* rows = cache ? detail::grow(cache->rows, Mt * pd) : detail::grow(ws.rows2, Mt * pd);
-    stack.forward(ps, x, rows, B, L, nullptr, DropPath{}, cache ? &cache->stack : nullptr, ws, K);
+    const StackInput<T> stack_rows{x, B, L, nullptr, K};
+    if (cache)
+      stack.forward(ps, stack_rows, rows, DropPath{}, cache->stack, ws);
+    else
+      stack.forward(ps, stack_rows, rows, DropPath{}, ws);
     T* normed = cache ? detail::grow(cache->normed, Mt * pd) : rows;
     norm.forward(ps, rows, normed, cache ? detail::grow(cache->mean, Mt) : nullptr,
                  cache ? detail::grow(cache->rstd, Mt) : nullptr, int(Mt));

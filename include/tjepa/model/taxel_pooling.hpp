@@ -57,9 +57,20 @@ struct TaxelPooling {
     return t;
   }
 
-  // x [M, N, d] → p [M, d]. cache == nullptr: inference (scratch from ws).
+  // x [M, N, d] → p [M, d]: inference (scratch from ws).
   template <class T>
-  void forward(const ParamSet<T>& ps, const T* x, int M, int N, T* p, TaxelPoolCache<T>* cache, Workspace<T>& ws) const {
+  void forward(const ParamSet<T>& ps, const T* x, int M, int N, T* p, Workspace<T>& ws) const {
+    run(ps, x, M, N, p, static_cast<TaxelPoolCache<T>*>(nullptr), ws);
+  }
+  // The same, keeping in `cache` what backward needs.
+  template <class T>
+  void forward(const ParamSet<T>& ps, const T* x, int M, int N, T* p, TaxelPoolCache<T>& cache, Workspace<T>& ws) const {
+    run(ps, x, M, N, p, &cache, ws);
+  }
+
+ private:
+  template <class T>
+  void run(const ParamSet<T>& ps, const T* x, int M, int N, T* p, TaxelPoolCache<T>* cache, Workspace<T>& ws) const {
     require<ShapeError>(N == tokens, "TaxelPooling::forward: windows of ", N, " tokens, the pooling was built for ",
                         tokens);
     const std::size_t rows = std::size_t(M) * N, d = std::size_t(norm.dim);
@@ -72,6 +83,8 @@ struct TaxelPooling {
     fc.forward(ps, z, p, M);
   }
 
+
+ public:
   // dp [M, d] → parameter gradients and dx [M, N, d] += (may be nullptr), for the last forward of c.
   template <class T>
   void backward(ParamSet<T>& ps, const T* dp, T* dx, int M, const TaxelPoolCache<T>& c, Workspace<T>& ws) const {
