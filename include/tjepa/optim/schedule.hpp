@@ -18,6 +18,7 @@
 #include <string_view>
 #include <utility>
 
+#include "tjepa/core/enum_names.hpp"
 #include "tjepa/core/error.hpp"
 
 namespace tjepa {
@@ -75,12 +76,12 @@ struct LinearMomentum {
 // it before each update, so step s uses wd(s + 1).
 enum class WeightDecayTiming { reference, ijepa };
 
-inline const char* to_string(WeightDecayTiming t) { return t == WeightDecayTiming::ijepa ? "ijepa" : "reference"; }
-// The JSON names (core/json.hpp).
+// The names (JSON, text).
 constexpr auto json_names(WeightDecayTiming) {
   return std::array{std::pair<std::string_view, WeightDecayTiming>{"reference", WeightDecayTiming::reference},
                     std::pair<std::string_view, WeightDecayTiming>{"ijepa", WeightDecayTiming::ijepa}};
 }
+inline const char* to_string(WeightDecayTiming t) { return enum_name(t); }
 
 // The three schedules of a run, indexed by the optimizer step s = 0, 1, ..., T − 1.
 struct TrainingSchedule {

@@ -232,7 +232,6 @@ struct TrainConfig {
           "local_targets and global_targets >= 0 and at least one target");
     check(k.min_context_tokens >= 1 || k.min_context_tokens == -1, "min_context_tokens", k.min_context_tokens,
           ">= 1, or -1 (automatic: 32, or half the smallest context on a small skin)");
-    check(k.num_threads >= 0, "masks.num_threads", k.num_threads, ">= 0 (0: OpenMP's default)");
     validate_mask_config(k);
     const JepaStepConfig& st = step;
     check(st.drop_path >= 0 && st.drop_path < 1, "drop_path", st.drop_path, "in [0, 1)");

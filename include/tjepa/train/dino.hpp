@@ -504,10 +504,11 @@ class DinoObjective {
     require<ConfigError>(model_.config.group_size.empty() || data.to_tokens,
                          "DinoObjective: a grouped tokenizer needs its own data.to_tokens");
     const T* x = data.tokens(b.ids, model_.num_tokens(), model_.token_width());
-    const DinoViews all = sample_dino_views(model_.config, b.batch, streams::masks(cfg_.seed), static_cast<std::uint64_t>(b.step));
+    DinoViews v = sample_dino_views(model_.config, b.batch, streams::masks(cfg_.seed), static_cast<std::uint64_t>(b.step));
+    if (b.size() != b.batch) v = dino_views_shard(v, b.first, b.size());
     teacher_temp_ = dino_teacher_temp(model_.config, b.step, total_steps());
-    loss_ = dino_forward(model_, x, b.size(), dino_views_shard(all, b.first, b.size()), teacher_temp_, w_,
-                         streams::noise(cfg_.seed, b.step), static_cast<std::uint64_t>(b.first));
+    loss_ = dino_forward(model_, x, b.size(), v, teacher_temp_, w_, streams::noise(cfg_.seed, b.step),
+                         static_cast<std::uint64_t>(b.first));
     return loss_;
   }
   void backward() { dino_backward(model_, w_); }

@@ -18,18 +18,19 @@
 #include <utility>
 
 #include "tjepa/core/detail/parallel.hpp"
+#include "tjepa/core/enum_names.hpp"
 #include "tjepa/optim/detail/deterministic_sum.hpp"
 
 namespace tjepa {
 
 enum class JepaLossKind { mse, smooth_l1 };
 
-inline const char* to_string(JepaLossKind k) { return k == JepaLossKind::mse ? "mse" : "smooth_l1"; }
-// The JSON names (core/json.hpp).
+// The names (JSON, text).
 constexpr auto json_names(JepaLossKind) {
   return std::array{std::pair<std::string_view, JepaLossKind>{"mse", JepaLossKind::mse},
                     std::pair<std::string_view, JepaLossKind>{"smooth_l1", JepaLossKind::smooth_l1}};
 }
+inline const char* to_string(JepaLossKind k) { return enum_name(k); }
 
 // PyTorch's F.layer_norm default eps.
 inline constexpr double target_norm_eps = 1e-5;

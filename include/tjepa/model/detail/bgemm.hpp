@@ -22,6 +22,7 @@
 #include <string_view>
 #include <utility>
 
+#include "tjepa/core/enum_names.hpp"
 #include "tjepa/core/error.hpp"
 #include "tjepa/model/detail/sgemm.hpp"
 
@@ -38,12 +39,12 @@ namespace tjepa {
 // weights, activations between the products and everything else stay fp32).
 enum class Precision { fp32, bf16 };
 
-inline const char* precision_name(Precision p) { return p == Precision::bf16 ? "bf16" : "fp32"; }
-// The JSON names (core/json.hpp).
+// The names (JSON, text).
 constexpr auto json_names(Precision) {
   return std::array{std::pair<std::string_view, Precision>{"fp32", Precision::fp32},
                     std::pair<std::string_view, Precision>{"bf16", Precision::bf16}};
 }
+inline const char* precision_name(Precision p) { return enum_name(p); }
 
 // Whether this translation unit was compiled with AVX512-BF16 (-mavx512bf16, or a -march that has
 // it): only then does Precision::bf16 run bf16 products; elsewhere it runs fp32.
