@@ -23,7 +23,7 @@
 #endif
 
 #include <tjepa/core/random.hpp>
-#include <tjepa/model/kernels/attention.hpp>
+#include <tjepa/kernels/attention.hpp>
 
 namespace {
 

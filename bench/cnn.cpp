@@ -1,4 +1,4 @@
-// BYOL's image encoder: torchvision AlexNet's trunk (model/alexnet.hpp) on 224 × 224 images of 3
+// BYOL's image encoder: torchvision AlexNet's trunk (baselines/alexnet.hpp) on 224 × 224 images of 3
 // channels, float, batch 8, at the thread count given as the first argument:
 //   BM_AlexNetForward   features only (inference: the frozen BYOL row's embedding)
 //   BM_AlexNetTrain     forward and backward without the image's gradient (the online network)

@@ -4,7 +4,7 @@
 # 528 grouped tokens; bf16 where tjepa_bench has it), and the streaming latency runs, and writes
 # bench/RESULTS.md: the tables and each of issues 8's and 22's goals, met or the distance to it.
 # Run it on a quiet machine: `bench/compare.sh`.
-# (Earlier hand-written analyses are kept in bench/HISTORY.md.)
+# (Sections written by other scripts or by hand, between "<!-- NAME:begin/end -->" markers, are kept.)
 # PyTorch comes from Debian's python3-torch (installed here if missing, as root); it is never a
 # dependency of the library or its tests. libopenblas0-pthread is ensured too: without it Debian's
 # PyTorch falls back to the netlib reference BLAS and the comparison measures that instead.

@@ -339,7 +339,7 @@ if all_runs:
                if med <= worst + 0.05 else
                "The tick spreads more than the memory sweeps: part of the distance is the encoder's. ")
             + "`tjepa_streaming --stages` times each stage of every tick: in the slowest 1% of ticks every stage "
-              "is slower in proportion (bench/HISTORY.md), not one stage. What it would take: a machine "
+              "was slower in proportion (commit b6c9a84), not one stage. What it would take: a machine "
               "without neighbours on its memory system (bare metal, an isolated core), where the controls "
               "themselves stay within 10%.")
 print("\n## Goals (issue 8)\n")
@@ -406,18 +406,19 @@ print("| goal | measured | |")
 print("|---|---|---|")
 for name, value, ok in goals22:
     print(f"| {name} | {value} | {ok} |")
-# The profile section is bench/profile.sh's (it needs perf) and the data-parallel one
-# bench/dist.sh's (it needs mpirun): kept from the current file, below.
+# The profile section is bench/profile.sh's (it needs perf), the data-parallel one bench/dist.sh's
+# (it needs mpirun), the AlexNet one and the notes on earlier runs are written by hand: all kept
+# from the current file, below.
 _previous = pathlib.Path(__file__).with_name("RESULTS.md")
 _previous_text = _previous.read_text() if _previous.exists() else ""
 _kept = [m.group(0) for m in (re.search(rf"<!-- {n}:begin -->.*?<!-- {n}:end -->", _previous_text, flags=re.S)
-                              for n in ("profile", "dist")) if m]
+                              for n in ("profile", "dist", "cnn", "notes")) if m]
 if any("85%" in name and ok != "met" for name, _, ok in goals22) and "<!-- profile:begin -->" in _previous_text:
     print("\nWhere the fp32 goals of 85 % of the peak are not met, the section \"Where the fp32 time goes\" "
           "(bench/profile.sh) shows where the rest of the time is: the products against the packing, epilogues "
           "and element-wise work around them.")
 print("\nAttention memory is O(L·d) by construction: the forward and backward run over query and key "
       "tiles with an online softmax and keep only the per-row log-sum-exp, never an L×L matrix "
-      "(include/tjepa/model/kernels/attention.hpp).")
+      "(include/tjepa/kernels/attention.hpp).")
 for _section in _kept:
     print("\n" + _section)

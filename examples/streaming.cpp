@@ -45,8 +45,8 @@
 #include <thread>
 #include <vector>
 
-#include "cli/setup.hpp"
 #include <tjepa/downstream/probe_labels.hpp>
+#include <tjepa/sim.hpp>
 
 // Every heap allocation of the process, counted at the C level (operator new, std::vector and
 // xsimd's aligned allocator all end in one of these): glibc lets the program interpose them.
@@ -300,7 +300,11 @@ int main(int argc, char** argv) {
       tau = lm.config.data.tau;
     } else {
       model = std::make_unique<JepaModel<float>>(TrainConfig{}.model_config(N, m), 0);
-      pre = cli::fit_preprocessor("xela", &baseline, std::span<const Recording>(&stream.recording, 1));
+      // Xela counts: drop-outs, the rest readings subtracted, per-axis scales of this stream.
+      Preprocessor p(PreprocessConfig::xela_counts());
+      p.fit_baseline(baseline);
+      p.fit(std::span<const Recording>(&stream.recording, 1));
+      pre = std::move(p);
       drift = DriftTracker(DriftTrackerConfig::magnetic());
       drift->fit(baseline);
     }

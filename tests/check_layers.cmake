@@ -1,27 +1,99 @@
-# Fails when a header of the algorithm (include/tjepa/ outside sim/ and eval/, and the umbrellas
-# tjepa.hpp and kernels.hpp) includes the simulator or the paper's evaluation: those are
-# applications of the library (<tjepa/sim.hpp>, <tjepa/eval.hpp>), and a robot codebase that
-# includes <tjepa/tjepa.hpp> gets neither. Run as a CTest test:
-#   cmake -DDIR=<include/tjepa> -P check_layers.cmake
+# The rooms of include/tjepa/ and the rules between them, as a CTest test:
+#   cmake -DDIR=<include/tjepa> -DTESTS=<tests> -DUSERS=<examples;apps> -P check_layers.cmake
+#
+# 1. Layers. Each folder is a stage of the data's path, and a header includes only headers of its
+#    own folder or of folders before it in `layers` (umbrellas count as the folder named beside
+#    them). So <tjepa/tjepa.hpp> (the algorithm, up to downstream/) reaches no baseline, simulator
+#    or evaluation header, and <tjepa/baselines.hpp> reaches no simulator.
+# 2. detail/ is private: a header under some detail/ folder declares nothing outside
+#    tjepa::detail, and no program in USERS (examples, the tjepa command) includes one.
+# 3. tests/ mirrors include/tjepa/: every folder there has its folder of tests.
+set(layers version core layout graph sensors data masks kernels model optim io train downstream dist
+  baselines sim eval)
+set(umbrella_tjepa.hpp downstream)
+set(umbrella_kernels.hpp kernels)
+set(umbrella_baselines.hpp baselines)
+set(umbrella_sim.hpp sim)
+set(umbrella_eval.hpp eval)
+set(umbrella_version.hpp version)
+
+# The layer of a path relative to include/tjepa/ ("model/encoder.hpp", "tjepa.hpp"), or "" when
+# it names no known folder.
+function(layer_of path out)
+  if(DEFINED umbrella_${path})
+    set(${out} "${umbrella_${path}}" PARENT_SCOPE)
+    return()
+  endif()
+  string(REGEX MATCH "^[^/]+" folder "${path}")
+  list(FIND layers "${folder}" at)
+  if(at LESS 0 OR NOT path MATCHES "/")
+    set(${out} "" PARENT_SCOPE)
+  else()
+    set(${out} "${folder}" PARENT_SCOPE)
+  endif()
+endfunction()
+
 file(GLOB_RECURSE headers RELATIVE ${DIR} ${DIR}/*.hpp)
 set(bad "")
-set(core 0)
+set(count 0)
 foreach(h IN LISTS headers)
-  if(h MATCHES "^(sim|eval)/" OR h STREQUAL "sim.hpp" OR h STREQUAL "eval.hpp")
+  math(EXPR count "${count} + 1")
+  layer_of("${h}" own)
+  if(own STREQUAL "")
+    list(APPEND bad "include/tjepa/${h}: in no layer of check_layers.cmake (add its folder to `layers`)")
     continue()
   endif()
-  math(EXPR core "${core} + 1")
-  file(STRINGS ${DIR}/${h} lines REGEX "#[ \t]*include[ \t]*[<\"]tjepa/(sim|eval)[/.]")
+  list(FIND layers "${own}" own_rank)
+  file(STRINGS ${DIR}/${h} lines REGEX "#[ \t]*include[ \t]*[<\"]tjepa/")
   foreach(l IN LISTS lines)
-    string(STRIP "${l}" l)
-    list(APPEND bad "include/tjepa/${h}: ${l}")
+    string(REGEX REPLACE ".*[<\"]tjepa/([^>\"]+)[>\"].*" "\\1" target "${l}")
+    layer_of("${target}" theirs)
+    list(FIND layers "${theirs}" their_rank)
+    if(their_rank LESS 0)
+      list(APPEND bad "include/tjepa/${h}: includes tjepa/${target}, which is in no layer")
+    elseif(their_rank GREATER own_rank)
+      list(APPEND bad "include/tjepa/${h} (${own}) includes tjepa/${target} (${theirs}), a later layer")
+    endif()
+  endforeach()
+  if(h MATCHES "(^|/)detail/")
+    file(STRINGS ${DIR}/${h} spaces REGEX "^[ \t]*namespace[ \t]")
+    foreach(n IN LISTS spaces)
+      if(NOT n MATCHES "^[ \t]*namespace[ \t]+(tjepa::detail|xsimd|Eigen)[ :{]" AND NOT n MATCHES "^[ \t]*namespace[ \t]+[A-Za-z_]+[ \t]*=")
+        string(STRIP "${n}" n)
+        list(APPEND bad "include/tjepa/${h}: a detail header opens `${n}` (public names belong outside detail/)")
+      endif()
+    endforeach()
+  endif()
+endforeach()
+
+foreach(dir IN LISTS USERS)
+  file(GLOB_RECURSE programs ${dir}/*.cpp ${dir}/*.hpp)
+  foreach(p IN LISTS programs)
+    file(STRINGS ${p} lines REGEX "#[ \t]*include[ \t]*[<\"]tjepa/.*detail/")
+    foreach(l IN LISTS lines)
+      string(STRIP "${l}" l)
+      list(APPEND bad "${p}: ${l} (detail/ is the library's own)")
+    endforeach()
   endforeach()
 endforeach()
+
+file(GLOB folders LIST_DIRECTORIES true RELATIVE ${DIR} ${DIR}/*)
+set(mirrored 0)
+foreach(f IN LISTS folders)
+  if(IS_DIRECTORY ${DIR}/${f})
+    math(EXPR mirrored "${mirrored} + 1")
+    file(GLOB tests_there ${TESTS}/${f}/*.cpp)
+    if(NOT tests_there)
+      list(APPEND bad "include/tjepa/${f}/ has no tests/${f}/*.cpp")
+    endif()
+  endif()
+endforeach()
+
 if(bad)
   list(JOIN bad "\n" text)
-  message(FATAL_ERROR "headers of the algorithm include the simulator or the evaluation:\n${text}")
+  message(FATAL_ERROR "the rooms of include/tjepa/ break their rules:\n${text}")
 endif()
-if(core LESS 50)
-  message(FATAL_ERROR "only ${core} headers of the algorithm found under ${DIR}: wrong directory?")
+if(count LESS 50 OR mirrored LESS 10)
+  message(FATAL_ERROR "only ${count} headers in ${mirrored} folders found under ${DIR}: wrong directory?")
 endif()
-message(STATUS "${core} headers of the algorithm: none includes sim/ or eval/")
+message(STATUS "${count} headers in ${mirrored} folders: layers kept, detail/ private, tests/ mirrors include/")

@@ -5,6 +5,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source tools/deps.sh
 tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}"
-cmake --preset release -DTJEPA_BUILD_EXAMPLES=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_BENCHMARKS=OFF >/dev/null
+cmake --preset release -DTJEPA_BUILD_APPS=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_BENCHMARKS=OFF >/dev/null
 cmake --build --preset release --target tjepa_cli -j "$(nproc)"
-exec build/release/examples/tjepa demo "$@"
+exec build/release/apps/tjepa/tjepa demo "$@"

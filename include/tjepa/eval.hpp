@@ -4,6 +4,7 @@
 // pose; the rows constant, ridge, random, end to end, MAE and Tactile-JEPA; pre-training caches;
 // tables with Welch tests; the mask ablation (run_grasp_eval, `tjepa eval`, `tjepa demo`).
 #include "tjepa/sim.hpp"
+#include "tjepa/baselines.hpp"
 
 #include "tjepa/eval/grasp_tasks.hpp"
 #include "tjepa/eval/eval_table.hpp"

@@ -1,14 +1,17 @@
 #pragma once
 // tjepa: Tactile-JEPA for distributed tactile skins. This umbrella header includes the
 // algorithm's user-facing headers, in the order of the data's path: layouts, graph, sensors,
-// data, masks, model, optim, io, train (every objective through one Trainer), and the generic
-// downstream pieces (heads, ridge, metrics, Welch tests). Three other umbrellas stand beside it:
-//   <tjepa/kernels.hpp>  the compute kernels under the modules (tjepa::kernels), for those who
-//                        call or benchmark them directly
-//   <tjepa/sim.hpp>      the simulated skins and the simulated Allegro hand (test data)
-//   <tjepa/eval.hpp>     the paper's evaluation protocol on the simulated hand (grasp tasks,
-//                        run_grasp_eval, its tables and caches), which the `tjepa` command uses
-// No header reachable from this one includes sim/ or eval/ (tests/check_layers.cmake).
+// data, masks, model, optim, io, train (every objective through one Trainer, the reference
+// code's checkpoints), and the generic downstream pieces (heads, ridge, metrics, Welch tests).
+// Four other umbrellas stand beside it:
+//   <tjepa/kernels.hpp>    the compute kernels under the modules (tjepa::kernels), for those who
+//                          call or benchmark them directly
+//   <tjepa/baselines.hpp>  the paper's baselines: MAE, DINO and BYOL with their modules (AlexNet,
+//                          DINO's head, BYOL's projector, tactile images)
+//   <tjepa/sim.hpp>        the simulated skins and the simulated Allegro hand (test data)
+//   <tjepa/eval.hpp>       the paper's evaluation protocol on the simulated hand (grasp tasks,
+//                          run_grasp_eval, its tables and caches), which the `tjepa` command uses
+// No header reachable from this one includes baselines/, sim/ or eval/ (tests/check_layers.cmake).
 
 #include "tjepa/version.hpp"
 
@@ -20,6 +23,7 @@
 #include "tjepa/core/json.hpp"
 #include "tjepa/core/param_set.hpp"
 #include "tjepa/core/prefixed_params.hpp"
+#include "tjepa/core/threads.hpp"
 
 #include "tjepa/layout/taxel_layout.hpp"
 
@@ -53,7 +57,6 @@
 #include "tjepa/data/text_reader.hpp"
 #include "tjepa/data/window.hpp"
 #include "tjepa/data/window_source.hpp"
-#include "tjepa/data/taxel_image.hpp"
 
 #include "tjepa/masks/collator.hpp"
 #include "tjepa/masks/config.hpp"
@@ -64,6 +67,9 @@
 #include "tjepa/masks/local.hpp"
 #include "tjepa/masks/svg.hpp"
 #include "tjepa/masks/uniform_masking.hpp"
+#include "tjepa/masks/workspace.hpp"
+
+#include "tjepa/kernels/precision.hpp"
 
 #include "tjepa/model/attention.hpp"
 #include "tjepa/model/attentive_probe.hpp"
@@ -78,9 +84,6 @@
 #include "tjepa/model/taxel_pooling.hpp"
 #include "tjepa/model/tokenizer.hpp"
 #include "tjepa/model/workspace.hpp"
-#include "tjepa/model/dino_head.hpp"
-#include "tjepa/model/alexnet.hpp"
-#include "tjepa/model/projection_mlp.hpp"
 
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
@@ -88,7 +91,6 @@
 #include "tjepa/optim/schedule.hpp"
 
 #include "tjepa/io/checkpoint.hpp"
-#include "tjepa/io/reference_checkpoint.hpp"
 #include "tjepa/io/safetensors.hpp"
 
 #include "tjepa/train/health.hpp"
@@ -97,13 +99,10 @@
 #include "tjepa/train/loss.hpp"
 #include "tjepa/train/config.hpp"
 #include "tjepa/train/trained_model.hpp"
+#include "tjepa/train/reference_checkpoint.hpp"
 #include "tjepa/train/objective.hpp"
 #include "tjepa/train/trainer.hpp"
 #include "tjepa/train/jepa_objective.hpp"
-#include "tjepa/train/mae.hpp"
-#include "tjepa/train/dino_loss.hpp"
-#include "tjepa/train/dino.hpp"
-#include "tjepa/train/byol.hpp"
 
 #include "tjepa/downstream/causal_attention.hpp"
 #include "tjepa/downstream/cross_entropy.hpp"

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include <tjepa/core/atomic_write.hpp>
-#include <tjepa/io/reference_checkpoint.hpp>
+#include <tjepa/train/reference_checkpoint.hpp>
 #include <tjepa/train/jepa_objective.hpp>
 
 #include "targets.hpp"

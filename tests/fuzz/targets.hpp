@@ -20,7 +20,7 @@
 #include <tjepa/core/error.hpp>
 #include <tjepa/data/npy.hpp>
 #include <tjepa/data/text_reader.hpp>
-#include <tjepa/io/reference_checkpoint.hpp>
+#include <tjepa/train/reference_checkpoint.hpp>
 #include <tjepa/io/safetensors.hpp>
 #include <tjepa/sensors/csv.hpp>
 #include <tjepa/sensors/generic.hpp>

@@ -19,7 +19,7 @@
 #include <tjepa/tjepa.hpp>
 #include <tjepa/model/stage_clock.hpp>  // tested directly below (StageClock)
 
-#include "gradcheck.hpp"
+#include "../support/gradcheck.hpp"
 
 // Counting allocator for the allocation-free inference test. Global operator new is replaced for
 // the whole test binary (it only forwards to malloc). Eigen and xsimd allocate with malloc, not
@@ -133,7 +133,7 @@ using namespace tjepa;
 using test::gradient_error;
 using test::grad_tolerance;
 
-TEST_SUITE("nn") {
+TEST_SUITE("model") {
   TEST_CASE("Encoder on a context subset: gradients of tokens and parameters (2 blocks - drop-path)") {
     ParamSet<double> ps;
     EncoderConfig cfg{.num_tokens = 7, .dim = 12, .depth = 2, .heads = 3, .mlp_ratio = 4.0, .bias = true, .eps = 1e-6};

@@ -2,7 +2,7 @@
 
 #include <tjepa/core/param_set.hpp>
 
-TEST_SUITE("nn") {
+TEST_SUITE("model") {
   TEST_CASE("ParamSet registers named views in one flat aligned buffer") {
     tjepa::ParamSet<float> ps;
     auto w = ps.add("blocks.0.attn.qkv.weight", {576, 192});

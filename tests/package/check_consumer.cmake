@@ -11,7 +11,7 @@ set(cfg -G ${GENERATOR} -DCMAKE_CXX_COMPILER=${CXX} -DCMAKE_BUILD_TYPE=Release)
 if(MODE STREQUAL "find_package")
   # Install from a fresh configure of the source tree into a temporary prefix.
   run(${CMAKE_COMMAND} -S ${TJEPA_SOURCE_DIR} -B ${dir}/tjepa-build ${cfg}
-      -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_BENCHMARKS=OFF -DTJEPA_BUILD_EXAMPLES=OFF
+      -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_BENCHMARKS=OFF -DTJEPA_BUILD_EXAMPLES=OFF -DTJEPA_BUILD_APPS=OFF
       -DCMAKE_INSTALL_PREFIX=${dir}/prefix)
   run(${CMAKE_COMMAND} --install ${dir}/tjepa-build)
   if(NOT EXISTS ${dir}/prefix/share/cmake/tjepa/tjepaConfigVersion.cmake)

@@ -1,8 +1,7 @@
 // tjepa against an outside reference: the PyTorch fixture of tools/reference/fixture.py (the
 // reference code's module structure and names, autograd backward), whose dumps are committed under
 // tests/data/reference/. The model comes in through the reference-checkpoint converter
-// (io/reference_checkpoint.hpp), so these tests check the converter's name map too; `tjepa
-// convert` and `tjepa embed` are checked on the fixture's model at the end. Compared per
+// (train/reference_checkpoint.hpp), so these tests check the converter's name map too. Compared per
 // tensor as ‖tjepa − fixture‖ / ‖fixture‖: outputs of both encoders and of the predictor, the
 // loss, every gradient, and after each of three steps the schedule's values, every parameter
 // (target encoder included) and AdamW's moments. Float64 within 1e-12, float32 within 1e-5.
@@ -10,9 +9,7 @@
 
 #include <tjepa/tjepa.hpp>
 
-#include "../../examples/cli/commands.hpp"
-#include "../../examples/cli/convert.hpp"
-#include "../support/files.hpp"
+#include "fixture.hpp"
 
 #include <cmath>
 #include <cstdint>
@@ -24,65 +21,6 @@
 #include <nlohmann/json.hpp>
 
 namespace tjepa::reference_fixture {
-
-inline std::filesystem::path fixture_dir() { return std::filesystem::path(TJEPA_TEST_DATA_DIR) / "reference"; }
-
-// The tensors of f under `prefix`, without it, as a file of their own.
-inline SafetensorsFile fixture_part(const SafetensorsFile& f, const std::string& prefix) {
-  SafetensorsFile out;
-  for (const std::string& name : f.names())
-    if (name.starts_with(prefix)) out.add(name.substr(prefix.size()), f.at(name));
-  out.set_source(f.source() + " [" + prefix + "]");
-  return out;
-}
-
-// f with every F64 tensor as F32 (the float64 fixture's model for a float model).
-inline SafetensorsFile fixture_as_float(const SafetensorsFile& f) {
-  SafetensorsFile out;
-  for (const std::string& name : f.names()) {
-    const Tensor& t = f.at(name);
-    if (t.dtype != Dtype::F64 || name.ends_with(".stats")) {
-      out.add(name, t);
-      continue;
-    }
-    const auto v = t.to_vector<double>();
-    out.add(name, Tensor::from(std::vector<float>(v.begin(), v.end()), t.shape));
-  }
-  out.metadata = f.metadata;
-  out.set_source(f.source() + " [as float32]");
-  return out;
-}
-
-// ‖a − b‖ / ‖b‖ (‖a‖ when b is 0), over the entries [skip_begin, skip_end) left out.
-template <class T>
-double fixture_error(std::span<const T> a, const std::vector<double>& b, std::size_t skip_begin = 0,
-                     std::size_t skip_end = 0) {
-  REQUIRE(a.size() == b.size());
-  double diff = 0, nb = 0, na = 0;
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    if (i >= skip_begin && i < skip_end) continue;
-    diff += (double(a[i]) - b[i]) * (double(a[i]) - b[i]);
-    nb += b[i] * b[i];
-    na += double(a[i]) * double(a[i]);
-  }
-  return std::sqrt(diff) / std::sqrt(nb > 0 ? nb : (na > 0 ? na : 1.0));
-}
-
-inline std::vector<double> fixture_values(const SafetensorsFile& f, const std::string& name) {
-  REQUIRE_MESSAGE(f.contains(name), "fixture tensor ", name);
-  const Tensor& t = f.at(name);
-  if (t.dtype == Dtype::F32) {
-    const auto v = t.to_vector<float>();
-    return {v.begin(), v.end()};
-  }
-  return t.to_vector<double>();
-}
-
-inline std::vector<int> fixture_ints(const SafetensorsFile& f, const std::string& name) {
-  const auto v = f.at(name).to_vector<std::int64_t>();
-  return {v.begin(), v.end()};
-}
-
 // The largest error of each kind of quantity over a run against the fixture.
 struct FixtureErrors {
   double outputs = 0, loss = 0, grads = 0, schedule = 0, params = 0, moments = 0;
@@ -312,93 +250,5 @@ TEST_SUITE("reference") {
     CHECK(e.grads < 5e-2);
     CHECK(e.params < 3e-2);
     CHECK(e.moments < 1e-1);
-  }
-}
-
-TEST_SUITE("reference") {
-  TEST_CASE("tjepa convert: the fixture's model in a permuted recording order - embed gives its target encoder's output - back bit for bit") {
-    using tjepa_test::TempDir;
-    TempDir t("convert");
-    const SafetensorsFile fx = load_safetensors(rf::fixture_dir() / "per_taxel-reference-f32.safetensors");
-    // The skin: two 2x3 pads; the recordings (and the reference's tokens) in a permuted order.
-    const auto csv = t / "pads.csv", order = t / "order.csv";
-    std::vector<int> column(12);
-    {
-      std::ofstream f(csv), o(order);
-      f << "id,group,x,y\n";
-      o << "id,column\n";
-      for (int j = 0; j < 12; ++j) {
-        f << j << ",pad" << j / 6 << ',' << (j / 6 * 14 + j % 3 * 4) << ',' << (j % 6) / 3 * 4 << '\n';
-        column[std::size_t(j)] = (5 * j + 3) % 12;
-        o << j << ',' << column[std::size_t(j)] << '\n';
-      }
-    }
-    SafetensorsFile ref = rf::fixture_part(fx, "init.");
-    ref.metadata["reference.config"] = R"({"num_heads": 2, "sequence_length": 6, "time_chunk_size": 6})";
-    save_safetensors(t / "ref.safetensors", ref);
-    cli::ConvertOptions co;
-    co.in = (t / "ref.safetensors").string();
-    co.out = (t / "tjepa.safetensors").string();
-    co.layout = csv.string();
-    co.order = order.string();
-    co.taxel_types = "2,2,0,0,0,1,1,0,2,1,0,0";
-    std::ostringstream out;
-    REQUIRE(cli::run_convert(co, out) == 0);
-    CHECK(out.str().find("temporal padding 2") != std::string::npos);
-    CHECK(out.str().find("taxel types 3") != std::string::npos);
-
-    // The fixture's windows x [B, T, N, C] as one recording [B·T, N, C], columns in the reference's order.
-    const auto x = rf::fixture_values(fx, "x");
-    std::vector<float> rec(x.begin(), x.end());
-    const std::int64_t shape[3] = {3 * 6, 12, 3};
-    write_npy(t / "rec.npy", std::span<const float>(rec), std::span<const std::int64_t>(shape));
-    cli::EmbedOptions eo;
-    eo.checkpoint = co.out;
-    eo.data = (t / "rec.npy").string();
-    eo.out = (t / "emb.npy").string();
-    eo.quiet = true;
-    REQUIRE(cli::run_embed(eo, out) == 0);
-    const NpyArray emb = read_npy(t / "emb.npy");
-    REQUIRE(emb.shape == std::vector<std::int64_t>{3, 12, 8});
-    // Token j of tjepa is the reference's token column[j].
-    const auto h = rf::fixture_values(fx, "step0.h");
-    std::vector<double> expected(h.size());
-    for (int w = 0; w < 3; ++w)
-      for (int j = 0; j < 12; ++j)
-        for (int c = 0; c < 8; ++c)
-          expected[(std::size_t(w) * 12 + j) * 8 + c] = h[(std::size_t(w) * 12 + column[std::size_t(j)]) * 8 + c];
-    const double err = rf::fixture_error<float>(std::span<const float>(emb.data(), emb.numel()), expected);
-    MESSAGE("tjepa embed on the converted fixture model against its target encoder: relative error ", err);
-    CHECK(err < 1e-5);
-
-    // Back to the reference: the same tensors, bit for bit.
-    cli::ConvertOptions back;
-    back.in = co.out;
-    back.out = (t / "back.safetensors").string();
-    REQUIRE(cli::run_convert(back, out) == 0);
-    const SafetensorsFile b = load_safetensors(back.out);
-    CHECK(b.size() == ref.size());
-    for (const std::string& name : ref.names()) {
-      REQUIRE_MESSAGE(b.contains(name), name);
-      CHECK_MESSAGE(b.at(name).dtype == ref.at(name).dtype, name);
-      CHECK_MESSAGE(b.at(name).shape == ref.at(name).shape, name);
-      CHECK_MESSAGE(b.at(name).data == ref.at(name).data, name);
-    }
-
-    // What tjepa cannot represent is refused by name.
-    SafetensorsFile reg = ref;
-    reg.add("context_encoder.register_tokens", Tensor::from(std::vector<float>(16, 0.0f), {1, 2, 8}));
-    save_safetensors(t / "reg.safetensors", reg);
-    co.in = (t / "reg.safetensors").string();
-    co.out = (t / "reg_tjepa.safetensors").string();
-    CHECK_THROWS_WITH_AS(cli::run_convert(co, out), doctest::Contains("register_tokens"), FileError);
-    CHECK_FALSE(std::filesystem::exists(co.out));
-    co.in = (t / "last.ckpt").string();
-    CHECK_THROWS_WITH_AS(cli::run_convert(co, out), doctest::Contains("torch_checkpoint.py to-safetensors"), ConfigError);
-    SafetensorsFile chunks = ref;
-    chunks.metadata["reference.config"] = R"({"num_heads": 2, "sequence_length": 12, "time_chunk_size": 6})";
-    save_safetensors(t / "chunks.safetensors", chunks);
-    co.in = (t / "chunks.safetensors").string();
-    CHECK_THROWS_WITH_AS(cli::run_convert(co, out), doctest::Contains("one token per taxel"), FileError);
   }
 }

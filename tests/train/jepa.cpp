@@ -20,7 +20,7 @@
 #include <thread>
 #include <vector>
 
-#include "../model/gradcheck.hpp"
+#include "../support/gradcheck.hpp"
 
 using namespace tjepa;
 

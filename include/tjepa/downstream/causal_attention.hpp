@@ -13,7 +13,7 @@
 #include <string>
 
 #include "tjepa/model/attention.hpp"
-#include "tjepa/model/kernels/attention.hpp"
+#include "tjepa/kernels/attention.hpp"
 #include "tjepa/model/layers.hpp"
 #include "tjepa/model/workspace.hpp"
 

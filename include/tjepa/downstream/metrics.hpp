@@ -1,8 +1,11 @@
 #pragma once
 // Evaluation metrics of downstream heads on held-out windows: RMSE per output column (force per
-// axis, in the label's units) and classification accuracy.
+// axis, in the label's units) and classification accuracy; and the constant baseline every table
+// scores first.
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <span>
 #include <vector>
 
 #include "tjepa/core/error.hpp"
@@ -53,5 +56,48 @@ inline double majority_accuracy(const int* labels, int B, int C) {
   for (int c : count) best = std::max(best, c);
   return static_cast<double>(best) / B;
 }
+
+// The constant baseline: what predicts best while ignoring the input, fitted on the training
+// samples: each regression column's mean and the most frequent class (the lowest id among ties).
+// The protocol's "constant" row, `tjepa probe`'s and the label probe's all score these.
+struct ConstantBaseline {
+  std::vector<double> mean;  // [columns]: the training values' mean per column (summed in double)
+  int majority = -1;         // the most frequent training class; -1 without classes
+
+  // values [S, columns] (columns 0: none); labels [S'] in [0, classes) (classes 0: none).
+  static ConstantBaseline fit(std::span<const float> values, int columns, std::span<const int> labels, int classes) {
+    require<ShapeError>(columns >= 0 && classes >= 0 && (columns == 0 || values.size() % std::size_t(columns) == 0),
+                        "ConstantBaseline::fit: ", values.size(), " values in ", columns, " columns, ", classes,
+                        " classes");
+    ConstantBaseline c;
+    if (columns > 0) {
+      const std::size_t rows = values.size() / std::size_t(columns);
+      require<DataError>(rows > 0, "ConstantBaseline::fit: no training values");
+      c.mean.assign(std::size_t(columns), 0.0);
+      for (std::size_t r = 0; r < rows; ++r)
+        for (int j = 0; j < columns; ++j) c.mean[std::size_t(j)] += values[r * std::size_t(columns) + std::size_t(j)];
+      for (double& m : c.mean) m /= static_cast<double>(rows);
+    }
+    if (classes > 0) {
+      require<DataError>(!labels.empty(), "ConstantBaseline::fit: no training labels");
+      std::vector<int> count(std::size_t(classes), 0);
+      for (int l : labels) {
+        require<DataError>(l >= 0 && l < classes, "ConstantBaseline::fit: class ", l, ", expected in [0, ", classes, ")");
+        ++count[std::size_t(l)];
+      }
+      c.majority = static_cast<int>(std::max_element(count.begin(), count.end()) - count.begin());
+    }
+    return c;
+  }
+
+  // The predictions for `rows` samples: [rows, columns] values and [rows] classes.
+  std::vector<double> values(std::size_t rows) const {
+    std::vector<double> out;
+    out.reserve(rows * mean.size());
+    for (std::size_t r = 0; r < rows; ++r) out.insert(out.end(), mean.begin(), mean.end());
+    return out;
+  }
+  std::vector<int> classes(std::size_t rows) const { return std::vector<int>(majority >= 0 ? rows : 0, majority); }
+};
 
 }  // namespace tjepa

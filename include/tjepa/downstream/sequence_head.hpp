@@ -11,7 +11,7 @@
 //   y   = head(norm(h₂))             y [B·L, P]       norm, head (a Linear)
 // Position l sees windows 0..l: the prediction after window l never depends on later windows.
 // With pooling.kind = taxel (model/taxel_pooling.hpp; not the paper's; why it exists:
-// docs/history/evaluation-log.md, "A sequence head that keeps where the contact is") pool(x) is
+// docs/evaluation.md, "Why the protocol is set this way") pool(x) is
 // the per-taxel read-out that keeps where on the skin each feature sits.
 #include <algorithm>
 #include <cstdint>

@@ -46,10 +46,10 @@
 #include "tjepa/sensors/allegro_xela.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"
 #include "tjepa/sim/grasping_hand.hpp"
-#include "tjepa/train/byol.hpp"
+#include "tjepa/baselines/byol.hpp"
 #include "tjepa/train/config.hpp"
-#include "tjepa/train/dino.hpp"
-#include "tjepa/train/mae.hpp"
+#include "tjepa/baselines/dino.hpp"
+#include "tjepa/baselines/mae.hpp"
 #include "tjepa/train/trained_model.hpp"
 #include "tjepa/train/trainer.hpp"
 
@@ -57,7 +57,7 @@ namespace tjepa {
 
 // Tactile-JEPA's pre-training for the grasp protocol: TrainConfig's defaults (2L+2G masks, the
 // scaled-down ViT) with the two settings the indenter demo needed for the encoder to move at all
-// (docs/findings.md), fixed before any grasp run: drift tracking (the sensor drifts during a
+// (docs/evaluation.md, "Why the protocol is set this way"), fixed before any grasp run: drift tracking (the sensor drifts during a
 // session) and AdamW's beta2 at 0.99.
 inline TrainConfig grasp_pretrain_config() {
   TrainConfig c;

@@ -241,8 +241,8 @@ struct GraspHeadConfig {
   // stopping follows the fit; contiguous blocks hold a few of the 16 objects only.
   // The heads' validation loss sits on a plateau for 10-20 epochs before it falls (the pooling has
   // to become selective first): patience 20 waits it out, and the probes' limit of 200 epochs
-  // leaves room for a slow fall after it (docs/history/evaluation-log.md, "Probes trained past
-  // their plateau" and "A three times longer labelled recording").
+  // leaves room for a slow fall after it (docs/evaluation.md, "Why the protocol is set this way";
+  // commits 8cbb683, c30f0f8).
   HeadTrainConfig probe{.max_epochs = 200, .patience = 20, .batch = 64, .lr = 1e-3};
   HeadTrainConfig sequence{.max_epochs = 100, .patience = 20, .batch = 16, .lr = 1e-3};
   // End to end (the encoder trains with the head): the heads' limits, capped by these (every step
@@ -258,8 +258,8 @@ struct GraspHeadConfig {
   // How the probes and the sequence head pool a window: the paper's attentive pooling, or the
   // taxel pooling (model/taxel_pooling.hpp) that keeps where a feature sits. Their `tokens` are
   // set from the features. The sequence head uses the taxel pooling: with the attentive one it
-  // learns no pose on this data for any encoder (docs/history/evaluation-log.md, "A sequence head
-  // that keeps where the contact is").
+  // learns no pose on this data for any encoder (docs/evaluation.md, "Why the
+  // protocol is set this way").
   PoolingConfig probe_pooling;
   PoolingConfig sequence_pooling{.kind = PoolingKind::taxel};
 };
@@ -506,26 +506,15 @@ inline std::vector<GraspScores> score_end_to_end(const ParamSet<float>& params, 
   return out;
 }
 
-// The constant baseline: the training split's majority class and mean targets.
+// The constant baseline (ConstantBaseline): the training split's majority class and mean targets.
 inline GraspScores score_constant(const GraspTasks& tr, const GraspTasks& te) {
   GraspScores s{};
-  std::vector<int> count(static_cast<std::size_t>(tr.object.classes), 0);
-  for (int l : tr.object.label) ++count[static_cast<std::size_t>(l)];
-  const int majority = static_cast<int>(std::max_element(count.begin(), count.end()) - count.begin());
-  score_object(s, std::vector<int>(te.object.label.size(), majority), te);
-  auto means = [](const std::vector<float>& v) {
-    std::array<double, 3> m{};
-    for (std::size_t i = 0; i < v.size(); ++i) m[i % 3] += v[i];
-    for (double& x : m) x /= static_cast<double>(v.size() / 3);
-    return m;
-  };
-  auto repeat = [](const std::array<double, 3>& m, std::size_t rows) {
-    std::vector<double> out(rows * 3);
-    for (std::size_t i = 0; i < out.size(); ++i) out[i] = m[i % 3];
-    return out;
-  };
-  score_force(s, repeat(means(tr.force.value), te.force.value.size() / 3).data(), 3, te);
-  score_pose(s, repeat(means(tr.pose.value), te.pose.value.size() / 3).data(), 3, te);
+  const auto object = ConstantBaseline::fit({}, 0, tr.object.label, tr.object.classes);
+  score_object(s, object.classes(te.object.label.size()), te);
+  const auto force = ConstantBaseline::fit(tr.force.value, 3, {}, 0);
+  score_force(s, force.values(te.force.value.size() / 3).data(), 3, te);
+  const auto pose = ConstantBaseline::fit(tr.pose.value, 3, {}, 0);
+  score_pose(s, pose.values(te.pose.value.size() / 3).data(), 3, te);
   return s;
 }
 

@@ -24,6 +24,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tjepa/core/detail/parallel.hpp"
+#include "tjepa/core/threads.hpp"
 #include "tjepa/core/detail/vendor.hpp"
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/hash.hpp"

@@ -17,7 +17,7 @@
 // E's rows are what graph_positions returns; JepaModel::set_positions writes them into the context
 // and target position tables, which then train as before (init only: checkpoints are unchanged).
 // Off by default: with rows this informative, the MSE objective can be met from the position alone
-// (docs/findings.md has the run that showed it).
+// (docs/formats.md, "Notes on some keys"; measured at commit a4abc0b).
 // Cost: a dense N×N symmetric eigendecomposition, O(N³): a few ms at N = 368, seconds at N = 2124.
 #include <algorithm>
 #include <cmath>

@@ -43,7 +43,7 @@
 #include "tjepa/graph/taxel_graph.hpp"
 #include "tjepa/masks/config.hpp"
 #include "tjepa/masks/context.hpp"
-#include "tjepa/masks/detail/workspace.hpp"
+#include "tjepa/masks/workspace.hpp"
 #include "tjepa/masks/domain.hpp"
 #include "tjepa/masks/global.hpp"
 #include "tjepa/masks/ijepa_blocks.hpp"

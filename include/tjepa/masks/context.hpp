@@ -12,7 +12,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/graph/taxel_graph.hpp"
-#include "tjepa/masks/detail/workspace.hpp"
+#include "tjepa/masks/workspace.hpp"
 #include "tjepa/masks/domain.hpp"
 #include "tjepa/masks/local.hpp"
 

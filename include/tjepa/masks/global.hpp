@@ -11,7 +11,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/masks/config.hpp"
-#include "tjepa/masks/detail/workspace.hpp"
+#include "tjepa/masks/workspace.hpp"
 #include "tjepa/masks/domain.hpp"
 
 namespace tjepa {

@@ -23,7 +23,7 @@
 #include "tjepa/core/random.hpp"
 #include "tjepa/masks/config.hpp"
 #include "tjepa/layout/taxel_layout.hpp"
-#include "tjepa/masks/detail/workspace.hpp"
+#include "tjepa/masks/workspace.hpp"
 
 namespace tjepa {
 

@@ -21,7 +21,7 @@
 #include "tjepa/core/random.hpp"
 #include "tjepa/masks/collator.hpp"
 #include "tjepa/masks/context.hpp"
-#include "tjepa/masks/detail/workspace.hpp"
+#include "tjepa/masks/workspace.hpp"
 
 namespace tjepa {
 

@@ -22,8 +22,8 @@
 #include <string>
 
 #include "tjepa/core/detail/simd.hpp"
-#include "tjepa/model/kernels/attention.hpp"
-#include "tjepa/model/kernels/softmax.hpp"
+#include "tjepa/kernels/attention.hpp"
+#include "tjepa/kernels/softmax.hpp"
 #include "tjepa/model/layers.hpp"
 #include "tjepa/model/workspace.hpp"
 

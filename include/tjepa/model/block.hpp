@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "tjepa/model/attention.hpp"
-#include "tjepa/model/kernels/drop_path.hpp"
+#include "tjepa/kernels/drop_path.hpp"
 #include "tjepa/model/mlp.hpp"
 
 namespace tjepa {

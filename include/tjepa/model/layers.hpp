@@ -18,8 +18,8 @@
 #include <utility>
 #include <vector>
 
-#include "tjepa/model/kernels/layer_norm.hpp"
-#include "tjepa/model/kernels/linear.hpp"
+#include "tjepa/kernels/layer_norm.hpp"
+#include "tjepa/kernels/linear.hpp"
 #include "tjepa/core/param_set.hpp"
 
 namespace tjepa {

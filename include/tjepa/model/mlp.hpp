@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <string>
 
-#include "tjepa/model/kernels/gelu.hpp"
+#include "tjepa/kernels/gelu.hpp"
 #include "tjepa/model/layers.hpp"
 
 namespace tjepa {

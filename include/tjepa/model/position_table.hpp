@@ -4,7 +4,7 @@
 // adds the rows of its context tokens and the predictor reads the rows of its targets.
 #include <string>
 
-#include "tjepa/model/kernels/gather.hpp"
+#include "tjepa/kernels/gather.hpp"
 #include "tjepa/core/param_set.hpp"
 
 namespace tjepa {

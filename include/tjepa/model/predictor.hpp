@@ -36,7 +36,7 @@ struct PredictorConfig {
   bool bias = false;  // biases inside the blocks (the reference has none)
   double eps = kernels::layer_norm_eps;
   // Width of each output row; 0: in_dim (JEPA predicts embeddings). The MAE decoder
-  // (train/mae.hpp) sets the token width m·τ: it reconstructs the tokenizer's input.
+  // (baselines/mae.hpp) sets the token width m·τ: it reconstructs the tokenizer's input.
   int out_dim = 0;
   int output_width() const { return out_dim > 0 ? out_dim : in_dim; }
 };

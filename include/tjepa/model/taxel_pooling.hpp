@@ -1,8 +1,8 @@
 #pragma once
 // The taxel pooling: a window's N token embeddings → one vector, keeping where on the skin each
 // feature sits (the attentive pooling is a function of the set of tokens and sees a taxel's place
-// only through what its embedding says about it). Not in the paper; docs/history/evaluation-log.md
-// ("A sequence head that keeps where the contact is") says why it exists. For x [M, N, d]:
+// only through what its embedding says about it). Not in the paper; docs/evaluation.md
+// ("Why the protocol is set this way") says why it exists. For x [M, N, d]:
 //   z = proj(norm(x))          [M, N, d] → [M, N, k]   LayerNorm, then one Linear d → k shared by the taxels
 //   p = fc(z as [M, N·k])      [M, d]                  a Linear over all N·k values
 // PyTorch names (after the owner's prefix): norm.*, proj.* ([k, d]), fc.* ([d, N·k]).

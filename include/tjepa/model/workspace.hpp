@@ -8,8 +8,8 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/detail/parallel.hpp"
-#include "tjepa/model/kernels/attention.hpp"
-#include "tjepa/model/kernels/linear.hpp"
+#include "tjepa/kernels/attention.hpp"
+#include "tjepa/kernels/linear.hpp"
 #include "tjepa/model/stage_clock.hpp"
 
 namespace tjepa {

@@ -36,7 +36,7 @@ inline void check_width(const char* who, const char* part, int dim, int depth, i
 }  // namespace detail
 
 // The context encoder's side of a model config: the tokenizer and the encoder. JepaConfig and
-// MaeConfig (train/mae.hpp) both extend it, so both build the same `context_encoder.` tensors.
+// MaeConfig (baselines/mae.hpp) both extend it, so both build the same `context_encoder.` tensors.
 struct ContextEncoderConfig {
   // Tokenizer input per token: m·τ values (one token per taxel), or with group_size set, the
   // m·τ values of each taxel of a group (DECO-50: groups of 4 and 5 taxels).

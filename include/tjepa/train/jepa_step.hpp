@@ -33,7 +33,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/masks/collator.hpp"
-#include "tjepa/model/kernels/gather.hpp"
+#include "tjepa/kernels/gather.hpp"
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
 #include "tjepa/optim/ema.hpp"

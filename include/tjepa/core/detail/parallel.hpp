@@ -123,8 +123,3 @@ void add_transposed(T* dst, const T* src, int R, int C) {
 }
 
 }  // namespace tjepa::detail
-
-namespace tjepa {
-// OpenMP's thread count for the next parallel region (1 without OpenMP).
-inline int max_threads() { return detail::max_threads(); }
-}  // namespace tjepa

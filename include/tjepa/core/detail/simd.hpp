@@ -1,7 +1,7 @@
 #pragma once
 // Small xsimd helpers: the native vector type and width, horizontal sum and max, and the row
 // reductions and updates of the row-wise kernels (LayerNorm, GELU, softmax, the shared-query
-// cross-attention); the attention kernels (model/kernels/detail/attention_simd.hpp) use the same
+// cross-attention); the attention kernels (kernels/detail/attention_simd.hpp) use the same
 // vector type. Every loop runs whole vectors, then a scalar tail, so any length works.
 #include <cstddef>
 

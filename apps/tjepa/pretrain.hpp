@@ -1,0 +1,228 @@
+#pragma once
+// Pre-training for `tjepa pretrain` and `tjepa demo`: the library's Trainer, with a progress line
+// and one log row per step. This file only prints; the Trainer does the work.
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <tjepa/tjepa.hpp>
+
+#include "options.hpp"
+#include "output.hpp"
+#include "setup.hpp"
+
+namespace tjepa::cli {
+
+struct PretrainOutcome {
+  CsvTable log;              // one row per step
+  double seconds = 0;
+  double windows_per_second = 0;
+};
+
+// The rows of an earlier log.csv with step < before (the steps a resumed run keeps), or none when
+// the file is missing or not a pre-training log.
+inline CsvTable earlier_log_rows(const std::filesystem::path& path, std::int64_t before);
+
+inline const std::vector<std::string>& pretrain_log_columns() {
+  static const std::vector<std::string> c{"step", "loss", "lr", "weight_decay", "momentum", "grad_norm",
+                                          "target_std", "windows_per_s", "seconds", "target_sample_std"};
+  return c;
+}
+
+// Runs the trainer until step stop_after (< 0: the end of its schedule), printing progress unless quiet.
+inline PretrainOutcome pretrain(JepaTrainer<float>& trainer, bool quiet, std::int64_t stop_after = -1) {
+  const int B = trainer.objective().config().batch;
+  PretrainOutcome out;
+  out.log.header = pretrain_log_columns();
+  ProgressLine progress("pretrain", trainer.total_steps(), quiet);
+  const std::int64_t first = trainer.step();
+  trainer.on_step = [&](const JepaStepStats& st) {
+    const double t = progress.elapsed();
+    const double rate = t > 0 ? static_cast<double>((st.step + 1 - first) * B) / t : 0.0;
+    out.log.rows.push_back({static_cast<double>(st.step), st.loss, st.lr, st.weight_decay, st.momentum, st.grad_norm,
+                            st.target_std, rate, t, st.target_sample_std});
+    char extra[96];
+    std::snprintf(extra, sizeof extra, "loss %.4f  target std %.3f (over samples %.3f)", st.loss, st.target_std,
+                  st.target_sample_std);
+    progress.update(st.step + 1, (st.step + 1 - first) * B, extra);
+  };
+  trainer.run(stop_after < 0 ? -1 : std::max<std::int64_t>(0, stop_after - first));
+  trainer.on_step = nullptr;
+  out.seconds = progress.elapsed();
+  out.windows_per_second =
+      out.seconds > 0 ? static_cast<double>(trainer.step() - first) * B / out.seconds : 0.0;
+  return out;
+}
+
+// Writes checkpoint.safetensors (the trainer's), log.csv and loss.svg into dir (registered with
+// files). earlier: the log of the steps before a resume, which the new rows continue.
+inline void write_pretrain_outputs(const std::filesystem::path& dir, JepaTrainer<float>& trainer,
+                                   const PretrainOutcome& outcome, OutputFiles& files, const CsvTable& earlier = {}) {
+  trainer.save(files.add(dir / "checkpoint.safetensors"));
+  CsvTable log = earlier;
+  log.header = outcome.log.header;
+  log.rows.insert(log.rows.end(), outcome.log.rows.begin(), outcome.log.rows.end());
+  write_file_atomic(files.add(dir / "log.csv"), log.str());
+  const std::vector<double> x = log.column(0);
+  write_file_atomic(files.add(dir / "loss.svg"),
+                    curve_svg(x,
+                              {{"JEPA loss", log.column(1), "#1f77b4"},
+                               {"target std", log.column(6), "#ff7f0e"}},
+                              "Tactile-JEPA pre-training", "step"));
+}
+
+inline CsvTable earlier_log_rows(const std::filesystem::path& path, std::int64_t before) {
+  CsvTable t;
+  t.header = pretrain_log_columns();
+  std::ifstream in(path);
+  std::string line;
+  if (!in || !std::getline(in, line)) return t;
+  std::string want;
+  for (const auto& c : t.header) want += (want.empty() ? "" : ",") + c;
+  if (line != want) return t;
+  while (std::getline(in, line)) {
+    std::vector<double> row;
+    std::istringstream fields(line);
+    for (std::string f; std::getline(fields, f, ',');) row.push_back(std::strtod(f.c_str(), nullptr));
+    if (row.size() != t.header.size() || row[0] >= static_cast<double>(before)) continue;
+    t.rows.push_back(std::move(row));
+  }
+  return t;
+}
+
+struct PretrainOptions {
+  std::string config;                 // JSON file with TrainConfig keys ("" = defaults)
+  nlohmann::json overrides = nlohmann::json::object();  // command-line overrides of TrainConfig keys
+  std::vector<std::string> data;      // recordings (.npy [T, N, m] or text); empty: simulated
+  std::string baseline;               // no-contact recording (preprocessing xela or baseline)
+  std::string preprocess = "auto";    // auto | xela | baseline | standardize | none (setup.hpp)
+  DataFormat format;                  // how recordings are read (axes, columns, header, NaN)
+  int simulate_frames = 20000;        // simulated data: frames of the pre-training recording
+  int simulate_contacts = 1;          // simulated data: indenters touching at once (SimulatedSkin::record)
+  std::string out;                    // "": the resumed checkpoint's folder, else runs/pretrain
+  bool force = false;
+  bool quiet = false;
+  std::string resume;                 // continue the run of this checkpoint (its config, then overrides)
+  std::int64_t stop_after = -1;       // stop (and save) after this many steps of the schedule (< 0: at its end)
+  bool strict = false;                // warnings about the layout's graph are errors
+  DataParallel<float> parallel;       // under mpirun: this rank's share of each batch (rank 0 prints and writes)
+};
+
+inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
+  const bool lead = o.parallel.rank == 0;
+  NullStream null;
+  std::ostream& out = lead ? out_lead : null;
+  TrainConfig run = !o.config.empty()   ? TrainConfig::from_file(o.config)
+                    : !o.resume.empty() ? load_trained_model(o.resume).config
+                                        : TrainConfig{};
+  run.update(o.overrides, "command line");
+  fit_default_warmup(run, o.overrides, out);
+  run.validate();
+  SkinSpec spec = SkinSpec::of(run);
+  spec.strict = o.strict;
+  const Skin skin = load_skin(spec, &out);
+  std::vector<Recording> recs;
+  std::optional<Recording> baseline;
+  std::string mode = o.preprocess;
+  if (o.data.empty()) {
+    require<ConfigError>(o.simulate_frames >= run.data.tau, "--simulate ", o.simulate_frames, " frames, expected >= tau");
+    SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, run.seed);
+    baseline = sim.record_baseline(300);
+    recs.push_back(sim.record(o.simulate_frames, o.simulate_contacts).recording);
+    if (mode == "auto") mode = "xela";  // the simulated skin reports Xela counts
+  } else {
+    // Data parallel: each rank maps the recordings, so training reads only the pages of its
+    // shards' windows; fitting the preprocessing (and the drift tracker, which writes a private
+    // copy) still reads every recording once on every rank.
+    const bool map = o.parallel.active();
+    for (const auto& p : o.data) recs.push_back(in_layout_order(read_recording(p, o.format, map), skin, p));
+    if (!o.baseline.empty()) baseline = in_layout_order(read_recording(o.baseline, o.format, map), skin, o.baseline);
+  }
+  for (std::size_t r = 0; r < recs.size(); ++r)
+    require<ShapeError>(recs[r].taxels() == skin.size(), o.data.empty() ? "simulated" : o.data[r], ": ",
+                        recs[r].taxels(), " taxels, the layout '", run.data.layout, "' has ", skin.size());
+  std::vector<Recording*> rec_ptrs;
+  for (auto& r : recs) rec_ptrs.push_back(&r);
+  const PreprocessChoice picked = choose_preprocessing(mode, recs);
+  if (mode != picked.mode) out << "preprocessing: " << picked.mode << " (" << picked.reason << ")\n";
+  if ((picked.mode == "xela" || picked.mode == "baseline") && !baseline && !o.data.empty())
+    out << "note: no --baseline recording: each taxel's no-contact mean is taken over " << o.data[0] << "\n";
+  const std::optional<DriftTracker> drift =
+      picked.mode == "xela" && baseline ? track_drift(run, *baseline, rec_ptrs) : std::nullopt;
+  const Preprocessor pre = fit_preprocessor(picked.mode, baseline ? &*baseline : nullptr, recs);
+  const int axes = recs[0].axes();
+  const WindowSource src(recs, window_spec(run.data.tau, o.format), {}, pre);
+  note_dropped(src, "pre-training data", out);
+
+  OutputFiles files;
+  // A resumed run writes into its own folder unless told otherwise, and continues its log there.
+  const std::filesystem::path dir =
+      !o.out.empty() ? std::filesystem::path(o.out)
+                     : !o.resume.empty() ? std::filesystem::path(o.resume).parent_path() : std::filesystem::path("runs/pretrain");
+  const bool own_folder = !o.resume.empty() && std::filesystem::exists(dir) &&
+                          std::filesystem::equivalent(std::filesystem::absolute(o.resume).parent_path(), dir);
+  OutputFiles::check_new(dir / "checkpoint.safetensors", o.force || own_folder);
+  if (lead) files.make_dir(dir);
+  const auto owned = make_jepa_model(run, skin.graph, axes, run.seed);
+  JepaModel<float>& model = *owned;
+  JepaTrainer<float> trainer(model, src, skin.graph, run);
+  trainer.parallel = o.parallel;
+  trainer.extras = data_state(pre, drift ? &*drift : nullptr);
+  if (!o.resume.empty()) trainer.resume(o.resume);
+  require<ConfigError>(o.stop_after < 0 || o.stop_after > trainer.step(), "--stop-after ", o.stop_after,
+                       ", expected a step after the run's current ", trainer.step());
+  out << "pre-training on " << src.size() << " windows (" << skin.size() << " taxels, tau " << run.data.tau << "), "
+      << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
+      << run.schedule.steps << " steps of " << run.batch
+      << (o.parallel.active() ? " on " + std::to_string(o.parallel.ranks) + " MPI ranks" : std::string()) << "\n";
+  const PretrainOutcome r = pretrain(trainer, o.quiet || !lead, o.stop_after);
+  if (!lead) return 0;
+  write_pretrain_outputs(dir, trainer, r, files,
+                         own_folder ? earlier_log_rows(dir / "log.csv", r.log.rows.empty() ? 0 : static_cast<std::int64_t>(r.log.rows.front()[0]))
+                                    : CsvTable{});
+  files.commit();
+  out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "
+      << r.log.rows.back()[6] << " (over samples " << r.log.rows.back()[9] << "), " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
+      << "\nwrote " << (dir / "checkpoint.safetensors").string() << ", log.csv, loss.svg\n";
+  // Collapse: the target embeddings barely differ between windows, though they vary inside one.
+  const double within = r.log.rows.back()[6], across = r.log.rows.back()[9];
+  if (std::isfinite(within) && std::isfinite(across) && across < 0.1 * within)
+    out << "warning: the target embeddings hardly differ between windows (std over windows " << across
+        << ", inside a window " << within << "): the inputs may be dominated by fixed per-taxel offsets"
+        << (picked.mode == "baseline" || picked.mode == "xela" ? std::string()
+                                                               : "; try --preprocess baseline (with --baseline REST)")
+        << ", or train longer\n";
+  return 0;
+}
+
+
+// The subcommand and its options, which fill o (it outlives the parse).
+inline CLI::App* add_pretrain_command(CLI::App& app, PretrainOptions& o) {
+  CLI::App* sub = app.add_subcommand("pretrain", "Pre-train Tactile-JEPA: checkpoint, CSV log, loss-curve SVG");
+  sub->add_option("--config", o.config, "JSON run configuration (keys as in the checkpoint's config.run)");
+  add_run_overrides(sub, o.overrides);
+  sub->add_option("--data", o.data, "recordings (.npy [T, N, m] or CSV); default: simulated data");
+  sub->add_option("--baseline", o.baseline, "no-contact recording (preprocessing xela or baseline)");
+  sub->add_option("--preprocess", o.preprocess, "auto | xela | baseline | standardize | none")->capture_default_str();
+  add_data_format(sub, o.format);
+  sub->add_option("--simulate", o.simulate_frames, "frames of simulated data")->capture_default_str();
+  sub->add_option("--simulate-contacts", o.simulate_contacts, "indenters touching at once in simulated data")
+      ->capture_default_str();
+  sub->add_option("--out", o.out, "output directory (default: runs/pretrain; a resumed run's own folder)");
+  sub->add_flag("--force", o.force, "overwrite an existing checkpoint");
+  sub->add_flag("--quiet", o.quiet, "no progress line");
+  sub->add_option("--resume", o.resume, "continue the run of this checkpoint (same data and config)");
+  sub->add_option("--stop-after", o.stop_after, "stop and save after this many steps of the schedule");
+  sub->add_flag("--strict", o.strict, "warnings about the layout's graph are errors");
+  return sub;
+}
+
+}  // namespace tjepa::cli

@@ -1,0 +1,451 @@
+#pragma once
+// tjepa probe: probes on a frozen checkpoint. With the simulated skin's labels (or a [T, 4]
+// label file), force and indenter against a constant and a random encoder; with --task, the
+// user's own labels (label_probe.hpp).
+//
+// Every command writes its files through OutputFiles: on an error nothing it wrote is left.
+#include <CLI/CLI.hpp>
+
+#include <array>
+#include <chrono>
+#include <iostream>
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <ostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <tjepa/downstream/embed.hpp>
+#include <tjepa/downstream/probe_labels.hpp>
+#include <tjepa/eval.hpp>
+
+#include "label_probe.hpp"
+#include "output.hpp"
+#include "options.hpp"
+#include "setup.hpp"
+
+namespace tjepa::cli {
+
+// ---------------------------------------------------------------------------------------------
+// Probes (shared by `probe` and `demo`)
+
+// Held-out metrics of a force + indenter probe.
+struct ProbeMetrics {
+  std::array<double, force_axes> force_rmse{};  // N, per axis (shear u, shear v, normal)
+  double indenter_accuracy = 0;
+  double majority_accuracy = 0;                 // chance level: the most frequent class
+  int windows = 0;
+};
+
+struct ProbeRow {
+  std::string name;
+  ProbeMetrics metrics;               // one probe, or the mean over `runs`
+  double seconds = 0;
+  double lr = 0;                      // the probe's learning rate
+  std::vector<double> lr_objective;   // unused (kept for the JSON's schema)
+  std::vector<ProbeRow> runs;         // the repeats averaged into metrics (empty: a single probe)
+  ProbeMetrics spread;                // their sample standard deviation (0 for a single probe)
+  std::string flag;                   // why the row says little ("" = nothing to say)
+};
+
+// The mean (and sample standard deviation) of repeated probes: other probe seeds, and for a random
+// encoder other initializations. One probe on 600 labelled windows moves by as much as the
+// differences between encoders; the demo compares means.
+// A repeat whose head diverged is left out of the mean (and the row says so), unless all did.
+inline ProbeRow average_rows(std::string name, std::vector<ProbeRow> runs) {
+  require<ConfigError>(!runs.empty(), "average_rows: no probes");
+  ProbeRow row{std::move(name), {}, 0, 0, {}, {}, {}, {}};
+  std::vector<const ProbeRow*> kept;
+  for (const ProbeRow& r : runs)
+    if (r.flag.find("diverged") == std::string::npos) kept.push_back(&r);
+  if (kept.size() < runs.size())
+    row.flag = std::to_string(runs.size() - kept.size()) + " of " + std::to_string(runs.size()) + " repeats diverged" +
+               (kept.empty() ? "" : ", left out of the mean");
+  if (kept.empty())
+    for (const ProbeRow& r : runs) kept.push_back(&r);
+  const double n = static_cast<double>(kept.size());
+  auto stat = [&](auto get, double& mean, double& sd) {
+    double s = 0, s2 = 0;
+    for (const ProbeRow* r : kept) s += get(r->metrics);
+    mean = s / n;
+    for (const ProbeRow* r : kept) s2 += (get(r->metrics) - mean) * (get(r->metrics) - mean);
+    sd = kept.size() > 1 ? std::sqrt(s2 / (n - 1)) : 0.0;
+  };
+  for (int a = 0; a < force_axes; ++a)
+    stat([a](const ProbeMetrics& m) { return m.force_rmse[static_cast<std::size_t>(a)]; },
+         row.metrics.force_rmse[static_cast<std::size_t>(a)], row.spread.force_rmse[static_cast<std::size_t>(a)]);
+  stat([](const ProbeMetrics& m) { return m.indenter_accuracy; }, row.metrics.indenter_accuracy,
+       row.spread.indenter_accuracy);
+  row.metrics.majority_accuracy = runs.front().metrics.majority_accuracy;
+  row.metrics.windows = runs.front().metrics.windows;
+  for (const ProbeRow& r : runs) row.seconds += r.seconds;
+  row.runs = std::move(runs);
+  return row;
+}
+
+// Averaged rows print "mean ± sd" over their repeats, and the rate each repeat chose.
+inline void print_probe_table(std::ostream& out, const std::vector<ProbeRow>& rows) {
+  char buf[384];
+  std::snprintf(buf, sizeof buf, "%-34s %15s %15s %15s %9s %14s  %s\n", "encoder", "RMSE u/N", "RMSE v/N",
+                "RMSE n/N", "RMSE avg", "indenter", "probe lr");
+  out << buf;
+  auto cell = [](double mean, double sd, bool percent) {
+    char c[40];
+    if (percent)
+      std::snprintf(c, sizeof c, sd > 0 ? "%.1f%% ± %.1f" : "%.1f%%", 100 * mean, 100 * sd);
+    else
+      std::snprintf(c, sizeof c, sd > 0 ? "%.3f ± %.3f" : "%.3f", mean, sd);
+    return std::string(c);
+  };
+  for (const auto& r : rows) {
+    const auto& m = r.metrics;
+    std::string lrs;
+    for (const ProbeRow& x : r.runs.empty() ? std::vector<ProbeRow>{r} : r.runs) {
+      char lr[16] = "-";
+      if (x.lr > 0) std::snprintf(lr, sizeof lr, "%.0e", x.lr);
+      if (!lrs.empty()) lrs += ',';
+      lrs += lr;
+    }
+    std::snprintf(buf, sizeof buf, "%-34s %15s %15s %15s %9.3f %14s  %s\n", r.name.c_str(),
+                  cell(m.force_rmse[0], r.spread.force_rmse[0], false).c_str(),
+                  cell(m.force_rmse[1], r.spread.force_rmse[1], false).c_str(),
+                  cell(m.force_rmse[2], r.spread.force_rmse[2], false).c_str(),
+                  (m.force_rmse[0] + m.force_rmse[1] + m.force_rmse[2]) / 3,
+                  cell(m.indenter_accuracy, r.spread.indenter_accuracy, true).c_str(), lrs.c_str());
+    out << buf;
+  }
+  for (const auto& r : rows)
+    if (!r.flag.empty()) out << "note: " << r.name << ": " << r.flag << '\n';
+}
+
+inline nlohmann::json probe_rows_json(const std::vector<ProbeRow>& rows) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const auto& r : rows) {
+    nlohmann::json j = {{"encoder", r.name},
+                        {"force_rmse", r.metrics.force_rmse},
+                        {"indenter_accuracy", r.metrics.indenter_accuracy},
+                        {"majority_accuracy", r.metrics.majority_accuracy},
+                        {"windows", r.metrics.windows},
+                        {"probe_lr", r.lr},
+                        {"probe_lr_validation_objective", r.lr_objective},
+                        {"seconds", r.seconds},
+                        {"flag", r.flag}};
+    if (!r.runs.empty()) {
+      j["force_rmse_sd"] = r.spread.force_rmse;
+      j["indenter_accuracy_sd"] = r.spread.indenter_accuracy;
+      j["repeats"] = probe_rows_json(r.runs);
+    }
+    a.push_back(std::move(j));
+  }
+  return a;
+}
+
+// The mean-force / majority-class row: what a probe must beat to have learned anything.
+inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& test, int classes) {
+  const auto c = ConstantBaseline::fit(train.force, force_axes, train.indenter, classes);
+  std::vector<float> y(static_cast<std::size_t>(test.size()) * (force_axes + classes), 0.0f);
+  for (int i = 0; i < test.size(); ++i) {
+    float* r = y.data() + static_cast<std::size_t>(i) * (force_axes + classes);
+    for (int a = 0; a < force_axes; ++a) r[a] = static_cast<float>(c.mean[static_cast<std::size_t>(a)]);
+    r[force_axes + c.majority] = 1.0f;
+  }
+  ProbeRow row{"constant (train mean / majority)", {}, 0, 0, {}, {}, {}, {}};
+  const auto rm = rmse_per_column(y.data(), static_cast<std::size_t>(force_axes + classes), test.force.data(),
+                                  test.size(), force_axes);
+  std::copy(rm.begin(), rm.end(), row.metrics.force_rmse.begin());
+  row.metrics.indenter_accuracy = accuracy(y.data() + force_axes, static_cast<std::size_t>(force_axes + classes),
+                                           test.indenter.data(), test.size(), classes);
+  row.metrics.majority_accuracy = majority_accuracy(test.indenter.data(), test.size(), classes);
+  row.metrics.windows = test.size();
+  return row;
+}
+
+// A probe head (3 force outputs + the indenter logits) trained early-stopped on the frozen
+// encoder's embeddings of the training windows (train_head: a validation split of them decides
+// the epoch), scored on the held-out windows. repeats > 1: that many heads (seeds cfg.seed,
+// cfg.seed + 1, ...) on the same embeddings, averaged (average_rows). center_tokens: each token's
+// resting embedding is removed first (center_token_embeddings, fitted on the training windows).
+inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& params, const Tokenizer& tok,
+                             const Encoder& enc, const WindowSource& train_src, const ProbeLabels& train,
+                             const WindowSource& test_src, const ProbeLabels& test, const HeadTrainConfig& cfg,
+                             int heads, bool quiet, int repeats = 1, bool center_tokens = false) {
+  require<ConfigError>(repeats >= 1, "frozen_probe: repeats = ", repeats, ", expected >= 1");
+  ProgressLine embed_progress("  embed " + name, train.size() + test.size(), quiet);
+  const auto t0 = std::chrono::steady_clock::now();
+  auto emb_train = embed_windows(params, tok, enc, train_src, train.window, 32, [&](std::int64_t d, std::int64_t) {
+    embed_progress.update(d, d, "");
+  });
+  auto emb_test = embed_windows(params, tok, enc, test_src, test.window, 32, [&](std::int64_t d, std::int64_t) {
+    embed_progress.update(train.size() + d, train.size() + d, "");
+  });
+  const double embed_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (center_tokens) {
+    const std::span<float> test_span(emb_test);
+    center_token_embeddings<float>(emb_train, std::span<const std::span<float>>(&test_span, 1), enc.num_tokens(), enc.dim());
+  }
+  FrozenFeatures<float> ftrain(std::move(emb_train), enc.num_tokens(), enc.dim());
+  FrozenFeatures<float> ftest(std::move(emb_test), enc.num_tokens(), enc.dim());
+  const HeadTargets train_targets = head_targets(train, num_indenter_shapes);
+  const HeadTargets test_targets = head_targets(test, num_indenter_shapes);
+  std::vector<ProbeRow> runs;
+  for (int r = 0; r < repeats; ++r) {
+    const auto t1 = std::chrono::steady_clock::now();
+    HeadTrainConfig c = cfg;
+    c.seed = cfg.seed + static_cast<std::uint64_t>(r);
+    const std::string label = repeats > 1 ? name + " #" + std::to_string(r + 1) : name;
+    ProbeHead<float> head(enc.dim(), heads, force_axes, num_indenter_shapes, c.seed);
+    const HeadTrainResult fit = train_head(head, ftrain, train_targets, c);
+    if (!quiet)
+      std::cerr << "  probe " << label << ": best epoch " << fit.best_epoch + 1 << " of " << fit.epochs()
+                << " (validation loss " << fit.best_validation << ")\n";
+    const HeadMetrics hm = evaluate_head(head, ftest, test_targets);
+    ProbeRow row{label, {}, 0, c.lr, {}, {}, {}, {}};
+    if (!std::isfinite(fit.best_validation)) row.flag = "diverged (validation loss not finite)";
+    std::copy_n(hm.rmse.begin(), force_axes, row.metrics.force_rmse.begin());
+    row.metrics.indenter_accuracy = hm.accuracy;
+    row.metrics.majority_accuracy = hm.majority_accuracy;
+    row.metrics.windows = hm.samples;
+    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count() +
+                  (r == 0 ? embed_seconds : 0.0);
+    runs.push_back(std::move(row));
+  }
+  if (repeats == 1) return runs.front();
+  return average_rows(name, std::move(runs));
+}
+
+// ---------------------------------------------------------------------------------------------
+// tjepa probe
+
+struct ProbeOptions {
+  std::string checkpoint;
+  std::string encoder = "target";          // target | context
+  // Labelled data: files, or simulated (the layout's simulated skin) when empty.
+  std::string train_data, train_labels, test_data, test_labels;
+  DataFormat format;                  // how recordings are read (axes, columns, header, NaN)
+  std::uint64_t simulate_seed = 1;
+  int simulate_train_frames = 20000, simulate_test_frames = 10000;  // the demo's (8000 + 4000 gave noisy results)
+  // Frames in contact for a window to count; -1: 5 with the simulator's labels, 0 (off) with --task,
+  // where a frame is in contact when a taxel's preprocessed reading has a norm over its axes above
+  // contact_threshold (in the preprocessing's units: standard deviations after standardization).
+  int min_contact = -1;
+  double contact_threshold = 3.0;
+  int max_windows = 0;                     // per split, 0 = all
+  HeadTrainConfig probe{.max_epochs = 60, .batch = 32, .lr = 1e-3};  // early-stopped on a validation split
+  int repeats = 1;                         // probes with seeds seed, seed + 1, ... averaged
+  bool center_tokens = false;              // center_token_embeddings before the probe
+  std::string task;                        // "": force + indenter labels; regression | classification: the user's
+  std::string label_columns;               // the label files' columns (text), "a:b,..."
+  std::string data, labels;                // --task: one recording and its labels, split in time instead of
+  double test_fraction = 0.2;              //   train/test files: the last test_fraction of the frames is held out
+  std::string out;                         // results JSON ("" = none)
+  bool force = false;
+  bool quiet = false;
+};
+
+// tjepa probe --task: the user's own labels (label_probe.hpp).
+inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
+  const LabelTask task = parse_label_task(o.task);
+  const bool one_file = !o.data.empty() || !o.labels.empty();
+  require<ConfigError>(one_file ? !o.data.empty() && !o.labels.empty() && o.train_data.empty() && o.test_data.empty()
+                                : !o.train_data.empty() && !o.train_labels.empty() && !o.test_data.empty() &&
+                                      !o.test_labels.empty(),
+                       "--task needs --data and --labels (split in time by --test-fraction), or --train-data, "
+                       "--train-labels, --test-data and --test-labels");
+  require<ConfigError>(o.test_fraction > 0 && o.test_fraction < 1, "--test-fraction ", o.test_fraction,
+                       ", expected in (0, 1)");
+  TrainedModel m = load_trained_model(o.checkpoint);
+  const JepaModel<float>& model = *m.model;
+  const Skin skin = load_skin(SkinSpec::of(m.config));
+  Recording train_rec, test_rec, train_frames, test_frames;
+  std::string train_labels = o.train_labels, test_labels = o.test_labels;
+  if (one_file) {
+    // One session: the first frames train, the last test_fraction are held out (no window crosses).
+    const Recording rec = in_layout_order(read_recording(o.data, o.format), skin, o.data);
+    const Recording lab = read_label_frames(o.labels, o.label_columns, rec.frames());
+    const int cut = static_cast<int>(std::lround(rec.frames() * (1.0 - o.test_fraction)));
+    require<DataError>(cut >= 2 * m.config.data.tau && rec.frames() - cut >= 2 * m.config.data.tau, o.data, ": ", rec.frames(),
+                       " frames split at ", cut, " leave fewer than two windows of ", m.config.data.tau, " frames on a side");
+    train_rec = rec.frames_range(0, cut), test_rec = rec.frames_range(cut, rec.frames());
+    train_frames = lab.frames_range(0, cut), test_frames = lab.frames_range(cut, rec.frames());
+    train_labels = test_labels = o.labels;
+  } else {
+    train_rec = in_layout_order(read_recording(o.train_data, o.format), skin, o.train_data);
+    test_rec = in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data);
+    train_frames = read_label_frames(o.train_labels, o.label_columns, train_rec.frames());
+    test_frames = read_label_frames(o.test_labels, o.label_columns, test_rec.frames());
+  }
+  for (const Recording* r : {&train_rec, &test_rec}) require_fits(*r, m);
+  require<ShapeError>(train_frames.taxels() == test_frames.taxels(), test_labels, ": ", test_frames.taxels(),
+                      " label columns, ", train_labels, " has ", train_frames.taxels());
+  int classes = 0;
+  if (task == LabelTask::classification)
+    for (const Recording* f : {&train_frames, &test_frames})
+      for (float c : f->values()) classes = std::max(classes, static_cast<int>(c) + 1);
+  require<DataError>(task == LabelTask::regression || classes >= 2, train_labels, " and ", test_labels,
+                     ": class ids up to ", classes - 1, ", expected at least two classes");
+  m.track(train_rec);
+  m.track(test_rec);
+  const WindowSource train_src(train_rec, window_spec(m.config.data.tau, o.format), {}, m.pre);
+  const WindowSource test_src(test_rec, window_spec(m.config.data.tau, o.format), {}, m.pre);
+  note_dropped(train_src, "training recording", out);
+  note_dropped(test_src, "held-out recording", out);
+  WindowLabels train = window_labels(train_src, train_frames, task, classes, train_labels);
+  WindowLabels test = window_labels(test_src, test_frames, task, classes, test_labels);
+  if (o.min_contact > 0) {
+    const auto before = std::make_pair(train.window.size(), test.window.size());
+    keep_contact_windows(train, train_src, o.min_contact, o.contact_threshold, train_labels);
+    keep_contact_windows(test, test_src, o.min_contact, o.contact_threshold, test_labels);
+    out << "contact filter: windows with at least " << o.min_contact << " frames in which a taxel's reading exceeds "
+        << o.contact_threshold << ": " << train.window.size() << " of " << before.first << " training, "
+        << test.window.size() << " of " << before.second << " held-out\n";
+  }
+  out << "probe for " << o.task << " labels on " << o.checkpoint << ": " << train.window.size() << " training and "
+      << test.window.size() << " held-out windows\n";
+  // The default epochs suit thousands of windows; on a few hundred an epoch is a handful of steps,
+  // so by default the heads get at least 3000 steps and 1000 steps of patience (an attentive
+  // probe can sit at the uniform guess for hundreds of steps before it starts to learn).
+  HeadTrainConfig cfg = o.probe;
+  const HeadTrainConfig defaults = ProbeOptions{}.probe;
+  if (cfg.max_epochs == defaults.max_epochs && cfg.patience == defaults.patience) {
+    const double fit = (1.0 - cfg.validation_fraction) * static_cast<double>(train.window.size());
+    const int per_epoch = std::max(1, static_cast<int>(std::ceil(fit / cfg.batch)));
+    cfg.max_epochs = std::max(cfg.max_epochs, (3000 + per_epoch - 1) / per_epoch);
+    cfg.patience = std::max(cfg.patience, (1000 + per_epoch - 1) / per_epoch);
+    if (cfg.max_epochs != defaults.max_epochs)
+      out << "note: " << per_epoch << " steps per epoch: heads train up to " << cfg.max_epochs
+          << " epochs with a patience of " << cfg.patience << " (--epochs and --patience set them)\n";
+  }
+  const std::vector<LabelProbeRow> rows = label_probe_rows(
+      m, o.encoder == "target" ? model.target : model.context, o.encoder, train_src, train, test_src, test, skin,
+      cfg, o.quiet, o.repeats);
+  out << label_probe_markdown(rows, test.targets, static_cast<int>(train.window.size()));
+  if (!o.out.empty()) {
+    OutputFiles files;
+    write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint},
+                                                       {"task", o.task},
+                                                       {"train_windows", train.window.size()},
+                                                       {"repeats", o.repeats},
+                                                       {"test_windows", test.window.size()},
+                                                       {"results", label_probe_json(rows)}}
+                                            .dump(2));
+    files.commit();
+  }
+  return 0;
+}
+
+inline int run_probe(const ProbeOptions& o, std::ostream& out) {
+  require<ConfigError>(!o.checkpoint.empty(), "--checkpoint is required");
+  require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
+                       "', expected target or context");
+  if (!o.out.empty()) OutputFiles::check_new(o.out, o.force);
+  if (!o.task.empty()) return run_label_probe(o, out);
+  TrainedModel m = load_trained_model(o.checkpoint);
+  JepaModel<float>& model = *m.model;
+  Recording train_rec, test_rec;
+  std::vector<FrameLabel> train_lab, test_lab;
+  const Skin skin = load_skin(SkinSpec::of(m.config));
+  if (o.train_data.empty()) {
+    require<ConfigError>(o.test_data.empty(), "--test-data needs --train-data too");
+    // The sensor the checkpoint was pre-trained on (seeded by its run's seed: the same offsets and
+    // gains, so its baseline applies), with new events from --simulate-seed.
+    SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, m.config.seed);
+    sim.reseed(o.simulate_seed);
+    auto a = sim.record(o.simulate_train_frames);
+    auto b = sim.record(o.simulate_test_frames);
+    train_rec = std::move(a.recording);
+    train_lab = std::move(a.labels);
+    test_rec = std::move(b.recording);
+    test_lab = std::move(b.labels);
+  } else {
+    require<ConfigError>(!o.train_labels.empty() && !o.test_data.empty() && !o.test_labels.empty(),
+                         "--train-data needs --train-labels, --test-data and --test-labels");
+    train_rec = in_layout_order(read_recording(o.train_data, o.format), skin, o.train_data);
+    train_lab = read_frame_labels(o.train_labels, train_rec.frames());
+    test_rec = in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data);
+    test_lab = read_frame_labels(o.test_labels, test_rec.frames());
+  }
+  for (const Recording* r : {&train_rec, &test_rec}) require_fits(*r, m);
+  m.track(train_rec);
+  m.track(test_rec);
+  const WindowSource train_src(train_rec, window_spec(m.config.data.tau, o.format), train_lab, m.pre);
+  const WindowSource test_src(test_rec, window_spec(m.config.data.tau, o.format), test_lab, m.pre);
+  note_dropped(train_src, "training recording", out);
+  note_dropped(test_src, "held-out recording", out);
+  const ProbeLabels train = ProbeLabels::from_source(
+      train_src, labelled_windows(train_src, o.min_contact < 0 ? 5 : o.min_contact, o.max_windows, o.probe.seed));
+  const ProbeLabels test = ProbeLabels::from_source(
+      test_src, labelled_windows(test_src, o.min_contact < 0 ? 5 : o.min_contact, o.max_windows, o.probe.seed + 1));
+  for (int c : train.indenter)
+    require<DataError>(c < num_indenter_shapes, "indenter class ", c, " in the training labels, expected < ",
+                       num_indenter_shapes);
+  out << "probe on the frozen " << o.encoder << " encoder of " << o.checkpoint << ": " << train.size()
+      << " training windows, " << test.size() << " held-out windows\n";
+  const ParamSet<float>& ps = o.encoder == "target" ? model.target : model.context;
+  std::vector<ProbeRow> rows{constant_baseline(train, test, num_indenter_shapes),
+                             frozen_probe(o.encoder + " encoder (frozen)", ps, model.tokenizer, model.encoder,
+                                          train_src, train, test_src, test, o.probe, m.config.model.heads, o.quiet,
+                                          o.repeats, o.center_tokens)};
+  for (const auto& [labels, which] : {std::pair{&train, "training"}, std::pair{&test, "held-out"}})
+    if (distinct_classes(labels->indenter) < 2)
+      for (ProbeRow& r : rows)
+        r.flag += std::string(r.flag.empty() ? "" : "; ") + "the " + which + " windows hold one indenter class";
+  print_probe_table(out, rows);
+  if (!o.out.empty()) {
+    OutputFiles files;
+    write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint}, {"results", probe_rows_json(rows)}}.dump(2));
+    files.commit();
+  }
+  return 0;
+}
+
+// The subcommand and its options, which fill o (it outlives the parse).
+inline CLI::App* add_probe_command(CLI::App& app, ProbeOptions& o) {
+  CLI::App* sub = app.add_subcommand("probe", "Train and evaluate probes on a frozen checkpoint: force and indenter, or your own labels (--task)");
+  sub->add_option("--checkpoint", o.checkpoint, "checkpoint of `tjepa pretrain`")->required();
+  sub->add_option("--encoder", o.encoder, "target | context")->capture_default_str();
+  sub->add_option("--train-data", o.train_data, "labelled training recording (default: simulated)");
+  sub->add_option("--train-labels", o.train_labels,
+                    "labels per frame: [T, 4] .npy (force u, v, normal, indenter class or -1), or with --task your own");
+  sub->add_option("--task", o.task, "your own labels: regression (any number of columns) | classification (class ids)");
+  sub->add_option("--label-columns", o.label_columns, "text label files: the label columns, e.g. 1:3");
+  sub->add_option("--data", o.data, "with --task: one recording, split in time (--test-fraction)");
+  sub->add_option("--labels", o.labels, "with --task and --data: its labels, one row per frame");
+  sub->add_option("--test-fraction", o.test_fraction, "with --data: the last fraction of frames held out")
+      ->capture_default_str();
+  sub->add_option("--test-data", o.test_data, "held-out recording");
+  sub->add_option("--test-labels", o.test_labels, "held-out labels");
+  sub->add_option("--simulate-seed", o.simulate_seed, "seed of the simulated labelled data")->capture_default_str();
+  sub->add_option("--simulate-train-frames", o.simulate_train_frames, "simulated labelled frames to train on")
+      ->capture_default_str()->check(CLI::Range(1, 1 << 30));
+  sub->add_option("--simulate-test-frames", o.simulate_test_frames, "simulated held-out frames")
+      ->capture_default_str()->check(CLI::Range(1, 1 << 30));
+  sub->add_option("--min-contact", o.min_contact,
+                    "frames in contact for a window to count (default: 5 with simulated labels, off with --task)");
+  sub->add_option("--contact-threshold", o.contact_threshold,
+                    "--task: a frame is in contact when a taxel's preprocessed reading exceeds this norm")
+      ->capture_default_str();
+  sub->add_option("--max-windows", o.max_windows, "labelled windows per split (0: all)")->capture_default_str();
+  sub->add_option("--epochs", o.probe.max_epochs, "probe epoch limit (early stopping)")->capture_default_str();
+  sub->add_option("--patience", o.probe.patience, "epochs without a better validation loss before stopping")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  sub->add_option("--batch", o.probe.batch, "probe batch")->capture_default_str();
+  sub->add_option("--repeats", o.repeats, "probes with seeds seed, seed+1, ... averaged (mean ± sd)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  sub->add_option("--lr", o.probe.lr, "probe learning rate")->capture_default_str();
+  add_data_format(sub, o.format);
+  sub->add_option("--out", o.out, "write the results as JSON here");
+  sub->add_flag("--force", o.force, "overwrite --out");
+  sub->add_flag("--quiet", o.quiet, "no progress line");
+  sub->add_flag("--center-tokens", o.center_tokens,
+                  "the probe reads each token's embedding minus its training mean (center_token_embeddings)");
+  return sub;
+}
+
+}  // namespace tjepa::cli

@@ -1,0 +1,485 @@
+#pragma once
+// SIMD internals of the fast attention kernels (included only by ../attention.hpp, inside its
+// g++ warning suppression): a vectorized exp2, register-blocked GEMM
+// micro-kernels on tiles, and the tile sizes. Everything uses xsimd's default architecture (the best
+// one the translation unit is compiled for: AVX-512, AVX2 or plain SSE2).
+#include <algorithm>
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <type_traits>
+
+#include "tjepa/core/detail/vendor.hpp"
+
+#include "tjepa/core/detail/simd.hpp"
+#include "tjepa/core/detail/transpose.hpp"
+#include "tjepa/kernels/detail/bgemm.hpp"
+
+namespace tjepa::detail::attn {
+
+template <class T>
+using Vec = detail::simd<T>;
+
+template <class T>
+inline constexpr int W = static_cast<int>(detail::simd_width<T>);
+
+// Register blocking of the micro-kernels: an MR x (NV*W) block of C lives in MR*NV registers.
+// AVX-512 has 32 vector registers (24 accumulators + 4 B vectors + broadcasts); AVX2 and SSE have 16.
+template <class T>
+inline constexpr int MR = sizeof(Vec<T>) >= 64 ? 6 : 3;
+inline constexpr int NV = 4;
+template <class T>
+inline constexpr int NR = NV * W<T>;  // columns of one micro-panel
+// The forward's S^T tile is BQ = 6 W queries wide: on AVX-512 an 8 x 3 block covers it in two
+// full panels (a 6 x 4 block would leave a half-empty 6 x 2 one).
+template <class T>
+inline constexpr int MR_st = sizeof(Vec<T>) >= 64 ? 8 : MR<T>;
+template <class T>
+inline constexpr int NV_st = sizeof(Vec<T>) >= 64 ? 3 : NV;
+
+inline constexpr std::ptrdiff_t round_up(std::ptrdiff_t n, std::ptrdiff_t m) { return (n + m - 1) / m * m; }
+
+// ---------------------------------------------------------------------------------------------
+// exp2 on a batch, for arguments <= 0 as the softmax uses them (x <= 0 after subtracting the row
+// maximum). 2^x = 2^n * 2^f with n = round(x), f in [-1/2, 1/2]; 2^f by a polynomial (Cephes exp2f
+// in float, Taylor of degree 13 in double: both within ~1-2 ulp), 2^n by writing the exponent
+// bits. Arguments below the smallest normal exponent (and -inf) give exactly 0.
+template <class T>
+struct Exp2Traits;
+
+template <>
+struct Exp2Traits<float> {
+  using Int = std::int32_t;
+  static constexpr float lo = -127.0f, hi = 127.0f;
+  static constexpr float flush = -151.0f;  // 2^flush rounds to 0 (smallest subnormal 2^-149)
+  static constexpr float magic = 0x1.8p23f;  // adding it rounds to an integer in the low bits
+  static constexpr Int bias = 127;
+  static constexpr int mant = 23;
+  static Vec<float> poly(Vec<float> f) {
+    Vec<float> p(1.535336188319500e-4f);
+    p = xsimd::fma(p, f, Vec<float>(1.339887440266574e-3f));
+    p = xsimd::fma(p, f, Vec<float>(9.618437357674640e-3f));
+    p = xsimd::fma(p, f, Vec<float>(5.550332471162809e-2f));
+    p = xsimd::fma(p, f, Vec<float>(2.402264791363012e-1f));
+    p = xsimd::fma(p, f, Vec<float>(6.931472028550421e-1f));
+    return xsimd::fma(p, f, Vec<float>(1.0f));
+  }
+};
+
+template <>
+struct Exp2Traits<double> {
+  using Int = std::int64_t;
+  static constexpr double lo = -1023.0, hi = 1023.0;
+  static constexpr double flush = -1076.0;  // 2^flush rounds to 0 (smallest subnormal 2^-1074)
+  static constexpr double magic = 0x1.8p52;
+  static constexpr Int bias = 1023;
+  static constexpr int mant = 52;
+  static Vec<double> poly(Vec<double> f) {
+    // sum_k (ln 2)^k / k! f^k, k = 0..13: truncation error < 1e-17 on |f| <= 1/2.
+    constexpr double c[14] = {1.0,
+                              0.6931471805599453094,
+                              0.2402265069591007123,
+                              0.05550410866482157995,
+                              0.009618129107628477161,
+                              0.001333355814642844343,
+                              0.0001540353039338160995,
+                              1.525273380405984028e-05,
+                              1.321548679014430806e-06,
+                              1.017808600923969972e-07,
+                              7.054911620801123329e-09,
+                              4.445538271870811497e-10,
+                              2.567843599348820521e-11,
+                              1.369104011201429164e-12};
+    Vec<double> p(c[13]);
+    for (int k = 12; k >= 0; --k) p = xsimd::fma(p, f, Vec<double>(c[k]));
+    return p;
+  }
+};
+
+template <class T>
+inline Vec<T> exp2(Vec<T> x) {
+  using Tr = Exp2Traits<T>;
+#if defined(__AVX512F__)
+  if constexpr (sizeof(Vec<T>) == 64) {
+    // AVX-512: round with vrndscale, multiply by 2^n with vscalef (which also flushes 2^-150 and
+    // below to 0), no integer domain crossing. The low clamp keeps f finite for x = -inf.
+    x = xsimd::max(x, Vec<T>(Tr::flush));
+    if constexpr (std::is_same_v<T, float>) {
+      const __m512 n = _mm512_roundscale_ps(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+      const __m512 p = Tr::poly(Vec<T>(_mm512_sub_ps(x, n)));
+      return Vec<T>(_mm512_scalef_ps(p, n));
+    } else {
+      const __m512d n = _mm512_roundscale_pd(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+      const __m512d p = Tr::poly(Vec<T>(_mm512_sub_pd(x, n)));
+      return Vec<T>(_mm512_scalef_pd(p, n));
+    }
+  }
+#endif
+  using IV = xsimd::batch<typename Tr::Int>;
+  x = xsimd::min(xsimd::max(x, Vec<T>(Tr::lo)), Vec<T>(Tr::hi));  // also maps -inf to lo
+  const Vec<T> t = x + Vec<T>(Tr::magic);                         // low bits of t hold round(x)
+  const Vec<T> n = t - Vec<T>(Tr::magic);
+  const Vec<T> f = x - n;
+  // bits(t) = bits(magic) + n; shifting out the high bits leaves (n + bias) in the exponent field.
+  const IV e = (xsimd::bitwise_cast<IV>(t) + IV(Tr::bias)) << Tr::mant;
+  return Tr::poly(f) * xsimd::bitwise_cast<Vec<T>>(e);
+}
+
+// One key tile of the forward's online softmax on transposed scores st [kv, ld] (key r in row r,
+// queries along the row, nb vectors of them): with mx = max over the tile's keys,
+//   m_new = max(m, c mx), alpha = 2^(m - m_new), P^T = 2^(c S^T - m_new), l = alpha l + sum_r P^T,
+// all in base 2 (c = scale * log2 e); P^T replaces S^T, alpha is left for rescaling the output.
+// Full = true fixes nb = NBmax at compile time so the per-query vectors live in registers.
+template <class T, int NBmax, bool Full>
+inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* l, T* alpha) {
+  const int nb = Full ? NBmax : nb_rt;
+  constexpr int w = W<T>;
+  const Vec<T> cv(c);
+  Vec<T> mx[NBmax], mn[NBmax], sum[NBmax];
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j) mx[j] = Vec<T>::load_aligned(st + j * w);
+  for (int r = 1; r < kv; ++r)
+#pragma GCC unroll 8
+    for (int j = 0; j < nb; ++j) mx[j] = xsimd::max(mx[j], Vec<T>::load_aligned(st + r * ld + j * w));
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j) {
+    const Vec<T> mo = Vec<T>::load_aligned(m + j * w);
+    mn[j] = xsimd::max(mo, mx[j] * cv);
+    exp2(mo - mn[j]).store_aligned(alpha + j * w);  // 0 on the first tile (m = -inf)
+    mn[j].store_aligned(m + j * w);
+    sum[j] = Vec<T>(T(0));
+  }
+  for (int r = 0; r < kv; ++r) {
+    T* row = st + r * ld;
+#pragma GCC unroll 8
+    for (int j = 0; j < nb; ++j) {
+      const Vec<T> p = exp2(xsimd::fms(Vec<T>::load_aligned(row + j * w), cv, mn[j]));
+      p.store_aligned(row + j * w);
+      sum[j] += p;
+    }
+  }
+#pragma GCC unroll 8
+  for (int j = 0; j < nb; ++j)
+    xsimd::fma(Vec<T>::load_aligned(l + j * w), Vec<T>::load_aligned(alpha + j * w), sum[j]).store_aligned(l + j * w);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Micro-kernel: C[MR_, NV_*W] (op)= A[MR_, K] B[K, NV_*W], over K steps of the dot product D:
+// FloatDot (one FMA per step and element), or Bf16Dot (operands bf16 pairs in 32-bit words, one
+// vdpbf16ps per step: two depths, fp32 accumulation; K counts pairs).
+// A has arbitrary strides (element (i, p) at A[i*a_rs + p*a_cs]); its entries are broadcast, so a
+// transposed A costs nothing. B rows are W-aligned with stride ldb; C is W-aligned with stride ldc.
+enum class Store { overwrite, add, rescale_add };  // C = AB, C += AB, C = alpha_i C + AB
+
+template <class T>
+struct FloatDot {
+  using Elem = T;
+  using B = Vec<T>;
+  static B load(const T* b) { return B::load_aligned(b); }
+  static B broadcast(T a) { return B(a); }
+  static Vec<T> madd(B a, B b, Vec<T> acc) { return xsimd::fma(a, b, acc); }
+};
+#if TJEPA_BF16_NATIVE
+struct Bf16Dot {
+  using Elem = std::uint32_t;
+  using B = __m512i;
+  static B load(const std::uint32_t* b) { return _mm512_load_si512(b); }
+  static B broadcast(std::uint32_t a) { return _mm512_set1_epi32(static_cast<int>(a)); }
+  static Vec<float> madd(B a, B b, Vec<float> acc) {
+    return _mm512_dpbf16_ps(acc, std::bit_cast<__m512bh>(a), std::bit_cast<__m512bh>(b));
+  }
+};
+#endif
+
+// Inlined into the kernels; a build with TJEPA_PROFILE_SYMBOLS defined keeps it out of line, so
+// that a sampling profile shows the products under their own name (bench/profile.sh).
+template <class T, int MR_, int NV_, Store S, class D = FloatDot<T>>
+#ifdef TJEPA_PROFILE_SYMBOLS
+[[gnu::noinline]]
+#else
+inline
+#endif
+void micro_kernel(int K, const typename D::Elem* __restrict A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+                  const typename D::Elem* __restrict B, std::ptrdiff_t ldb, T* __restrict C, std::ptrdiff_t ldc,
+                  const T* __restrict alpha) {
+  constexpr int w = W<T>;
+  Vec<T> acc[MR_][NV_];
+#pragma GCC unroll 8
+  for (int i = 0; i < MR_; ++i)
+#pragma GCC unroll 8
+    for (int j = 0; j < NV_; ++j) acc[i][j] = Vec<T>(T(0));
+  for (int p = 0; p < K; ++p) {
+    const typename D::Elem* b = B + p * ldb;
+    typename D::B bv[NV_];
+#pragma GCC unroll 8
+    for (int j = 0; j < NV_; ++j) bv[j] = D::load(b + j * w);
+    const typename D::Elem* a = A + p * a_cs;
+#pragma GCC unroll 8
+    for (int i = 0; i < MR_; ++i) {
+      const typename D::B ai = D::broadcast(a[i * a_rs]);
+#pragma GCC unroll 8
+      for (int j = 0; j < NV_; ++j) acc[i][j] = D::madd(ai, bv[j], acc[i][j]);
+    }
+  }
+#pragma GCC unroll 8
+  for (int i = 0; i < MR_; ++i) {
+    T* c = C + i * ldc;
+#pragma GCC unroll 8
+    for (int j = 0; j < NV_; ++j) {
+      if constexpr (S == Store::overwrite) {
+        acc[i][j].store_aligned(c + j * w);
+      } else if constexpr (S == Store::add) {
+        (Vec<T>::load_aligned(c + j * w) + acc[i][j]).store_aligned(c + j * w);
+      } else {
+        xsimd::fma(Vec<T>(alpha[i]), Vec<T>::load_aligned(c + j * w), acc[i][j]).store_aligned(c + j * w);
+      }
+    }
+  }
+}
+
+// Runs the micro-kernel of mr rows (1 <= mr <= MRm) and nv vectors (1 <= nv <= NVm).
+template <class T, Store S, int MRm, int NVm, class D = FloatDot<T>>
+inline void micro_dispatch(int mr, int nv, int K, const typename D::Elem* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+                           const typename D::Elem* B, std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha) {
+  if constexpr (MRm > 1) {
+    if (mr < MRm) return micro_dispatch<T, S, MRm - 1, NVm, D>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+  }
+  if constexpr (NVm > 1) {
+    if (nv < NVm) return micro_dispatch<T, S, MRm, NVm - 1, D>(mr, nv, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+  }
+  micro_kernel<T, MRm, NVm, S, D>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+}
+
+// C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NVm vectors outside (the B
+// panel stays in L1), strips of MRm rows inside. alpha [M] is read only by Store::rescale_add.
+// MRm * NVm accumulators must fit the register file. With Bf16Dot, A and B hold bf16 pairs (K
+// counts pairs; B's row stride ldb is in words, one word per output column).
+template <class T, Store S, int MRm = MR<T>, int NVm = NV, class D = FloatDot<T>>
+inline void gemm(int M, int N, int K, const typename D::Elem* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+                 const typename D::Elem* B, std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha = nullptr) {
+  constexpr int w = W<T>;
+  for (int n0 = 0; n0 < N; n0 += NVm * w) {
+    const int nv = std::min(NVm, (N - n0) / w);
+    for (int m0 = 0; m0 < M; m0 += MRm) {
+      const int mr = std::min(MRm, M - m0);
+      const typename D::Elem* a = A + m0 * a_rs;
+      const typename D::Elem* b = B + n0;
+      T* c = C + m0 * ldc + n0;
+      const T* al = alpha == nullptr ? nullptr : alpha + m0;
+      micro_dispatch<T, S, MRm, NVm, D>(mr, nv, K, a, a_rs, a_cs, b, ldb, c, ldc, al);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Packing one head's columns [0, Dh) of n source rows (row r at src + rows[r]*lds, or r*lds when
+// rows is null) into tile-friendly layouts.
+
+// The source rows are strided (e.g. one head of a fused [L, 3d] qkv buffer): the hardware
+// prefetcher does not follow them, so each row is fetched `ahead` rows in advance.
+template <class T>
+inline void prefetch_row(const T* src, std::ptrdiff_t lds, const int* rows, int r, int n, int Dh) {
+  constexpr int ahead = 16;
+  if (r + ahead >= n) return;
+  const char* p = reinterpret_cast<const char*>(src + (rows == nullptr ? r + ahead : rows[r + ahead]) * lds);
+  for (std::size_t off = 0; off < Dh * sizeof(T); off += 64) __builtin_prefetch(p + off);
+}
+
+// The rows transposed, in panels of `panel` rows: dst [n_pad / panel][Dh][panel], so the B operand
+// of one tile (row r of the source is column r % panel of panel r / panel) is contiguous; columns
+// [n, n_pad) are zero. n_pad is a multiple of panel.
+template <class T>
+inline void pack_transposed(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
+                            std::ptrdiff_t n_pad, int panel) {
+  auto source = [&](std::ptrdiff_t r) { return src + (rows == nullptr ? r : rows[r]) * lds; };
+  std::ptrdiff_t r = 0;
+  // Float: 16 rows at a time, their 16-column blocks transposed (in registers with AVX-512; a
+  // panel holds whole 16-row blocks when panel is a multiple of 16).
+  if constexpr (std::is_same_v<T, float>) {
+    for (; r + 16 <= n && panel % 16 == 0; r += 16) {
+      for (int i = 0; i < 16; ++i) prefetch_row(src, lds, rows, static_cast<int>(r + i), n, Dh);
+      T* d = dst + (r / panel) * Dh * panel + r % panel;
+      int p = 0;
+      for (; p + 16 <= Dh; p += 16)
+        transpose16([&](int i) { return source(r + i) + p; }, d + std::ptrdiff_t(p) * panel, panel);
+      for (int i = 0; i < 16; ++i)
+        for (int c = p; c < Dh; ++c) d[c * panel + i] = source(r + i)[c];
+    }
+  }
+  for (; r < n_pad; ++r) {
+    T* d = dst + (r / panel) * Dh * panel + r % panel;
+    if (r < n) {
+      prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
+      const T* sr = source(r);
+      for (int p = 0; p < Dh; ++p) d[p * panel] = sr[p];
+    } else {
+      for (int p = 0; p < Dh; ++p) d[p * panel] = T(0);
+    }
+  }
+}
+
+// dst [n_pad, DhP] = the rows, columns [Dh, DhP) and rows [n, n_pad) zero.
+template <class T>
+inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
+                      std::ptrdiff_t DhP, std::ptrdiff_t n_pad) {
+  for (std::ptrdiff_t r = 0; r < n_pad; ++r) {
+    T* d = dst + r * DhP;
+    std::ptrdiff_t p = 0;
+    if (r < n) {
+      prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
+      const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
+      for (; p < Dh; ++p) d[p] = sr[p];
+    }
+    for (; p < DhP; ++p) d[p] = T(0);
+  }
+}
+
+#if TJEPA_BF16_NATIVE
+// The bf16 operands of the attention products (32-bit words of two bf16, bgemm's conversion):
+// n rows (row r at src + rows[r]*lds, or r*lds) paired along their Dh columns, as the rows of
+// dst [n, Dh2] (A operands), or transposed into panels dst [n_pad / panel][Dh2][panel] (B operands;
+// columns [n, n_pad) zero).
+inline void pack_row_pairs(const float* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, std::uint32_t* dst,
+                           std::ptrdiff_t n_pad, int panel, bool transposed) {
+  namespace bg = bgemm;
+  const int Dh2 = (Dh + 1) / 2;
+  alignas(64) std::uint32_t words[bg::L];
+  auto source = [&](std::ptrdiff_t r) { return src + (rows == nullptr ? r : rows[r]) * lds; };
+  std::ptrdiff_t r = 0;
+  // Transposed: 16 rows at a time, their words transposed in 16 x 16 blocks (a panel holds whole
+  // 16-row blocks when panel is a multiple of 16).
+  if (transposed && panel % bg::L == 0)
+    for (; r + bg::L <= n; r += bg::L) {
+      std::uint32_t* d = dst + (r / panel) * Dh2 * panel + r % panel;
+      for (int i = 0; i < bg::L; ++i) prefetch_row(src, lds, rows, static_cast<int>(r + i), n, Dh);
+      for (int k = 0; k < Dh; k += 2 * bg::L)
+        bg::pairs_transposed16([&](int i) { return source(r + i) + k; }, std::min(2 * bg::L, Dh - k),
+                               d + (k / 2) * panel, panel);
+    }
+  for (; r < n_pad; ++r) {
+    std::uint32_t* d = transposed ? dst + (r / panel) * Dh2 * panel + r % panel : dst + r * Dh2;
+    const std::ptrdiff_t step = transposed ? panel : 1;
+    if (r >= n) {
+      for (int p = 0; p < Dh2; ++p) d[p * step] = 0u;
+      continue;
+    }
+    prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
+    const float* sr = source(r);
+    for (int k = 0; k < Dh; k += 2 * bg::L) {
+      _mm512_store_si512(words, bg::row_pairs(sr + k, std::min(2 * bg::L, Dh - k)));
+      for (int p = k / 2; p < std::min(Dh2, k / 2 + bg::L); ++p) d[p * step] = words[p - k / 2];
+    }
+  }
+}
+// n rows of width `cols` (row r at src + rows[r]*lds, or r*lds) paired across consecutive rows:
+// dst [⌈n/2⌉][ldd] words (pair p = rows 2p and 2p+1; the high half 0 past n; columns [cols, ldd)
+// zero, ldd a multiple of 16): V as the B operand of P·V, P^T as the A operand.
+inline void pack_pairs_across_rows(const float* src, std::ptrdiff_t lds, const int* rows, int n, int cols,
+                                   std::uint32_t* dst, std::ptrdiff_t ldd) {
+  namespace bg = bgemm;
+  for (int p = 0; 2 * p < n; ++p) {
+    const float* lo = src + (rows == nullptr ? 2 * p : rows[2 * p]) * lds;
+    const float* hi = 2 * p + 1 < n ? src + (rows == nullptr ? 2 * p + 1 : rows[2 * p + 1]) * lds : nullptr;
+    for (int c = 0; c < ldd; c += bg::L)
+      _mm512_store_si512(dst + p * ldd + c, bg::pairs16(lo + c, hi ? hi + c : nullptr, cols - c));
+  }
+}
+#endif
+
+// ---------------------------------------------------------------------------------------------
+// Tile sizes. Forward: BK keys x BQ queries of transposed scores per tile (both multiples of MR,
+// BQ of W).
+// Backward (key blocks outside, query blocks inside): BKB keys x BQB queries.
+template <class T>
+struct Tiles {
+  static constexpr int BQ = 16 * MR<T>;
+  static constexpr int BK = 8 * MR<T>;
+  static constexpr int BKB = 8 * MR<T>;
+  static constexpr int BQB = NR<T>;
+};
+
+// Hands out consecutive W-aligned offsets (in elements) of one workspace buffer.
+template <class T>
+struct Carver {
+  std::ptrdiff_t at = 0;
+  std::ptrdiff_t take(std::ptrdiff_t n) {
+    const std::ptrdiff_t off = at;
+    at += round_up(n, W<T>);
+    return off;
+  }
+};
+
+// Offsets of the buffers one head needs, carved out of the workspace.
+template <class T>
+struct ForwardLayout {
+  std::ptrdiff_t NqP, DhP;  // padded query count, padded head width
+  std::ptrdiff_t qt, kp, vp, st, o, m, l, alpha, Dh2, qt16, kp16, vp16, pt16, total;
+  ForwardLayout(int Lq, int Lk, int Dh) {
+    using Tl = Tiles<T>;
+    NqP = round_up(Lq, Tl::BQ);
+    DhP = round_up(Dh, W<T>);
+    Carver<T> c;
+    auto take = [&c](std::ptrdiff_t n) { return c.take(n); };
+    qt = take(Dh * NqP);                           // Q_h^T in panels of BQ queries [NqP / BQ][Dh][BQ]
+    kp = take(std::ptrdiff_t{Lk} * DhP);            // K_h of the valid keys [Lk, DhP]
+    vp = take(std::ptrdiff_t{Lk} * DhP);            // V_h of the valid keys [Lk, DhP]
+    st = take(std::ptrdiff_t{Tl::BK} * Tl::BQ);     // S^T, then P^T, of one tile [BK, BQ]
+    o = take(std::ptrdiff_t{Tl::BQ} * DhP);         // unnormalized output of a query block [BQ, DhP]
+    m = take(Tl::BQ);                               // running max (base 2) [BQ]
+    l = take(Tl::BQ);                               // running sum [BQ]
+    alpha = take(Tl::BQ);                           // rescale factor of the current tile [BQ]
+    // bf16 operands (Precision::bf16; 32-bit words of two bf16, carved from the same buffer):
+    Dh2 = (Dh + 1) / 2;
+    qt16 = take(Dh2 * NqP);                            // Q_h^T pairs along Dh [NqP / BQ][Dh2][BQ]
+    kp16 = take(std::ptrdiff_t{Lk} * Dh2);             // K_h pairs along Dh [Lk, Dh2]
+    vp16 = take((std::ptrdiff_t{Lk} + 1) / 2 * DhP);   // V_h pairs along keys [Lk / 2][DhP]
+    pt16 = take(std::ptrdiff_t{Tl::BK} / 2 * Tl::BQ);  // P^T pairs along keys [BK / 2][BQ]
+    total = c.at;
+  }
+};
+
+template <class T>
+struct BackwardLayout {
+  std::ptrdiff_t Nk, NqP, DhP;
+  std::ptrdiff_t qt, dot, qp, dop, dq, kp, vp, lse2, dd, st, dpt, dk, dv;
+  std::ptrdiff_t Dh2, qt16, dot16, kr16, vr16, do16, q16, kx16, pt16, dst16, ds16, total;
+  BackwardLayout(int Lq, int Lk, int Dh) {
+    using Tl = Tiles<T>;
+    Nk = round_up(Lk, Tl::BKB);
+    NqP = round_up(Lq, Tl::BQB);
+    DhP = round_up(Dh, W<T>);
+    Carver<T> c;
+    auto take = [&c](std::ptrdiff_t n) { return c.take(n); };
+    qt = take(Dh * NqP);   // Q_h^T in panels of BQB queries [NqP / BQB][Dh][BQB]
+    dot = take(Dh * NqP);  // dO_h^T, same layout
+    qp = take(NqP * DhP);  // Q_h [NqP, DhP]
+    dop = take(NqP * DhP);  // dO_h [NqP, DhP]
+    dq = take(NqP * DhP);   // dQ_h accumulator [NqP, DhP]
+    kp = take(Nk * DhP);    // K_h of the valid keys [Nk, DhP]
+    vp = take(Nk * DhP);    // V_h of the valid keys [Nk, DhP]
+    lse2 = take(NqP);       // lse in base 2, +inf on padding rows [NqP]
+    dd = take(NqP);         // D = rowsum(dO * O) [NqP]
+    st = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB);   // S^T, then P^T [BKB, BQB]
+    dpt = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB);  // dP^T, then dS^T [BKB, BQB]
+    dk = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dK accumulator of one key block
+    dv = take(std::ptrdiff_t{Tl::BKB} * DhP);       // dV accumulator of one key block
+    // bf16 operands (Precision::bf16; words of two bf16): pairs along Dh of Q^T, dO^T (panels of
+    // BQB queries) and of K, V rows; pairs across rows of dO, Q [NqP / 2][DhP] and K [Nk / 2][DhP];
+    // per tile P^T and dS^T paired along queries [BKB][BQB / 2], dS paired across keys [BKB / 2][BQB].
+    Dh2 = (Dh + 1) / 2;
+    qt16 = take(Dh2 * NqP);
+    dot16 = take(Dh2 * NqP);
+    kr16 = take(Nk * Dh2);
+    vr16 = take(Nk * Dh2);
+    do16 = take(NqP / 2 * DhP);
+    q16 = take(NqP / 2 * DhP);
+    kx16 = take(Nk / 2 * DhP);
+    pt16 = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB / 2);
+    dst16 = take(std::ptrdiff_t{Tl::BKB} * Tl::BQB / 2);
+    ds16 = take(std::ptrdiff_t{Tl::BKB} / 2 * Tl::BQB);
+    total = c.at;
+  }
+};
+
+}  // namespace tjepa::detail::attn
