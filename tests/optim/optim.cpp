@@ -3,7 +3,6 @@
 
 #include <tjepa/tjepa.hpp>
 
-#include "../support/files.hpp"
 #include "../support/params.hpp"
 // The modules this file tests (the umbrella above holds them all; named here so each is traceable).
 #include <tjepa/core/prefixed_params.hpp>
@@ -11,20 +10,12 @@
 #include <tjepa/optim/detail/deterministic_sum.hpp>
 
 #include <cmath>
-#include <cstring>
-#include <filesystem>
-#include <fstream>
 #include <numbers>
 #include <string>
 #include <vector>
 
-namespace {
-
-namespace fs = std::filesystem;
 using tjepa_test::fill_grads;
 using tjepa_test::make_params;
-
-}  // namespace
 
 TEST_SUITE("optim") {
   TEST_CASE("schedules match their closed forms at chosen steps") {
