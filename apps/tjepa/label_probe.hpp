@@ -1,22 +1,29 @@
 #pragma once
 // `tjepa probe --task regression|classification`: probes for the user's own labels (motor
-// positions, object ids, anything per frame), on the user's recordings.
+// positions, object ids, anything per frame or per trial), on the user's recordings.
 //
-// Labels: one row per frame of the recording (a .npy [T] or [T, K], or text with a header
-// detected and --label-columns), a window's label is its last frame's. Regression: K outputs, every
-// value finite. Classification: one column of class ids; a negative id marks a frame without a
-// class and its windows are left out.
-// Rows, each scored on the held-out recording:
-//   constant               the training mean / the majority class;
-//   ridge on raw windows   closed-form ridge on pad sums and taxel means (downstream/ridge.hpp);
-//   random encoder         the checkpoint's architecture at a random initialization, frozen;
-//   this checkpoint        its target (or context) encoder, frozen.
-// Heads are attentive probes trained with early stopping on a validation split of the training
-// windows (train_head); with repeats, one per seed, averaged with their standard deviation.
-// Optionally only windows in contact count (keep_contact_windows; off by default). A head whose best validation loss is not 2 % below the constant's on the
-// same split is flagged (it learned nothing), as is a row no better than the constant on the
-// held-out windows and a split whose windows hold one class.
+// Labels: one per trial of a trial table (data/trial_table.hpp), or one row per frame of a
+// recording (a .npy [T] or [T, K], or text with a header detected and --label-columns), a
+// window's label then being its last frame's. Regression: K outputs, every value finite.
+// Classification: class names or ids; a negative id marks a frame without a class and its windows
+// are left out; the classes are the ids (names) present, so a stray id adds one class, listed.
+// Rows, each scored on the held-out windows, and on the held-out trials when there are trials
+// (a trial's windows' outputs averaged: class scores or logits, regression values):
+//   constant                 the training mean / the majority class;
+//   ridge on raw windows     closed-form ridge on pad sums and taxel means (downstream/ridge.hpp);
+//   <encoder>, linear        ridge on the frozen embeddings' group means, λ chosen on validation;
+//   <encoder>, attentive     an attentive probe (ProbeHead) on the frozen embeddings, trained with
+//                            early stopping, its learning rate chosen on the validation split;
+// for a random initialization of the checkpoint's architecture and for the checkpoint's encoder.
+// Validation splits are drawn by trial (by the targets' SampleGroups) when there are trials. With
+// repeats, one head per seed, averaged with their standard deviation. Optionally only windows in
+// contact count (keep_contact_windows; off by default). Flagged: a head whose best validation loss
+// is not 2 % below the constant's on the same split (it learned nothing), a row no better than the
+// constant on the held-out windows, a split whose windows hold one class, and an attentive probe
+// that reads more than 2 points (2 % RMSE) less than the linear read-out of the same embeddings.
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -24,6 +31,8 @@
 #include <ostream>
 #include <span>
 #include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -50,7 +59,16 @@ inline Recording read_label_frames(const std::filesystem::path& path, const std:
   DataFormat f;
   f.axes = 1;
   f.columns = columns;
-  Recording r = read_recording(path, f);
+  Recording r;
+  if (path.extension() == ".npy" && std::filesystem::exists(path) && read_npy_header(path).shape.size() == 1) {
+    NpyArray a = read_npy(path, NpyReadOptions{.require_finite = true, .map = false});  // [T]: one column
+    r = Recording(static_cast<int>(a.shape[0]), 1, 1, AlignedVector<float>(a.values.values().begin(), a.values.values().end()),
+                  a.source);
+    require<ConfigError>(columns.empty() || columns == "0" || columns == "0:1", path.string(),
+                         ": --label-columns '", columns, "' for a [T] label array, which has one column");
+  } else {
+    r = read_recording(path, f);
+  }
   if (path.extension() == ".npy" && r.axes() > 1) {  // [T, K, m] read as is: flatten to [T, K·m]
     r = Recording(r.frames(), r.taxels() * r.axes(), 1, AlignedVector<float>(r.values().begin(), r.values().end()),
                   r.source());
@@ -64,12 +82,19 @@ inline Recording read_label_frames(const std::filesystem::path& path, const std:
 struct WindowLabels {
   std::vector<std::int64_t> window;
   HeadTargets targets;
+  std::vector<int> trial;  // [S] the trial of each window (an index into the trial names); empty: none
 };
 
-inline WindowLabels window_labels(const WindowSource& src, const Recording& frames, LabelTask task, int classes,
-                                  const std::string& file) {
+// Labels from per-frame label rows: window i of src (of recording `frames` for all windows, or with
+// per_recording, frames[recording_of(i)]) takes its last frame's. class_ids: the classes' ids in
+// order (classification); a window's class is the position of its id there.
+inline WindowLabels window_labels(const WindowSource& src, std::span<const Recording> per_recording, LabelTask task,
+                                  std::span<const int> class_ids, const std::string& file) {
   WindowLabels w;
-  const int K = frames.taxels();
+  require<ShapeError>(per_recording.size() == src.recordings().size(), file, ": labels for ", per_recording.size(),
+                      " recordings, the source has ", src.recordings().size());
+  const int K = per_recording[0].taxels();
+  const int classes = static_cast<int>(class_ids.size());
   if (task == LabelTask::classification)
     require<ShapeError>(K == 1, file, ": ", K, " label columns, a classification takes one (the class id; choose it ",
                         "with --label-columns)");
@@ -77,12 +102,17 @@ inline WindowLabels window_labels(const WindowSource& src, const Recording& fram
   w.targets.classes = task == LabelTask::classification ? classes : 0;
   for (std::int64_t i = 0; i < src.size(); ++i) {
     const int last = src.start_of(i) + src.length() - 1;
+    const Recording& frames = per_recording[static_cast<std::size_t>(src.recording_of(i))];
     if (task == LabelTask::classification) {
       const float c = frames(last, 0, 0);
-      require<DataError>(c == std::floor(c), file, ": frame ", last, " has class ", c, ", expected an integer id");
+      require<DataError>(c == std::floor(c), frames.source(), ": frame ", last, " has class ", c,
+                         ", expected an integer id");
       if (c < 0) continue;
+      const auto at = std::find(class_ids.begin(), class_ids.end(), static_cast<int>(c));
+      require<DataError>(at != class_ids.end(), frames.source(), ": frame ", last, " has class ", c,
+                         ", not one of the classes");
       w.window.push_back(i);
-      w.targets.label.push_back(static_cast<int>(c));
+      w.targets.label.push_back(static_cast<int>(at - class_ids.begin()));
     } else {
       w.window.push_back(i);
       for (int k = 0; k < K; ++k) w.targets.value.push_back(frames(last, k, 0));
@@ -90,6 +120,20 @@ inline WindowLabels window_labels(const WindowSource& src, const Recording& fram
   }
   require<DataError>(w.window.size() >= 4, file, ": ", w.window.size(), " labelled windows, expected at least 4");
   return w;
+}
+
+// The class ids of per-frame class labels (non-negative, integer), sorted.
+inline std::vector<int> frame_class_ids(std::span<const Recording> label_frames) {
+  std::vector<int> ids;
+  for (const Recording& f : label_frames)
+    for (int t = 0; t < f.frames(); ++t) {
+      const float c = f(t, 0, 0);
+      require<DataError>(c == std::floor(c) && std::abs(c) < 1e9f, f.source(), ": frame ", t, " has class ", c,
+                         ", expected an integer id");
+      if (c >= 0 && std::find(ids.begin(), ids.end(), static_cast<int>(c)) == ids.end()) ids.push_back(static_cast<int>(c));
+    }
+  std::sort(ids.begin(), ids.end());
+  return ids;
 }
 
 // Keeps the windows of w with at least min_frames frames in which some taxel's preprocessed
@@ -121,6 +165,11 @@ inline void keep_contact_windows(WindowLabels& w, const WindowSource& src, int m
       if (frames < min_frames) continue;
       const std::size_t i = first + b;
       kept.window.push_back(w.window[i]);
+      if (!w.trial.empty()) kept.trial.push_back(w.trial[i]);
+      if (!w.targets.groups.empty()) {
+        kept.targets.groups.group.push_back(w.targets.groups.group[i]);
+        if (!w.targets.groups.stratum.empty()) kept.targets.groups.stratum.push_back(w.targets.groups.stratum[i]);
+      }
       if (R > 0)
         kept.targets.value.insert(kept.targets.value.end(), w.targets.value.begin() + std::ptrdiff_t(i * R),
                                   w.targets.value.begin() + std::ptrdiff_t((i + 1) * R));
@@ -128,28 +177,43 @@ inline void keep_contact_windows(WindowLabels& w, const WindowSource& src, int m
         kept.targets.label.push_back(w.targets.label[i]);
     }
   }
+  kept.targets.groups.held = w.targets.groups.held;
   require<DataError>(kept.window.size() >= 4, file, ": ", kept.window.size(), " of ", w.window.size(),
                      " labelled windows have ", min_frames, " frames in contact (a taxel above ", threshold,
                      "), expected at least 4: lower --min-contact or --contact-threshold");
   w = std::move(kept);
 }
 
-struct LabelProbeRow {
-  std::string name;
-  std::vector<double> rmse;         // regression: per output
+// What a row scores: RMSE per regression output and top-1 (NaN without classes).
+struct LabelScores {
+  std::vector<double> rmse;
   double accuracy = std::numeric_limits<double>::quiet_NaN();
-  // Heads with repeats > 1: the mean over the repeats that did not diverge (rmse, accuracy), the
-  // sample standard deviation of the mean RMSE (regression) or the top-1 (classification).
-  int repeats = 1;
-  double sd = std::numeric_limits<double>::quiet_NaN();
-  double validation = std::numeric_limits<double>::quiet_NaN();  // heads: best validation loss
-  int best_epoch = -1, epochs = 0;
-  std::string flag;                 // why the row says little ("" = nothing to say)
-  double seconds = 0;
+  // The score repeats are averaged and compared by: top-1 with classes, else the mean RMSE.
+  double primary() const {
+    if (std::isfinite(accuracy) || rmse.empty()) return accuracy;
+    double s = 0;
+    for (double e : rmse) s += e / static_cast<double>(rmse.size());
+    return s;
+  }
 };
 
-// The constant's validation loss on the split a head sees: the fit split's mean (0 in the head's
-// standardized units) and the fit split's class frequencies as logits.
+struct LabelProbeRow {
+  std::string name;
+  LabelScores window, trial;        // held-out windows; held-out trials (empty without trials)
+  // Heads with repeats > 1: the mean over the repeats that did not diverge, and the sample
+  // standard deviation of their primary score (top-1, or the mean RMSE) per level.
+  int repeats = 1;
+  double window_sd = std::numeric_limits<double>::quiet_NaN(), trial_sd = window_sd;
+  double validation = std::numeric_limits<double>::quiet_NaN();  // heads: best validation loss
+  int best_epoch = -1, epochs = 0;
+  double lr = std::numeric_limits<double>::quiet_NaN();      // attentive probes: the learning rate used
+  std::vector<std::pair<double, double>> lr_validation;      // the rates tried and their validation loss
+  double lambda = std::numeric_limits<double>::quiet_NaN();  // ridge rows: the λ chosen on validation
+  std::string flag;                 // why the row says little ("" = nothing to say)
+  double seconds = 0;
+  std::vector<double> outputs;      // [S, R + C] of the first repeat: values and class scores (predictions)
+};
+
 inline double constant_validation_loss(const HeadTargets& t, const HeadTrainConfig& cfg) {
   const ValidationSplit split = validation_split(t.size(), cfg, t.groups);
   const int R = t.regression, C = t.classes;
@@ -171,9 +235,6 @@ inline double constant_validation_loss(const HeadTargets& t, const HeadTrainConf
   return f + cfg.class_weight * ce;
 }
 
-// The flag of a head: not clearly better than the constant (by 2 %) on its own validation split.
-// A head that predicts the uniform class distribution can edge out the constant's class
-// frequencies on a split whose frequencies differ; 2 % keeps it flagged.
 inline std::string head_flag(double validation, double constant) {
   if (!std::isfinite(validation)) return "diverged (validation loss not finite)";
   if (validation > 0.98 * constant)
@@ -184,14 +245,33 @@ inline std::string head_flag(double validation, double constant) {
 
 // The flag of any row against the constant row on the held-out windows.
 inline std::string held_out_flag(const LabelProbeRow& row, const LabelProbeRow& constant) {
-  if (std::isfinite(row.accuracy) && row.accuracy <= constant.accuracy)
+  if (std::isfinite(row.window.accuracy) && row.window.accuracy <= constant.window.accuracy)
     return "held-out top-1 no better than the majority class";
-  if (!row.rmse.empty()) {
-    double a = 0, b = 0;
-    for (std::size_t k = 0; k < row.rmse.size(); ++k) a += row.rmse[k], b += constant.rmse[k];
-    if (!(a < b)) return "held-out RMSE no better than the constant";
-  }
+  if (!row.window.rmse.empty() && !(row.window.primary() < constant.window.primary()))
+    return "held-out RMSE no better than the constant";
   return "";
+}
+
+// The flag of an attentive probe that reads less than the linear read-out of the same embeddings:
+// more than 2 points of top-1 or 2 % of RMSE, at window or trial level.
+inline std::string under_read_flag(const LabelProbeRow& attentive, const LabelProbeRow& linear) {
+  std::string s;
+  auto check = [&](const LabelScores& a, const LabelScores& l, const char* level) {
+    if (std::isfinite(a.accuracy) && std::isfinite(l.accuracy) && a.accuracy < l.accuracy - 0.02) {
+      char buf[160];
+      std::snprintf(buf, sizeof buf, "reads %.1f points less than the linear read-out per %s", 100 * (l.accuracy - a.accuracy),
+                    level);
+      s += (s.empty() ? "" : "; ") + std::string(buf);
+    } else if (!std::isfinite(a.accuracy) && !a.rmse.empty() && !l.rmse.empty() && a.primary() > 1.02 * l.primary()) {
+      char buf[160];
+      std::snprintf(buf, sizeof buf, "RMSE %.0f %% above the linear read-out per %s", 100 * (a.primary() / l.primary() - 1),
+                    level);
+      s += (s.empty() ? "" : "; ") + std::string(buf);
+    }
+  };
+  check(attentive.window, linear.window, "window");
+  check(attentive.trial, linear.trial, "trial");
+  return s.empty() || attentive.name.find(", attentive") == std::string::npos ? s : s + " (--probe-pooling taxel reads each taxel)";
 }
 
 inline int distinct_classes(std::span<const int> labels) {
@@ -201,48 +281,171 @@ inline int distinct_classes(std::span<const int> labels) {
   return static_cast<int>(seen.size());
 }
 
-inline void score_row(LabelProbeRow& row, const std::vector<double>& pred_value, const std::vector<int>& pred_class,
-                      const HeadTargets& test) {
-  const int S = test.size(), R = test.regression;
-  if (R > 0) row.rmse = rmse_per_column(pred_value.data(), static_cast<std::size_t>(R), test.value.data(), S, R);
-  if (test.classes > 0) {
+// Scores of outputs [S, R + C] (values, then class scores) against the targets of S samples.
+inline LabelScores score_outputs(const std::vector<double>& y, const HeadTargets& t) {
+  const int S = t.size(), R = t.regression, C = t.classes, out = R + C;
+  LabelScores s;
+  if (R > 0) s.rmse = rmse_per_column(y.data(), static_cast<std::size_t>(out), t.value.data(), S, R);
+  if (C > 0) {
     int right = 0;
-    for (int s = 0; s < S; ++s) right += pred_class[static_cast<std::size_t>(s)] == test.label[static_cast<std::size_t>(s)];
-    row.accuracy = static_cast<double>(right) / S;
+    for (int i = 0; i < S; ++i) {
+      const double* r = y.data() + static_cast<std::size_t>(i) * out + R;
+      right += static_cast<int>(std::max_element(r, r + C) - r) == t.label[static_cast<std::size_t>(i)];
+    }
+    s.accuracy = static_cast<double>(right) / S;
   }
+  return s;
 }
+
+// The trials' view of windows: per trial (in order of first appearance), the mean of its windows'
+// outputs, and its target: the mean value, the majority class of its windows.
+struct TrialView {
+  std::vector<int> trial;      // [trials] trial ids
+  std::vector<double> outputs; // [trials, R + C]
+  HeadTargets targets;
+};
+
+inline TrialView trial_view(const std::vector<double>& y, const HeadTargets& t, std::span<const int> trial_of) {
+  const int S = t.size(), R = t.regression, C = t.classes, out = R + C;
+  require<ShapeError>(trial_of.size() == static_cast<std::size_t>(S), "trial_view: ", trial_of.size(),
+                      " trial ids for ", S, " windows");
+  TrialView v;
+  v.targets.regression = R, v.targets.classes = C;
+  std::vector<int> count;
+  std::vector<std::vector<int>> votes;
+  std::vector<double> sum_value;
+  for (int i = 0; i < S; ++i) {
+    const int id = trial_of[static_cast<std::size_t>(i)];
+    auto at = std::find(v.trial.begin(), v.trial.end(), id);
+    if (at == v.trial.end()) {
+      v.trial.push_back(id);
+      v.outputs.resize(v.outputs.size() + static_cast<std::size_t>(out), 0.0);
+      sum_value.resize(sum_value.size() + static_cast<std::size_t>(R), 0.0);
+      count.push_back(0);
+      votes.emplace_back(static_cast<std::size_t>(C), 0);
+      at = v.trial.end() - 1;
+    }
+    const auto k = static_cast<std::size_t>(at - v.trial.begin());
+    ++count[k];
+    for (int a = 0; a < out; ++a) v.outputs[k * out + a] += y[static_cast<std::size_t>(i) * out + a];
+    for (int a = 0; a < R; ++a) sum_value[k * R + a] += t.value[static_cast<std::size_t>(i) * R + a];
+    if (C > 0) ++votes[k][static_cast<std::size_t>(t.label[static_cast<std::size_t>(i)])];
+  }
+  for (std::size_t k = 0; k < v.trial.size(); ++k) {
+    for (int a = 0; a < out; ++a) v.outputs[k * out + a] /= count[k];
+    for (int a = 0; a < R; ++a) v.targets.value.push_back(static_cast<float>(sum_value[k * R + a] / count[k]));
+    if (C > 0) v.targets.label.push_back(static_cast<int>(std::max_element(votes[k].begin(), votes[k].end()) - votes[k].begin()));
+  }
+  return v;
+}
+
+// Window- and trial-level scores of a row's outputs.
+inline void score_row(LabelProbeRow& row, std::vector<double> outputs, const WindowLabels& test) {
+  row.window = score_outputs(outputs, test.targets);
+  if (!test.trial.empty()) {
+    const TrialView v = trial_view(outputs, test.targets, test.trial);
+    row.trial = score_outputs(v.outputs, v.targets);
+  }
+  row.outputs = std::move(outputs);
+}
+
+// The mean of repeated rows (all scored on the same held-out windows), the sample standard
+// deviation of their primary scores.
+inline LabelProbeRow mean_of_runs(std::vector<LabelProbeRow> runs) {
+  LabelProbeRow row = runs.front();
+  if (runs.size() < 2) return row;
+  const double k = static_cast<double>(runs.size());
+  auto mean = [&](auto get) {
+    LabelScores m = get(runs.front());
+    for (double& e : m.rmse) e = 0;
+    if (std::isfinite(m.accuracy)) m.accuracy = 0;
+    for (const auto& r : runs) {
+      const LabelScores& s = get(r);
+      for (std::size_t a = 0; a < m.rmse.size(); ++a) m.rmse[a] += s.rmse[a] / k;
+      if (std::isfinite(m.accuracy)) m.accuracy += s.accuracy / k;
+    }
+    double ss = 0;
+    for (const auto& r : runs) ss += (get(r).primary() - m.primary()) * (get(r).primary() - m.primary());
+    return std::pair{m, std::sqrt(ss / (k - 1))};
+  };
+  std::tie(row.window, row.window_sd) = mean([](const LabelProbeRow& r) -> const LabelScores& { return r.window; });
+  if (!row.trial.rmse.empty() || std::isfinite(row.trial.accuracy))
+    std::tie(row.trial, row.trial_sd) = mean([](const LabelProbeRow& r) -> const LabelScores& { return r.trial; });
+  row.validation = 0;
+  for (const auto& r : runs) row.validation += r.validation / k;
+  return row;
+}
+
+// The settings of the heads beyond HeadTrainConfig: the learning rates to choose from on the
+// validation split (empty: cfg.lr alone), and centring the token embeddings first.
+struct LabelProbeSettings {
+  std::vector<double> lr_grid;
+  PoolingConfig pooling;  // the probe's pooling: attentive (the paper's) or taxel
+  bool center_tokens = false;
+  int repeats = 1;
+  bool quiet = false;
+};
 
 // The rows of a label probe (see the top). encoder: the checkpoint's encoder to probe.
 inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const ParamSet<float>& encoder_params,
                                                    const std::string& encoder_name, const WindowSource& train_src,
                                                    const WindowLabels& train, const WindowSource& test_src,
                                                    const WindowLabels& test, const Skin& skin,
-                                                   const HeadTrainConfig& cfg, bool quiet, int repeats = 1) {
-  require<ConfigError>(repeats >= 1, "label probe: repeats = ", repeats, ", expected >= 1");
+                                                   const HeadTrainConfig& cfg, const LabelProbeSettings& set) {
+  require<ConfigError>(set.repeats >= 1, "label probe: repeats = ", set.repeats, ", expected >= 1");
   const TaxelLayout& layout = skin.layout;
   const HeadTargets& tr = train.targets;
   const HeadTargets& te = test.targets;
-  const int R = tr.regression, C = tr.classes;
+  const int R = tr.regression, C = tr.classes, out = R + C;
   std::vector<LabelProbeRow> rows;
   const std::string one_class =
       C > 0 && distinct_classes(tr.label) < 2 ? "the training windows hold one class" : "";
   const std::string one_class_test =
       C > 0 && distinct_classes(te.label) < 2 ? "the held-out windows hold one class" : "";
   auto join = [](std::string a, const std::string& b) { return a.empty() ? b : b.empty() ? a : a + "; " + b; };
+  auto since = [](auto t0) { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   // constant
   {
     LabelProbeRow row;
     row.name = "constant (train mean / majority)";
     row.flag = join(one_class, one_class_test);
     const auto constant = ConstantBaseline::fit(tr.value, R, tr.label, C);
-    const std::vector<double> v = constant.values(static_cast<std::size_t>(te.size()));
-    const std::vector<int> c = constant.classes(static_cast<std::size_t>(te.size()));
-    score_row(row, v, c, te);
+    std::vector<double> y(static_cast<std::size_t>(te.size()) * out, 0.0);
+    for (int s = 0; s < te.size(); ++s) {
+      for (int a = 0; a < R; ++a) y[static_cast<std::size_t>(s) * out + a] = constant.mean[static_cast<std::size_t>(a)];
+      if (C > 0) y[static_cast<std::size_t>(s) * out + R + constant.majority] = 1.0;
+    }
+    score_row(row, std::move(y), test);
     row.validation = constant_validation_loss(tr, cfg);
     rows.push_back(row);
   }
   const double constant = rows.front().validation;
-  // ridge on raw windows
+  // A ridge row on features [S, p]: regression outputs and one-hot class scores, λ by validation.
+  auto ridge_row = [&](const std::string& name, const Eigen::MatrixXd& Xtr, const Eigen::MatrixXd& Xte) {
+    LabelProbeRow row;
+    row.name = name;
+    std::vector<double> y(static_cast<std::size_t>(te.size()) * out, 0.0);
+    if (R > 0) {
+      Eigen::MatrixXd Y(tr.size(), R);
+      for (int s = 0; s < tr.size(); ++s)
+        for (int a = 0; a < R; ++a) Y(s, a) = tr.value[static_cast<std::size_t>(s) * R + a];
+      const RidgeModel rm = fit_ridge(Xtr, Y, ridge_lambdas, cfg.validation_fraction, cfg.seed, tr.groups);
+      const Eigen::MatrixXd P = predict(rm, Xte);
+      for (int s = 0; s < te.size(); ++s)
+        for (int a = 0; a < R; ++a) y[static_cast<std::size_t>(s) * out + a] = P(s, a);
+      row.lambda = rm.lambda;
+    }
+    if (C > 0) {
+      const RidgeModel rm = fit_ridge_classifier(Xtr, tr.label, C, ridge_lambdas, cfg.validation_fraction, cfg.seed, tr.groups);
+      const Eigen::MatrixXd P = predict(rm, Xte);
+      for (int s = 0; s < te.size(); ++s)
+        for (int c = 0; c < C; ++c) y[static_cast<std::size_t>(s) * out + R + c] = P(s, c);
+      row.lambda = rm.lambda;
+    }
+    score_row(row, std::move(y), test);
+    row.flag = join(one_class, held_out_flag(row, rows.front()));
+    return row;
+  };
   {
     const auto t0 = std::chrono::steady_clock::now();
     auto features = [&](const WindowSource& src, const std::vector<std::int64_t>& ids) {
@@ -250,169 +453,222 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
       src.gather(ids, wb);
       return window_features(wb, layout.group, layout.num_groups());
     };
-    const Eigen::MatrixXd Xtr = features(train_src, train.window), Xte = features(test_src, test.window);
-    LabelProbeRow row;
-    row.name = "ridge on raw windows";
-    row.flag = one_class;
-    std::vector<double> v;
-    std::vector<int> c;
-    if (R > 0) {
-      Eigen::MatrixXd Y(tr.size(), R);
-      for (int s = 0; s < tr.size(); ++s)
-        for (int a = 0; a < R; ++a) Y(s, a) = tr.value[static_cast<std::size_t>(s) * R + a];
-      const RidgeModel rm = fit_ridge(Xtr, Y, ridge_lambdas, cfg.validation_fraction, cfg.seed);
-      const Eigen::MatrixXd P = predict(rm, Xte);
-      for (int s = 0; s < te.size(); ++s)
-        for (int a = 0; a < R; ++a) v.push_back(P(s, a));
-    }
-    if (C > 0) {
-      const RidgeModel rm = fit_ridge_classifier(Xtr, tr.label, C, ridge_lambdas, cfg.validation_fraction, cfg.seed);
-      c = predict_class(rm, Xte);
-    }
-    score_row(row, v, c, te);
-    row.flag = join(row.flag, held_out_flag(row, rows.front()));
-    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    rows.push_back(row);
+    rows.push_back(ridge_row("ridge on raw windows", features(train_src, train.window), features(test_src, test.window)));
+    rows.back().seconds = since(t0);
   }
-  // frozen encoders: a random initialization of the same architecture, and the checkpoint's
-  auto head_row = [&](const std::string& name, const ParamSet<float>& params) {
-    const auto t0 = std::chrono::steady_clock::now();
+  // Frozen encoders: a random initialization of the same architecture, and the checkpoint's; each
+  // read out linearly and by an attentive probe.
+  auto encoder_rows = [&](const std::string& name, const ParamSet<float>& params) {
+    auto t0 = std::chrono::steady_clock::now();
     const JepaModel<float>& model = *m.model;
-    ProgressLine bar("  embed " + name, tr.size() + te.size(), quiet);
+    const int N = model.num_tokens(), d = model.dim();
+    ProgressLine bar("  embed " + name, tr.size() + te.size(), set.quiet);
     auto etr = embed_windows(params, model.tokenizer, model.encoder, train_src, train.window, 32,
-                             [&](std::int64_t d, std::int64_t) { bar.update(d, d, ""); });
+                             [&](std::int64_t k, std::int64_t) { bar.update(k, k, ""); });
     auto ete = embed_windows(params, model.tokenizer, model.encoder, test_src, test.window, 32,
-                             [&](std::int64_t d, std::int64_t) { bar.update(tr.size() + d, tr.size() + d, ""); });
-    FrozenFeatures<float> ftr(std::move(etr), model.num_tokens(), model.dim());
-    FrozenFeatures<float> fte(std::move(ete), model.num_tokens(), model.dim());
-    // One head per repeat (seeds cfg.seed, cfg.seed + 1, ...); a diverged one is left out of the mean.
-    std::vector<LabelProbeRow> runs;
-    int diverged = 0;
-    for (int rep = 0; rep < repeats; ++rep) {
-      HeadTrainConfig c_rep = cfg;
-      c_rep.seed = cfg.seed + static_cast<std::uint64_t>(rep);
-      ProbeHead<float> head(model.dim(), m.config.model.heads, R, C, c_rep.seed);
-      const HeadTrainResult fit = train_head(head, ftr, tr, c_rep);
+                             [&](std::int64_t k, std::int64_t) { bar.update(tr.size() + k, tr.size() + k, ""); });
+    if (set.center_tokens) {
+      const std::span<float> test_span(ete);
+      center_token_embeddings<float>(etr, std::span<const std::span<float>>(&test_span, 1), N, d);
+    }
+    const double embed_seconds = since(t0);
+    // linear read-out of the group means
+    std::vector<std::int64_t> all_tr(static_cast<std::size_t>(tr.size())), all_te(static_cast<std::size_t>(te.size()));
+    for (std::size_t s = 0; s < all_tr.size(); ++s) all_tr[s] = static_cast<std::int64_t>(s);
+    for (std::size_t s = 0; s < all_te.size(); ++s) all_te[s] = static_cast<std::int64_t>(s);
+    LabelProbeRow linear = ridge_row(name + ", linear", group_mean_embeddings(etr, N, d, all_tr, layout.group, layout.num_groups()),
+                                     group_mean_embeddings(ete, N, d, all_te, layout.group, layout.num_groups()));
+    linear.seconds = embed_seconds + since(t0);
+    t0 = std::chrono::steady_clock::now();
+    const std::string probe_kind = set.pooling.kind == PoolingKind::taxel ? ", taxel probe" : ", attentive";
+    FrozenFeatures<float> ftr(std::move(etr), N, d);
+    FrozenFeatures<float> fte(std::move(ete), N, d);
+    // One head per learning rate of the grid (seed cfg.seed); the lowest validation loss wins.
+    auto fit = [&](double lr, std::uint64_t seed) {
+      HeadTrainConfig c = cfg;
+      c.lr = lr, c.seed = seed;
+      PoolingConfig pc = set.pooling;
+      pc.tokens = N;
+      ProbeHead<float> head(d, m.config.model.heads, R, C, seed, 0, pc);
+      const HeadTrainResult r = train_head(head, ftr, tr, c);
       LabelProbeRow row;
-      row.name = name;
-      row.validation = fit.best_validation;
-      row.best_epoch = fit.best_epoch;
-      row.epochs = fit.epochs();
-      const std::vector<float> y = predict_head(head, fte, te.size());
-      std::vector<double> v;
-      std::vector<int> c;
-      const int out = R + C;
-      for (int s = 0; s < te.size(); ++s) {
-        const float* r = y.data() + static_cast<std::size_t>(s) * out;
-        for (int a = 0; a < R; ++a) v.push_back(r[a]);
-        if (C > 0) c.push_back(static_cast<int>(std::max_element(r + R, r + out) - (r + R)));
-      }
-      score_row(row, v, c, te);
-      if (!std::isfinite(row.validation) && repeats > 1) {
+      row.name = name + probe_kind;
+      row.validation = r.best_validation;
+      row.best_epoch = r.best_epoch;
+      row.epochs = r.epochs();
+      row.lr = lr;
+      const std::vector<float> yf = predict_head(head, fte, te.size());
+      score_row(row, std::vector<double>(yf.begin(), yf.end()), test);
+      return row;
+    };
+    const std::vector<double> grid = set.lr_grid.empty() ? std::vector<double>{cfg.lr} : set.lr_grid;
+    std::vector<LabelProbeRow> runs;
+    std::vector<std::pair<double, double>> tried;
+    for (double lr : grid) {
+      LabelProbeRow r = fit(lr, cfg.seed);
+      tried.emplace_back(lr, r.validation);
+      if (runs.empty() || (std::isfinite(r.validation) && !(r.validation >= runs.front().validation)))
+        runs.assign(1, std::move(r));
+    }
+    const double lr = runs.front().lr;
+    int diverged = std::isfinite(runs.front().validation) ? 0 : 1;
+    if (diverged && set.repeats > 1) runs.clear();
+    for (int rep = 1; rep < set.repeats; ++rep) {
+      LabelProbeRow r = fit(lr, cfg.seed + static_cast<std::uint64_t>(rep));
+      if (!std::isfinite(r.validation)) {
         ++diverged;
         continue;
       }
-      runs.push_back(std::move(row));
+      runs.push_back(std::move(r));
     }
-    if (runs.empty()) {  // every repeat diverged: the first one's row, flagged
-      LabelProbeRow row;
-      row.name = name;
-      row.repeats = repeats;
-      row.flag = "all " + std::to_string(repeats) + " repeats diverged (validation loss not finite)";
-      row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      return row;
+    LabelProbeRow attentive;
+    if (runs.empty()) {  // every repeat diverged
+      attentive.name = name + probe_kind;
+      attentive.flag = "all " + std::to_string(set.repeats) + " repeats diverged (validation loss not finite)";
+    } else {
+      attentive = mean_of_runs(std::move(runs));
+      attentive.flag = join(join(one_class, head_flag(attentive.validation, constant)), held_out_flag(attentive, rows.front()));
+      attentive.flag = join(attentive.flag, under_read_flag(attentive, linear));
+      if (diverged > 0 && set.repeats > 1)
+        attentive.flag = join(attentive.flag, std::to_string(diverged) + " of " + std::to_string(set.repeats) +
+                                                  " repeats diverged and are left out of the mean");
     }
-    LabelProbeRow row = runs.front();
-    row.repeats = repeats;
-    if (runs.size() > 1) {
-      const double k = static_cast<double>(runs.size());
-      const auto score = [&](const LabelProbeRow& r) {
-        if (R == 0) return r.accuracy;
-        double s = 0;
-        for (double e : r.rmse) s += e / static_cast<double>(r.rmse.size());
-        return s;
-      };
-      double mean_score = 0, ss = 0, val = 0;
-      for (const auto& r : runs) mean_score += score(r) / k, val += r.validation / k;
-      for (const auto& r : runs) ss += (score(r) - mean_score) * (score(r) - mean_score);
-      for (std::size_t a = 0; a < row.rmse.size(); ++a) {
-        row.rmse[a] = 0;
-        for (const auto& r : runs) row.rmse[a] += r.rmse[a] / k;
-      }
-      if (C > 0) {
-        row.accuracy = 0;
-        for (const auto& r : runs) row.accuracy += r.accuracy / k;
-      }
-      row.validation = val;
-      row.sd = std::sqrt(ss / (k - 1));
-    }
-    row.flag = join(join(one_class, head_flag(row.validation, constant)), held_out_flag(row, rows.front()));
-    if (diverged > 0)
-      row.flag = join(row.flag, std::to_string(diverged) + " of " + std::to_string(repeats) +
-                                    " repeats diverged and are left out of the mean");
-    row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    return row;
+    attentive.repeats = set.repeats;
+    attentive.lr = lr;
+    attentive.lr_validation = tried;
+    attentive.seconds = embed_seconds + since(t0);
+    rows.push_back(std::move(linear));
+    rows.push_back(std::move(attentive));
   };
   const auto random = make_jepa_model(m.config, skin.graph, m.model->config.in_dim / m.config.data.tau,
                                       m.config.seed ^ 0x72616e646f6dull);  // "random"
-  rows.push_back(head_row("random encoder (frozen)", random->target));
-  rows.push_back(head_row(encoder_name + " encoder (frozen)", encoder_params));
+  encoder_rows("random encoder (frozen)", random->target);
+  encoder_rows(encoder_name + " encoder (frozen)", encoder_params);
   return rows;
 }
 
-inline std::string label_probe_markdown(const std::vector<LabelProbeRow>& rows, const HeadTargets& test, int train_windows) {
-  const int R = test.regression, C = test.classes;
+inline std::string label_probe_markdown(const std::vector<LabelProbeRow>& rows, const WindowLabels& test,
+                                        int train_windows, int train_trials = 0) {
+  const int R = test.targets.regression, C = test.targets.classes;
+  const bool trials = !test.trial.empty();
+  const int test_trials = trials ? static_cast<int>(trial_view(std::vector<double>(static_cast<std::size_t>(test.targets.size()) * (R + C)),
+                                                               test.targets, test.trial).trial.size()) : 0;
   std::string s = "### Probe: " + std::string(R > 0 ? std::to_string(R) + " regression output(s)" : "") +
                   (R > 0 && C > 0 ? " and " : "") + (C > 0 ? std::to_string(C) + " classes" : "") + ", " +
-                  std::to_string(train_windows) + " training / " + std::to_string(test.size()) + " held-out windows\n\n";
+                  std::to_string(train_windows) + " training / " + std::to_string(test.targets.size()) + " held-out windows" +
+                  (trials ? " (" + std::to_string(train_trials) + " / " + std::to_string(test_trials) + " trials)" : "") + "\n\n";
   s += "| row |";
   for (int a = 0; a < R; ++a) s += " RMSE " + std::to_string(a) + " ↓ |";
   if (R > 1) s += " mean RMSE ↓ |";
+  if (R > 0 && trials) s += " trial mean RMSE ↓ |";
   if (C > 0) s += " top-1 (%) ↑ |";
+  if (C > 0 && trials) s += " trial top-1 (%) ↑ |";
   s += " best epoch | note |\n|---|";
-  for (int a = 0; a < R + (R > 1 ? 1 : 0) + (C > 0 ? 1 : 0) + 2; ++a) s += "---|";
+  const int cols = R + (R > 1) + (R > 0 && trials) + (C > 0) + (C > 0 && trials) + 2;
+  for (int a = 0; a < cols; ++a) s += "---|";
   s += "\n";
   char buf[64];
+  auto cell = [&](double v, double sd, const char* fmt, const char* fmt_sd) {
+    std::snprintf(buf, sizeof buf, std::isfinite(sd) ? fmt_sd : fmt, v, sd);
+    s += buf;
+  };
   for (const auto& r : rows) {
     s += "| " + r.name + " |";
-    double mean = 0;
-    for (double v : r.rmse) {
-      std::snprintf(buf, sizeof buf, " %.4g |", v);
-      s += buf;
-      mean += v / static_cast<double>(r.rmse.size());
-    }
-    const bool sd = std::isfinite(r.sd);
-    if (R > 1) {
-      std::snprintf(buf, sizeof buf, sd ? " %.4g ± %.2g |" : " %.4g |", mean, r.sd);
-      s += buf;
-    } else if (R == 1 && sd) {  // the one output's column carries the spread
-      s.pop_back(), s.pop_back();
-      std::snprintf(buf, sizeof buf, " ± %.2g |", r.sd);
-      s += buf;
-    }
-    if (C > 0) {
-      std::snprintf(buf, sizeof buf, sd ? " %.1f ± %.1f |" : " %.1f |", 100 * r.accuracy, 100 * r.sd);
-      s += buf;
-    }
+    for (std::size_t a = 0; a < r.window.rmse.size(); ++a)
+      cell(r.window.rmse[a], R == 1 ? r.window_sd : NAN, " %.4g |", " %.4g ± %.2g |");
+    if (r.window.rmse.empty() && R > 0)
+      for (int a = 0; a < R; ++a) s += " - |";
+    if (R > 1) cell(r.window.primary(), r.window_sd, " %.4g |", " %.4g ± %.2g |");
+    if (R > 0 && trials) cell(r.trial.primary(), r.trial_sd, " %.4g |", " %.4g ± %.2g |");
+    if (C > 0) cell(100 * r.window.accuracy, 100 * r.window_sd, " %.1f |", " %.1f ± %.1f |");
+    if (C > 0 && trials) cell(100 * r.trial.accuracy, 100 * r.trial_sd, " %.1f |", " %.1f ± %.1f |");
     s += r.best_epoch >= 0 ? " " + std::to_string(r.best_epoch + 1) + " of " + std::to_string(r.epochs) + " |" : " - |";
     s += " " + (r.flag.empty() ? std::string() : "**" + r.flag + "**") + " |\n";
   }
   return s;
 }
 
+inline nlohmann::json label_scores_json(const LabelScores& s, double sd) {
+  nlohmann::json j = nlohmann::json::object();
+  if (!s.rmse.empty()) j["rmse"] = s.rmse;
+  if (std::isfinite(s.accuracy)) j["accuracy"] = s.accuracy;
+  if (std::isfinite(sd)) j["sd"] = sd;
+  return j;
+}
+
 inline nlohmann::json label_probe_json(const std::vector<LabelProbeRow>& rows) {
   nlohmann::json a = nlohmann::json::array();
   for (const auto& r : rows) {
     nlohmann::json j = {{"row", r.name}, {"flag", r.flag}, {"seconds", r.seconds}};
-    if (!r.rmse.empty()) j["rmse"] = r.rmse;
-    if (std::isfinite(r.accuracy)) j["accuracy"] = r.accuracy;
+    j.update(label_scores_json(r.window, r.window_sd));
+    if (!r.trial.rmse.empty() || std::isfinite(r.trial.accuracy)) j["trial"] = label_scores_json(r.trial, r.trial_sd);
     if (std::isfinite(r.validation)) j["validation_loss"] = r.validation;
     if (r.best_epoch >= 0) j["best_epoch"] = r.best_epoch + 1, j["epochs"] = r.epochs;
     if (r.repeats > 1) j["repeats"] = r.repeats;
-    if (std::isfinite(r.sd)) j["sd"] = r.sd;
+    if (std::isfinite(r.lr)) j["lr"] = r.lr;
+    if (!r.lr_validation.empty()) {
+      nlohmann::json t = nlohmann::json::array();
+      for (const auto& [lr, v] : r.lr_validation) t.push_back({{"lr", lr}, {"validation_loss", std::isfinite(v) ? nlohmann::json(v) : nlohmann::json()}});
+      j["lr_tried"] = t;
+    }
+    if (std::isfinite(r.lambda)) j["lambda"] = r.lambda;
     a.push_back(std::move(j));
   }
   return a;
+}
+
+// The predictions of every row (its first repeat) as CSV: one line per held-out window
+// (level window: its trial, window id, first frame and length) and, with trials, one per trial
+// (level trial: the mean of its windows' outputs). Classification: the class names of label and
+// prediction; regression: label_k and prediction_k per output.
+inline std::string label_predictions_csv(const std::vector<LabelProbeRow>& rows, const WindowSource& src,
+                                         const WindowLabels& test, std::span<const std::string> class_names,
+                                         std::span<const std::string> trial_names) {
+  const int R = test.targets.regression, C = test.targets.classes, out = R + C;
+  auto quote = [](const std::string& v) {
+    if (v.find_first_of(",\"\n") == std::string::npos) return v;
+    std::string q = "\"";
+    for (char ch : v) q += ch == '"' ? std::string("\"\"") : std::string(1, ch);
+    return q + "\"";
+  };
+  std::string s = "row,level,trial,window,first_frame,frames";
+  if (C > 0) s += ",label,prediction";
+  for (int a = 0; a < R; ++a) s += ",label_" + std::to_string(a) + ",prediction_" + std::to_string(a);
+  s += "\n";
+  char buf[64];
+  auto values = [&](const std::vector<double>& y, std::size_t k, const HeadTargets& t) {
+    std::string v;
+    if (C > 0) {
+      const double* r = y.data() + k * out + R;
+      v += "," + quote(class_names[static_cast<std::size_t>(t.label[k])]) + "," +
+           quote(class_names[static_cast<std::size_t>(std::max_element(r, r + C) - r)]);
+    }
+    for (int a = 0; a < R; ++a) {
+      std::snprintf(buf, sizeof buf, ",%.7g,%.7g", static_cast<double>(t.value[k * R + a]), y[k * out + a]);
+      v += buf;
+    }
+    return v;
+  };
+  for (const auto& r : rows) {
+    if (r.outputs.empty()) continue;
+    const std::string row = quote(r.name);
+    for (std::size_t k = 0; k < static_cast<std::size_t>(test.targets.size()); ++k) {
+      const std::int64_t w = test.window[k];
+      const std::string trial = test.trial.empty() ? std::to_string(src.recording_of(w))
+                                                   : quote(trial_names[static_cast<std::size_t>(test.trial[k])]);
+      s += row + ",window," + trial + "," + std::to_string(w) + "," + std::to_string(src.start_of(w)) + "," +
+           std::to_string(src.length()) + values(r.outputs, k, test.targets) + "\n";
+    }
+    if (test.trial.empty()) continue;
+    const TrialView v = trial_view(r.outputs, test.targets, test.trial);
+    for (std::size_t k = 0; k < v.trial.size(); ++k) {
+      const auto first = std::find(test.trial.begin(), test.trial.end(), v.trial[k]) - test.trial.begin();
+      const int frames = src.recordings()[static_cast<std::size_t>(src.recording_of(test.window[static_cast<std::size_t>(first)]))].frames();
+      s += row + ",trial," + quote(trial_names[static_cast<std::size_t>(v.trial[k])]) + ",,," + std::to_string(frames) +
+           values(v.outputs, k, v.targets) + "\n";
+    }
+  }
+  return s;
 }
 
 }  // namespace tjepa::cli

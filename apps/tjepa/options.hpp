@@ -23,6 +23,8 @@ inline void add_data_format(CLI::App* app, DataFormat& f) {
   app->add_option("--axes", f.axes, "axes per taxel of text recordings")->capture_default_str();
   app->add_option("--columns", f.columns, "text recordings: the columns of the taxels' values, e.g. 0:60 (end exclusive)");
   app->add_option("--skip-rows", f.skip_rows, "text recordings: header lines to skip (-1: detect one)")->capture_default_str();
+  app->add_option("--lines-per-frame", f.lines_per_frame, "text recordings: lines that make one frame, their columns "
+                  "joined (the iCub grasp dataset: 7)")->capture_default_str();
   app->add_option("--non-finite", f.non_finite, "NaN/Inf readings: error | hold (last finite value) | interpolate | zero | drop (the windows that hold one)")
       ->capture_default_str();
 }

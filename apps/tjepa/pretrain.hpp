@@ -18,6 +18,7 @@
 #include "options.hpp"
 #include "output.hpp"
 #include "setup.hpp"
+#include "trials.hpp"
 
 namespace tjepa::cli {
 
@@ -98,10 +99,36 @@ inline CsvTable earlier_log_rows(const std::filesystem::path& path, std::int64_t
   return t;
 }
 
+// A collapse in a pre-training log: at the last row, the target embeddings' std over windows
+// (target_sample_std) is under a tenth of their std inside a window (target_std), or has fallen
+// under a quarter of its value at the first row. "" when neither.
+inline std::string collapse_warning(const CsvTable& log, const std::string& preprocessing) {
+  if (log.rows.empty()) return "";
+  const double within = log.rows.back()[6], across = log.rows.back()[9], first = log.rows.front()[9];
+  const std::string remedy = std::string(preprocessing == "baseline" || preprocessing == "xela"
+                                             ? ""
+                                             : "; try --preprocess baseline (with --baseline REST)") +
+                             ", a lower --lr or a slower EMA (--ema-start)";
+  char buf[256];
+  if (std::isfinite(within) && std::isfinite(across) && across < 0.1 * within) {
+    std::snprintf(buf, sizeof buf, "the target embeddings hardly differ between windows (std over windows %.3g, inside a window %.3g): a collapse",
+                  across, within);
+    return buf + std::string(": the inputs may be dominated by fixed per-taxel offsets") + remedy;
+  }
+  if (std::isfinite(first) && std::isfinite(across) && log.rows.size() > 1 && across < 0.25 * first) {
+    std::snprintf(buf, sizeof buf, "the target embeddings' std over windows fell from %.3g at step %.0f to %.3g at step %.0f (below a quarter): a collapse",
+                  first, log.rows.front()[0], across, log.rows.back()[0]);
+    return buf + remedy;
+  }
+  return "";
+}
+
 struct PretrainOptions {
   std::string config;                 // JSON file with TrainConfig keys ("" = defaults)
   nlohmann::json overrides = nlohmann::json::object();  // command-line overrides of TrainConfig keys
   std::vector<std::string> data;      // recordings (.npy [T, N, m] or text); empty: simulated
+  TrialOptions trials;                // --trials TABLE: its training (and validation) trials, no labels
+  double test_fraction = 0.2;         // --trials without a split column: as the probe's
   std::string baseline;               // no-contact recording (preprocessing xela or baseline)
   std::string preprocess = "auto";    // auto | xela | baseline | standardize | none (setup.hpp)
   DataFormat format;                  // how recordings are read (axes, columns, header, NaN)
@@ -130,14 +157,28 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
   spec.strict = o.strict;
   const Skin skin = load_skin(spec, &out);
   std::vector<Recording> recs;
+  std::vector<std::string> data_names = o.data;  // the recordings' files
   std::optional<Recording> baseline;
   std::string mode = o.preprocess;
-  if (o.data.empty()) {
+  if (o.data.empty() && o.trials.table.empty()) {
     require<ConfigError>(o.simulate_frames >= run.data.tau, "--simulate ", o.simulate_frames, " frames, expected >= tau");
     SimulatedSkin sim(SkinGeometry::from_layout(skin.layout), SimConfig{}, run.seed);
     baseline = sim.record_baseline(300);
     recs.push_back(sim.record(o.simulate_frames, o.simulate_contacts).recording);
     if (mode == "auto") mode = "xela";  // the simulated skin reports Xela counts
+  } else if (!o.trials.table.empty()) {
+    require<ConfigError>(o.data.empty(), "--trials and --data both name the recordings; give one");
+    const TrialTable table = read_trial_table(o.trials.table);
+    const TrialSplits sp = split_trials(table, o.test_fraction, o.trials.seed);
+    std::vector<int> fit = sp.train;
+    fit.insert(fit.end(), sp.val.begin(), sp.val.end());
+    std::sort(fit.begin(), fit.end());
+    out << "trials: pre-training on the " << fit.size() << " training and validation trials of " << describe_split(table, sp)
+        << "; the test trials are left out\n";
+    TrialRecordings tr = read_trials(table, fit, o.format, skin, run.data.tau, "training trials", out);
+    recs = std::move(tr.recordings);
+    for (int i : tr.trial) data_names.push_back(table.trials[static_cast<std::size_t>(i)].file.string());
+    if (!o.baseline.empty()) baseline = in_layout_order(read_recording(o.baseline, o.format), skin, o.baseline);
   } else {
     // Data parallel: each rank maps the recordings, so training reads only the pages of its
     // shards' windows; fitting the preprocessing (and the drift tracker, which writes a private
@@ -147,14 +188,17 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
     if (!o.baseline.empty()) baseline = in_layout_order(read_recording(o.baseline, o.format, map), skin, o.baseline);
   }
   for (std::size_t r = 0; r < recs.size(); ++r)
-    require<ShapeError>(recs[r].taxels() == skin.size(), o.data.empty() ? "simulated" : o.data[r], ": ",
+    require<ShapeError>(recs[r].taxels() == skin.size(), data_names.empty() ? "simulated" : data_names[r], ": ",
                         recs[r].taxels(), " taxels, the layout '", run.data.layout, "' has ", skin.size());
   std::vector<Recording*> rec_ptrs;
   for (auto& r : recs) rec_ptrs.push_back(&r);
   const PreprocessChoice picked = choose_preprocessing(mode, recs);
   if (mode != picked.mode) out << "preprocessing: " << picked.mode << " (" << picked.reason << ")\n";
-  if ((picked.mode == "xela" || picked.mode == "baseline") && !baseline && !o.data.empty())
-    out << "note: no --baseline recording: each taxel's no-contact mean is taken over " << o.data[0] << "\n";
+  if ((picked.mode == "xela" || picked.mode == "baseline") && !baseline && !data_names.empty()) {
+    out << "note: no --baseline recording: each taxel's no-contact mean is taken over " << data_names[0] << "\n";
+    const std::string w = baseline_contact_warning(recs[0], recs);
+    if (!w.empty()) out << "warning: " << w << "\n";
+  }
   const std::optional<DriftTracker> drift =
       picked.mode == "xela" && baseline ? track_drift(run, *baseline, rec_ptrs) : std::nullopt;
   const Preprocessor pre = fit_preprocessor(picked.mode, baseline ? &*baseline : nullptr, recs);
@@ -192,14 +236,8 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
   out << "loss " << r.log.rows.front()[1] << " -> " << r.log.rows.back()[1] << ", target std "
       << r.log.rows.back()[6] << " (over samples " << r.log.rows.back()[9] << "), " << r.windows_per_second << " windows/s, " << format_duration(r.seconds)
       << "\nwrote " << (dir / "checkpoint.safetensors").string() << ", log.csv, loss.svg\n";
-  // Collapse: the target embeddings barely differ between windows, though they vary inside one.
-  const double within = r.log.rows.back()[6], across = r.log.rows.back()[9];
-  if (std::isfinite(within) && std::isfinite(across) && across < 0.1 * within)
-    out << "warning: the target embeddings hardly differ between windows (std over windows " << across
-        << ", inside a window " << within << "): the inputs may be dominated by fixed per-taxel offsets"
-        << (picked.mode == "baseline" || picked.mode == "xela" ? std::string()
-                                                               : "; try --preprocess baseline (with --baseline REST)")
-        << ", or train longer\n";
+  const std::string collapse = collapse_warning(r.log, picked.mode);
+  if (!collapse.empty()) out << "warning: " << collapse << "\n";
   return 0;
 }
 
@@ -210,6 +248,9 @@ inline CLI::App* add_pretrain_command(CLI::App& app, PretrainOptions& o) {
   sub->add_option("--config", o.config, "JSON run configuration (keys as in the checkpoint's config.run)");
   add_run_overrides(sub, o.overrides);
   sub->add_option("--data", o.data, "recordings (.npy [T, N, m] or CSV); default: simulated data");
+  add_trial_options(sub, o.trials);
+  sub->add_option("--test-fraction", o.test_fraction, "--trials without a split column: the share of trials held out "
+                  "(as the probe's, so pre-training never sees its test trials)")->capture_default_str();
   sub->add_option("--baseline", o.baseline, "no-contact recording (preprocessing xela or baseline)");
   sub->add_option("--preprocess", o.preprocess, "auto | xela | baseline | standardize | none")->capture_default_str();
   add_data_format(sub, o.format);

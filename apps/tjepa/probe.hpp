@@ -12,7 +12,10 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <memory>
+#include <optional>
+#include <tuple>
 #include <ostream>
 #include <sstream>
 #include <string>
@@ -28,6 +31,7 @@
 #include "output.hpp"
 #include "options.hpp"
 #include "setup.hpp"
+#include "trials.hpp"
 
 namespace tjepa::cli {
 
@@ -221,6 +225,9 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
 // ---------------------------------------------------------------------------------------------
 // tjepa probe
 
+// The probes' training unless told otherwise: 60 epochs of batch 32 at rate 1e-3, early-stopped.
+inline HeadTrainConfig default_probe_config() { return {.max_epochs = 60, .batch = 32, .lr = 1e-3}; }
+
 struct ProbeOptions {
   std::string checkpoint;
   std::string encoder = "target";          // target | context
@@ -235,67 +242,195 @@ struct ProbeOptions {
   int min_contact = -1;
   double contact_threshold = 3.0;
   int max_windows = 0;                     // per split, 0 = all
-  HeadTrainConfig probe{.max_epochs = 60, .batch = 32, .lr = 1e-3};  // early-stopped on a validation split
+  HeadTrainConfig probe = default_probe_config();  // early-stopped on a validation split
   int repeats = 1;                         // probes with seeds seed, seed + 1, ... averaged
   bool center_tokens = false;              // center_token_embeddings before the probe
   std::string task;                        // "": force + indenter labels; regression | classification: the user's
   std::string label_columns;               // the label files' columns (text), "a:b,..."
   std::string data, labels;                // --task: one recording and its labels, split in time instead of
   double test_fraction = 0.2;              //   train/test files: the last test_fraction of the frames is held out
+  TrialOptions trials;                     // --trials TABLE: labelled trials (trials.hpp)
+  std::vector<double> lr_grid{3e-4, 1e-3, 3e-3};  // --task: the attentive probe's rates, chosen on validation
+  PoolingConfig pooling;                   // --task: the probe's pooling (attentive or taxel)
+  std::string predictions;                 // --task: per-window and per-trial predictions CSV ("" = none)
   std::string out;                         // results JSON ("" = none)
   bool force = false;
   bool quiet = false;
 };
 
-// tjepa probe --task: the user's own labels (label_probe.hpp).
+// A seeded subset of at most `limit` windows of w (0: all), kept in order.
+inline void limit_windows(WindowLabels& w, int limit, std::uint64_t seed) {
+  const std::size_t S = w.window.size();
+  if (limit <= 0 || S <= static_cast<std::size_t>(limit)) return;
+  std::vector<std::int64_t> pick(S);
+  for (std::size_t i = 0; i < S; ++i) pick[i] = static_cast<std::int64_t>(i);
+  Rng(seed, 0x6c6162656c).shuffle(std::span<std::int64_t>(pick));  // "label"
+  pick.resize(static_cast<std::size_t>(limit));
+  std::sort(pick.begin(), pick.end());
+  WindowLabels k;
+  const int R = w.targets.regression;
+  k.targets.regression = R, k.targets.classes = w.targets.classes, k.targets.groups.held = w.targets.groups.held;
+  for (std::int64_t i : pick) {
+    const auto u = static_cast<std::size_t>(i);
+    k.window.push_back(w.window[u]);
+    if (!w.trial.empty()) k.trial.push_back(w.trial[u]);
+    for (int a = 0; a < R; ++a) k.targets.value.push_back(w.targets.value[u * R + a]);
+    if (w.targets.classes > 0) k.targets.label.push_back(w.targets.label[u]);
+    if (!w.targets.groups.empty()) {
+      k.targets.groups.group.push_back(w.targets.groups.group[u]);
+      if (!w.targets.groups.stratum.empty()) k.targets.groups.stratum.push_back(w.targets.groups.stratum[u]);
+    }
+  }
+  w = std::move(k);
+}
+
+// The labelled windows of trials: each window takes its trial's label (class or value) or, with
+// per-frame label files, its last frame's; grouped by the trial's group for validation splits,
+// stratified by class where no group holds two classes; the table's val trials are the
+// validation split.
+inline WindowLabels trial_window_labels(const TrialTable& t, const TrialRecordings& trials, const WindowSource& src,
+                                        LabelTask task, std::span<const int> class_of_trial,
+                                        std::span<const float> value_of_trial, std::span<const Recording> label_frames,
+                                        std::span<const int> class_ids) {
+  WindowLabels w;
+  if (t.labels_are_files()) {
+    w = window_labels(src, label_frames, task, class_ids, t.source);
+  } else {
+    w.targets.regression = task == LabelTask::regression ? 1 : 0;
+    w.targets.classes = task == LabelTask::classification ? static_cast<int>(class_ids.size()) : 0;
+    for (std::int64_t i = 0; i < src.size(); ++i) {
+      const auto trial = static_cast<std::size_t>(trials.trial[static_cast<std::size_t>(src.recording_of(i))]);
+      w.window.push_back(i);
+      if (task == LabelTask::classification) w.targets.label.push_back(class_of_trial[trial]);
+      else w.targets.value.push_back(value_of_trial[trial]);
+    }
+  }
+  const std::vector<std::string> keys = t.group_keys();
+  std::map<std::string, std::int64_t> gid;
+  for (const std::string& k : keys) gid.emplace(k, static_cast<std::int64_t>(gid.size()));
+  std::map<std::int64_t, int> class_of_group;
+  bool stratify = task == LabelTask::classification;
+  for (std::size_t s = 0; s < w.window.size(); ++s) {
+    const int trial = trials.trial[static_cast<std::size_t>(src.recording_of(w.window[s]))];
+    w.trial.push_back(trial);
+    const std::int64_t g = gid.at(keys[static_cast<std::size_t>(trial)]);
+    w.targets.groups.group.push_back(g);
+    if (stratify) {
+      const auto [at, fresh] = class_of_group.emplace(g, w.targets.label[s]);
+      stratify = fresh || at->second == w.targets.label[s];
+    }
+  }
+  if (stratify) w.targets.groups.stratum = w.targets.label;
+  for (std::size_t i = 0; i < t.size(); ++i)
+    if (t.trials[i].split == TrialSplit::val) {
+      const std::int64_t g = gid.at(keys[i]);
+      if (std::find(w.targets.groups.held.begin(), w.targets.groups.held.end(), g) == w.targets.groups.held.end())
+        w.targets.groups.held.push_back(g);
+    }
+  return w;
+}
+
+// tjepa probe --task: the user's own labels (label_probe.hpp), from a trial table, one recording
+// split in time, or a training and a held-out recording.
 inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
   const LabelTask task = parse_label_task(o.task);
+  const bool trials = !o.trials.table.empty();
   const bool one_file = !o.data.empty() || !o.labels.empty();
-  require<ConfigError>(one_file ? !o.data.empty() && !o.labels.empty() && o.train_data.empty() && o.test_data.empty()
-                                : !o.train_data.empty() && !o.train_labels.empty() && !o.test_data.empty() &&
-                                      !o.test_labels.empty(),
-                       "--task needs --data and --labels (split in time by --test-fraction), or --train-data, "
-                       "--train-labels, --test-data and --test-labels");
+  const bool two_files = !o.train_data.empty() || !o.test_data.empty() || !o.train_labels.empty() || !o.test_labels.empty();
+  require<ConfigError>(trials + one_file + two_files == 1,
+                       "--task needs one of: --trials TABLE; --data and --labels (split in time by --test-fraction); "
+                       "or --train-data, --train-labels, --test-data and --test-labels");
+  require<ConfigError>(!one_file || (!o.data.empty() && !o.labels.empty()), "--data needs --labels and --labels --data");
+  require<ConfigError>(!two_files || (!o.train_data.empty() && !o.train_labels.empty() && !o.test_data.empty() &&
+                                      !o.test_labels.empty()),
+                       "--train-data needs --train-labels, --test-data and --test-labels");
   require<ConfigError>(o.test_fraction > 0 && o.test_fraction < 1, "--test-fraction ", o.test_fraction,
                        ", expected in (0, 1)");
+  if (!o.predictions.empty()) OutputFiles::check_new(o.predictions, o.force);
   TrainedModel m = load_trained_model(o.checkpoint);
   const JepaModel<float>& model = *m.model;
   const Skin skin = load_skin(SkinSpec::of(m.config));
-  Recording train_rec, test_rec, train_frames, test_frames;
+  const int tau = m.config.data.tau;
+  std::vector<Recording> train_recs, test_recs, train_frames, test_frames;  // frames: per-frame labels per recording
   std::string train_labels = o.train_labels, test_labels = o.test_labels;
-  if (one_file) {
+  std::optional<TrialTable> table;
+  TrialRecordings train_trials, test_trials;
+  std::vector<int> class_of_trial, class_ids;
+  std::vector<float> value_of_trial;
+  std::vector<std::string> class_names, names;
+  if (trials) {
+    table = read_trial_table(o.trials.table);
+    const TrialSplits sp = split_trials(*table, o.test_fraction, o.trials.seed);
+    out << "trials: " << describe_split(*table, sp) << "\n";
+    require<DataError>(!sp.test.empty(), o.trials.table, ": no test trial to hold out (", sp.how, ")");
+    std::vector<int> fit = sp.train;
+    fit.insert(fit.end(), sp.val.begin(), sp.val.end());
+    std::sort(fit.begin(), fit.end());
+    train_trials = read_trials(*table, fit, o.format, skin, tau, "training trials", out);
+    test_trials = read_trials(*table, sp.test, o.format, skin, tau, "test trials", out);
+    train_recs = train_trials.recordings, test_recs = test_trials.recordings;
+    names = trial_names(*table);
+    train_labels = test_labels = o.trials.table;
+    if (table->labels_are_files()) {
+      for (auto [recs, frames, ids] : {std::tuple{&train_trials, &train_frames, 0}, std::tuple{&test_trials, &test_frames, 1}})
+        for (std::size_t k = 0; k < recs->recordings.size(); ++k)
+          frames->push_back(read_label_frames(table->trials[static_cast<std::size_t>(recs->trial[k])].label_file,
+                                              o.label_columns, recs->recordings[k].frames()));
+    } else if (task == LabelTask::classification) {
+      const TrialClasses c = trial_classes(*table);
+      class_names = c.names, class_of_trial = c.of_trial;
+      for (std::size_t k = 0; k < c.names.size(); ++k) class_ids.push_back(static_cast<int>(k));
+    } else {
+      value_of_trial = trial_values(*table);
+    }
+  } else if (one_file) {
     // One session: the first frames train, the last test_fraction are held out (no window crosses).
     const Recording rec = in_layout_order(read_recording(o.data, o.format), skin, o.data);
     const Recording lab = read_label_frames(o.labels, o.label_columns, rec.frames());
     const int cut = static_cast<int>(std::lround(rec.frames() * (1.0 - o.test_fraction)));
-    require<DataError>(cut >= 2 * m.config.data.tau && rec.frames() - cut >= 2 * m.config.data.tau, o.data, ": ", rec.frames(),
-                       " frames split at ", cut, " leave fewer than two windows of ", m.config.data.tau, " frames on a side");
-    train_rec = rec.frames_range(0, cut), test_rec = rec.frames_range(cut, rec.frames());
-    train_frames = lab.frames_range(0, cut), test_frames = lab.frames_range(cut, rec.frames());
+    require<DataError>(cut >= 2 * tau && rec.frames() - cut >= 2 * tau, o.data, ": ", rec.frames(),
+                       " frames split at ", cut, " leave fewer than two windows of ", tau, " frames on a side");
+    train_recs = {rec.frames_range(0, cut)}, test_recs = {rec.frames_range(cut, rec.frames())};
+    train_frames = {lab.frames_range(0, cut)}, test_frames = {lab.frames_range(cut, rec.frames())};
     train_labels = test_labels = o.labels;
+    out << "note: one recording split in time at frame " << cut << "; for separate trials (grasps, strokes) give a "
+        << "trial table (--trials), which keeps each trial whole on one side\n";
   } else {
-    train_rec = in_layout_order(read_recording(o.train_data, o.format), skin, o.train_data);
-    test_rec = in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data);
-    train_frames = read_label_frames(o.train_labels, o.label_columns, train_rec.frames());
-    test_frames = read_label_frames(o.test_labels, o.label_columns, test_rec.frames());
+    train_recs = {in_layout_order(read_recording(o.train_data, o.format), skin, o.train_data)};
+    test_recs = {in_layout_order(read_recording(o.test_data, o.format), skin, o.test_data)};
+    train_frames = {read_label_frames(o.train_labels, o.label_columns, train_recs[0].frames())};
+    test_frames = {read_label_frames(o.test_labels, o.label_columns, test_recs[0].frames())};
   }
-  for (const Recording* r : {&train_rec, &test_rec}) require_fits(*r, m);
-  require<ShapeError>(train_frames.taxels() == test_frames.taxels(), test_labels, ": ", test_frames.taxels(),
-                      " label columns, ", train_labels, " has ", train_frames.taxels());
-  int classes = 0;
-  if (task == LabelTask::classification)
-    for (const Recording* f : {&train_frames, &test_frames})
-      for (float c : f->values()) classes = std::max(classes, static_cast<int>(c) + 1);
-  require<DataError>(task == LabelTask::regression || classes >= 2, train_labels, " and ", test_labels,
-                     ": class ids up to ", classes - 1, ", expected at least two classes");
-  m.track(train_rec);
-  m.track(test_rec);
-  const WindowSource train_src(train_rec, window_spec(m.config.data.tau, o.format), {}, m.pre);
-  const WindowSource test_src(test_rec, window_spec(m.config.data.tau, o.format), {}, m.pre);
-  note_dropped(train_src, "training recording", out);
-  note_dropped(test_src, "held-out recording", out);
-  WindowLabels train = window_labels(train_src, train_frames, task, classes, train_labels);
-  WindowLabels test = window_labels(test_src, test_frames, task, classes, test_labels);
+  for (const auto* recs : {&train_recs, &test_recs})
+    for (const Recording& r : *recs) require_fits(r, m);
+  if (!train_frames.empty()) {
+    for (const Recording& f : test_frames)
+      require<ShapeError>(f.taxels() == train_frames[0].taxels(), f.source(), ": ", f.taxels(), " label columns, ",
+                          train_frames[0].source(), " has ", train_frames[0].taxels());
+    if (task == LabelTask::classification) {
+      std::vector<Recording> all = train_frames;
+      all.insert(all.end(), test_frames.begin(), test_frames.end());
+      class_ids = frame_class_ids(all);
+      for (int c : class_ids) class_names.push_back(std::to_string(c));
+    }
+  }
+  require<DataError>(task == LabelTask::regression || class_ids.size() >= 2, train_labels, " and ", test_labels, ": ",
+                     class_ids.size(), " class(es), expected at least two");
+  for (Recording& r : train_recs) m.track(r);
+  for (Recording& r : test_recs) m.track(r);
+  const WindowSource train_src(train_recs, window_spec(tau, o.format), {}, m.pre);
+  const WindowSource test_src(test_recs, window_spec(tau, o.format), {}, m.pre);
+  note_dropped(train_src, "training data", out);
+  note_dropped(test_src, "held-out data", out);
+  WindowLabels train, test;
+  if (trials) {
+    train = trial_window_labels(*table, train_trials, train_src, task, class_of_trial, value_of_trial, train_frames, class_ids);
+    test = trial_window_labels(*table, test_trials, test_src, task, class_of_trial, value_of_trial, test_frames, class_ids);
+    test.targets.groups = {};
+  } else {
+    train = window_labels(train_src, train_frames, task, class_ids, train_labels);
+    test = window_labels(test_src, test_frames, task, class_ids, test_labels);
+  }
   if (o.min_contact > 0) {
     const auto before = std::make_pair(train.window.size(), test.window.size());
     keep_contact_windows(train, train_src, o.min_contact, o.contact_threshold, train_labels);
@@ -304,13 +439,35 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
         << o.contact_threshold << ": " << train.window.size() << " of " << before.first << " training, "
         << test.window.size() << " of " << before.second << " held-out\n";
   }
+  if (o.max_windows > 0) {
+    limit_windows(train, o.max_windows, o.probe.seed);
+    limit_windows(test, o.max_windows, o.probe.seed + 1);
+    out << "--max-windows " << o.max_windows << ": " << train.window.size() << " training and " << test.window.size()
+        << " held-out windows kept (a seeded subset)\n";
+  }
+  if (task == LabelTask::classification) {
+    // The classes with their windows; a held-out class that training never shows counts as wrong.
+    const int C = static_cast<int>(class_ids.size());
+    std::vector<int> n_train(static_cast<std::size_t>(C), 0), n_test(static_cast<std::size_t>(C), 0);
+    for (int c : train.targets.label) ++n_train[static_cast<std::size_t>(c)];
+    for (int c : test.targets.label) ++n_test[static_cast<std::size_t>(c)];
+    out << "classes (training / held-out windows):";
+    for (int c = 0; c < C; ++c)
+      out << (c ? ", " : " ") << class_names[static_cast<std::size_t>(c)] << " " << n_train[static_cast<std::size_t>(c)]
+          << "/" << n_test[static_cast<std::size_t>(c)];
+    out << "\n";
+    for (int c = 0; c < C; ++c)
+      if (n_train[static_cast<std::size_t>(c)] == 0 && n_test[static_cast<std::size_t>(c)] > 0)
+        out << "warning: class " << class_names[static_cast<std::size_t>(c)] << " has " << n_test[static_cast<std::size_t>(c)]
+            << " held-out windows and no training window: no head can predict it, they count as wrong\n";
+  }
   out << "probe for " << o.task << " labels on " << o.checkpoint << ": " << train.window.size() << " training and "
       << test.window.size() << " held-out windows\n";
   // The default epochs suit thousands of windows; on a few hundred an epoch is a handful of steps,
   // so by default the heads get at least 3000 steps and 1000 steps of patience (an attentive
   // probe can sit at the uniform guess for hundreds of steps before it starts to learn).
   HeadTrainConfig cfg = o.probe;
-  const HeadTrainConfig defaults = ProbeOptions{}.probe;
+  const HeadTrainConfig defaults = default_probe_config();
   if (cfg.max_epochs == defaults.max_epochs && cfg.patience == defaults.patience) {
     const double fit = (1.0 - cfg.validation_fraction) * static_cast<double>(train.window.size());
     const int per_epoch = std::max(1, static_cast<int>(std::ceil(fit / cfg.batch)));
@@ -320,21 +477,40 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
       out << "note: " << per_epoch << " steps per epoch: heads train up to " << cfg.max_epochs
           << " epochs with a patience of " << cfg.patience << " (--epochs and --patience set them)\n";
   }
+  const LabelProbeSettings set{o.lr_grid, o.pooling, o.center_tokens, o.repeats, o.quiet};
   const std::vector<LabelProbeRow> rows = label_probe_rows(
       m, o.encoder == "target" ? model.target : model.context, o.encoder, train_src, train, test_src, test, skin,
-      cfg, o.quiet, o.repeats);
-  out << label_probe_markdown(rows, test.targets, static_cast<int>(train.window.size()));
+      cfg, set);
+  const int n_train_trials = trials ? static_cast<int>(train_trials.recordings.size()) : 0;
+  out << label_probe_markdown(rows, test, static_cast<int>(train.window.size()), n_train_trials);
+  OutputFiles files;
   if (!o.out.empty()) {
-    OutputFiles files;
-    write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint},
-                                                       {"task", o.task},
-                                                       {"train_windows", train.window.size()},
-                                                       {"repeats", o.repeats},
-                                                       {"test_windows", test.window.size()},
-                                                       {"results", label_probe_json(rows)}}
-                                            .dump(2));
-    files.commit();
+    nlohmann::json j{{"checkpoint", o.checkpoint},
+                     {"task", o.task},
+                     {"train_windows", train.window.size()},
+                     {"repeats", o.repeats},
+                     {"test_windows", test.window.size()},
+                     {"probe", {{"lr_grid", o.lr_grid.empty() ? std::vector<double>{cfg.lr} : o.lr_grid},
+                                {"max_epochs", cfg.max_epochs}, {"patience", cfg.patience}, {"batch", cfg.batch},
+                                {"validation_fraction", cfg.validation_fraction}, {"center_tokens", o.center_tokens},
+                                {"pooling", to_string(o.pooling.kind)}}},
+                     {"results", label_probe_json(rows)}};
+    if (!class_names.empty()) j["classes"] = class_names;
+    if (trials) {
+      j["trials"] = {{"table", o.trials.table}, {"train", train_trials.recordings.size()},
+                     {"test", test_trials.recordings.size()}};
+      std::vector<std::string> held;
+      for (int i : test_trials.trial) held.push_back(names[static_cast<std::size_t>(i)]);
+      j["trials"]["test_files"] = held;
+    }
+    write_file_atomic(files.add(o.out), j.dump(2));
   }
+  if (!o.predictions.empty()) {
+    if (names.empty())
+      for (std::size_t r = 0; r < test_recs.size(); ++r) names.push_back(std::to_string(r));
+    write_file_atomic(files.add(o.predictions), label_predictions_csv(rows, test_src, test, class_names, names));
+  }
+  files.commit();
   return 0;
 }
 
@@ -344,6 +520,9 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
                        "', expected target or context");
   if (!o.out.empty()) OutputFiles::check_new(o.out, o.force);
   if (!o.task.empty()) return run_label_probe(o, out);
+  require<ConfigError>(o.trials.table.empty() && o.predictions.empty() && o.data.empty() && o.labels.empty(),
+                       "--trials, --predictions, --data and --labels are for your own labels: give --task regression ",
+                       "or classification");
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
   Recording train_rec, test_rec;
@@ -415,7 +594,7 @@ inline CLI::App* add_probe_command(CLI::App& app, ProbeOptions& o) {
   sub->add_option("--label-columns", o.label_columns, "text label files: the label columns, e.g. 1:3");
   sub->add_option("--data", o.data, "with --task: one recording, split in time (--test-fraction)");
   sub->add_option("--labels", o.labels, "with --task and --data: its labels, one row per frame");
-  sub->add_option("--test-fraction", o.test_fraction, "with --data: the last fraction of frames held out")
+  sub->add_option("--test-fraction", o.test_fraction, "with --data: the last fraction of frames held out; with --trials and no split column: the share of trials")
       ->capture_default_str();
   sub->add_option("--test-data", o.test_data, "held-out recording");
   sub->add_option("--test-labels", o.test_labels, "held-out labels");
@@ -438,7 +617,17 @@ inline CLI::App* add_probe_command(CLI::App& app, ProbeOptions& o) {
   sub->add_option("--repeats", o.repeats, "probes with seeds seed, seed+1, ... averaged (mean ± sd)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  sub->add_option("--lr", o.probe.lr, "probe learning rate")->capture_default_str();
+  sub->add_option_function<double>(
+         "--lr", [&o](double lr) { o.probe.lr = lr, o.lr_grid = {lr}; },
+         "probe learning rate (--task: instead of choosing one of --lr-grid on the validation split)")
+      ->default_str(std::to_string(o.probe.lr));
+  sub->add_option("--lr-grid", o.lr_grid, "--task: the attentive probe's learning rates, the best on validation kept")
+      ->capture_default_str();
+  sub->add_option("--predictions", o.predictions, "--task: write one row per held-out window and per trial here (CSV)");
+  add_trial_options(sub, o.trials);
+  sub->add_option_function<std::string>(
+      "--probe-pooling", [&o](const std::string& v) { o.pooling.kind = parse_pooling(v); },
+      "--task: the probe's pooling of a window: attentive (the paper's, default) or taxel (per-taxel read-out)");
   add_data_format(sub, o.format);
   sub->add_option("--out", o.out, "write the results as JSON here");
   sub->add_flag("--force", o.force, "overwrite --out");

@@ -113,8 +113,9 @@ inline Recording in_layout_order(Recording rec, const Skin& skin, const std::str
 //   none         the values as they are.
 //   auto         xela when at least 90 % of the readings are in Xela's range; else baseline when the
 //                taxels' offsets vary more than each taxel's signal does; else standardize.
-// The no-contact mean comes from the baseline recording, or without one from the first training
-// recording.
+// auto decides on all training recordings together (one file or the same frames as many give the
+// same choice). The no-contact mean comes from the baseline recording, or without one from the
+// first training recording (baseline_contact_warning says when that one moves like the data).
 struct PreprocessChoice {
   std::string mode, reason;
 };
@@ -135,33 +136,48 @@ inline std::tuple<double, float, float> xela_range_share(std::span<const Recordi
       }
   return {n ? static_cast<double>(in) / static_cast<double>(n) : 0.0, lo, hi};
 }
-// Variance of the taxels' means against the mean variance inside a taxel, per axis, summed.
-inline double offset_to_signal_ratio(const Recording& r) {
-  const int N = r.taxels(), m = r.axes(), T = r.frames();
+// Per taxel and axis over all frames of all recordings: the count, mean and variance of the
+// finite readings ([N·m] each).
+struct TaxelMoments {
+  std::vector<double> count, mean, var;
+};
+inline TaxelMoments taxel_moments(std::span<const Recording> recs) {
+  const std::size_t per = static_cast<std::size_t>(recs[0].taxels()) * recs[0].axes();
+  TaxelMoments t{std::vector<double>(per, 0.0), std::vector<double>(per, 0.0), std::vector<double>(per, 0.0)};
+  for (const Recording& r : recs)
+    for (int f = 0; f < r.frames(); ++f)
+      for (std::size_t k = 0; k < per; ++k) {
+        const double v = r.frame(f)[k];
+        if (!std::isfinite(v)) continue;
+        t.count[k] += 1;  // Welford
+        const double d = v - t.mean[k];
+        t.mean[k] += d / t.count[k];
+        t.var[k] += d * (v - t.mean[k]);
+      }
+  for (std::size_t k = 0; k < per; ++k) t.var[k] = t.count[k] > 0 ? t.var[k] / t.count[k] : 0.0;
+  return t;
+}
+
+// Variance of the taxels' means against the mean variance inside a taxel, per axis, summed, over
+// all frames of all recordings: one file or the same frames as many give the same ratio.
+inline double offset_to_signal_ratio(std::span<const Recording> recs) {
+  const int N = recs[0].taxels(), m = recs[0].axes();
+  const TaxelMoments t = taxel_moments(recs);
   double between = 0, within = 0;
   for (int a = 0; a < m; ++a) {
-    std::vector<double> mean(static_cast<std::size_t>(N), 0.0), sq(static_cast<std::size_t>(N), 0.0);
-    std::vector<int> cnt(static_cast<std::size_t>(N), 0);
-    for (int t = 0; t < T; ++t)
-      for (int i = 0; i < N; ++i) {
-        const double v = r(t, i, a);
-        if (!std::isfinite(v)) continue;
-        mean[static_cast<std::size_t>(i)] += v, sq[static_cast<std::size_t>(i)] += v * v, ++cnt[static_cast<std::size_t>(i)];
-      }
     double mm = 0, ms = 0;
     int k = 0;
     for (int i = 0; i < N; ++i) {
-      if (!cnt[static_cast<std::size_t>(i)]) continue;
-      const double mu = mean[static_cast<std::size_t>(i)] / cnt[static_cast<std::size_t>(i)];
-      mean[static_cast<std::size_t>(i)] = mu;
-      ms += std::max(0.0, sq[static_cast<std::size_t>(i)] / cnt[static_cast<std::size_t>(i)] - mu * mu);
-      mm += mu;
-      ++k;
+      const std::size_t j = static_cast<std::size_t>(i) * m + a;
+      if (t.count[j] == 0) continue;
+      mm += t.mean[j], ms += t.var[j], ++k;
     }
     if (!k) continue;
     mm /= k;
-    for (int i = 0; i < N; ++i)
-      if (cnt[static_cast<std::size_t>(i)]) between += (mean[static_cast<std::size_t>(i)] - mm) * (mean[static_cast<std::size_t>(i)] - mm) / k;
+    for (int i = 0; i < N; ++i) {
+      const std::size_t j = static_cast<std::size_t>(i) * m + a;
+      if (t.count[j] > 0) between += (t.mean[j] - mm) * (t.mean[j] - mm) / k;
+    }
     within += ms / k;
   }
   return within > 0 ? between / within : (between > 0 ? std::numeric_limits<double>::infinity() : 0.0);
@@ -177,9 +193,22 @@ inline PreprocessChoice choose_preprocessing(const std::string& asked, std::span
   const double share = std::get<0>(data_stats::xela_range_share(train));
   if (share >= 0.9)
     return {"xela", std::to_string(static_cast<int>(100 * share)) + " % of the readings are in Xela's range [20000, 60000]"};
-  const double ratio = data_stats::offset_to_signal_ratio(train[0]);
+  const double ratio = data_stats::offset_to_signal_ratio(train);
   if (ratio > 1.0) return {"baseline", "the taxels' offsets vary " + std::to_string(ratio) + " x more than their signals"};
   return {"standardize", "the readings are not Xela counts and the taxels share one offset"};
+}
+
+// A no-contact mean taken from a recording that moves like the data: its readings' variance (per
+// taxel, averaged) is at least a quarter of all training readings'. "" when it looks at rest.
+inline std::string baseline_contact_warning(const Recording& rest, std::span<const Recording> train) {
+  const data_stats::TaxelMoments r = data_stats::taxel_moments(std::span<const Recording>(&rest, 1));
+  const data_stats::TaxelMoments all = data_stats::taxel_moments(train);
+  double vr = 0, va = 0;
+  for (std::size_t k = 0; k < r.var.size(); ++k) vr += r.var[k], va += all.var[k];
+  if (!(va > 0) || vr < 0.25 * va) return "";
+  return "the no-contact mean is taken from " + rest.source() + ", whose readings vary " +
+         std::to_string(static_cast<int>(std::lround(100 * vr / va))) +
+         " % as much as all training readings: if it holds contact (a grasp, a stroke), give --baseline a recording at rest";
 }
 
 // A preprocessor of a resolved mode (not auto), fitted on the training recordings.
@@ -217,6 +246,7 @@ struct DataFormat {
   std::string columns;
   int skip_rows = -1;
   std::string non_finite = "error";
+  int lines_per_frame = 1;  // text: lines that make one frame (the iCub grasp dataset: 7)
 };
 
 // "a:b[,c:d...]" -> the column indices a..b-1, c..d-1, ...
@@ -268,6 +298,7 @@ inline Recording read_recording(const std::filesystem::path& path, const DataFor
   const NonFinite policy = parse_non_finite(fmt.non_finite);
   Recording rec;
   if (path.extension() == ".npy") {
+    require<ConfigError>(fmt.lines_per_frame == 1, path.string(), ": --lines-per-frame is for text recordings, not .npy");
     NpyReadOptions opt;
     opt.map = map;
     rec = read_recording_npy(path, fmt.axes > 0 ? fmt.axes : 0, opt);
@@ -290,6 +321,7 @@ inline Recording read_recording(const std::filesystem::path& path, const DataFor
     TextFormat f;
     f.axes = fmt.axes > 0 ? fmt.axes : 3;
     f.skip_rows = fmt.skip_rows;
+    f.lines_per_frame = fmt.lines_per_frame;
     f.columns = parse_column_ranges(fmt.columns);
     f.require_finite = policy == NonFinite::error;  // names the file's line
     rec = read_text_recording(path, f);

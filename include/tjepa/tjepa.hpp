@@ -55,6 +55,7 @@
 #include "tjepa/data/preprocessor.hpp"
 #include "tjepa/data/recording.hpp"
 #include "tjepa/data/text_reader.hpp"
+#include "tjepa/data/trial_table.hpp"
 #include "tjepa/data/window.hpp"
 #include "tjepa/data/window_source.hpp"
 
@@ -114,4 +115,5 @@
 #include "tjepa/downstream/probe_labels.hpp"
 #include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/downstream/ridge.hpp"
+#include "tjepa/downstream/trial_split.hpp"
 #include "tjepa/downstream/welch.hpp"

@@ -231,7 +231,9 @@ TEST_SUITE("data") {
         {"order_not_bool.npy", npy_bytes(dict("<f4", "(24,)", "0"), raw(v)), "not True or False"},
         {"structured.npy", npy_bytes("{'descr': [('a', '<f4')], 'fortran_order': False, 'shape': (24,)}", raw(v)),
          "structured dtypes"},
-        {"int16.npy", npy_bytes(dict("<i2", "(24,)"), std::string(48, '\0')), "unsupported dtype '<i2'"},
+        {"complex.npy", npy_bytes(dict("<c8", "(24,)"), std::string(192, '\0')), "unsupported dtype '<c8'"},
+        {"int64_big.npy", npy_bytes(dict("<i8", "(3,)"), std::string("\0\0\0\0\0\0\0\0\1\0\0\0\0\0\0\0\0\0\0\x02\0\0\0\0", 24)),
+         "value 33554432 at flat index 2 of int64 data is not exactly a float32"},
         {"float16.npy", npy_bytes(dict("<f2", "(24,)"), std::string(48, '\0')), "unsupported dtype '<f2'"},
         {"big_endian.npy", npy_bytes(dict(">f4", "(2, 4, 3)"), raw(v)), "big-endian"},
         {"fortran.npy", npy_bytes(dict("<f4", "(2, 4, 3)", "True"), raw(v)), "Fortran-order"},
@@ -344,5 +346,29 @@ TEST_SUITE("data") {
                          tjepa::FileError);
     CHECK_THROWS_AS(tjepa::read_text_recording(dir / "cols.txt", text_format(0)), tjepa::ConfigError);
     CHECK_THROWS_AS(tjepa::read_text_recording(dir / "cols.txt", text_format(2, 0, 0, {0, 1, 2})), tjepa::ConfigError);
+  }
+}
+
+TEST_SUITE("data") {
+  TEST_CASE("npy: integer arrays (label ids) read as exact floats, one-byte ones without a byte order") {
+    using namespace tjepa;
+    TempDir t("npy_int");
+    std::string i8;
+    for (std::int64_t v : {std::int64_t{0}, std::int64_t{-1}, std::int64_t{1000}, std::int64_t{1} << 24}) {
+      char b[8];
+      std::memcpy(b, &v, 8);
+      i8.append(b, 8);
+    }
+    write_bytes(t / "ids.npy", npy_bytes(dict("<i8", "(4,)"), i8));
+    const NpyArray a = read_npy(t / "ids.npy");
+    REQUIRE(a.numel() == 4);
+    CHECK(a.data()[1] == -1.0f);
+    CHECK(a.data()[2] == 1000.0f);
+    CHECK(a.data()[3] == 16777216.0f);
+    write_bytes(t / "u1.npy", npy_bytes(dict("|u1", "(2, 2)"), std::string("\x01\x02\x03\xff", 4)));
+    const Recording r = read_recording_npy(t / "u1.npy");
+    CHECK(r(1, 1, 0) == 255.0f);
+    write_bytes(t / "be.npy", npy_bytes(dict(">i4", "(1,)"), std::string(4, '\0')));
+    CHECK_THROWS_WITH_AS(read_npy(t / "be.npy"), doctest::Contains("convert with arr.astype('<i4')"), FileError);
   }
 }

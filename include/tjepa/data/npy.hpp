@@ -36,7 +36,18 @@ namespace tjepa {
 
 static_assert(std::endian::native == std::endian::little, "tjepa's .npy reader assumes a little-endian host");
 
-enum class NpyDtype { float32, float64 };
+// Integer arrays (label ids) are read too, as float: every value must be exactly a float
+// (|v| <= 2^24), else read_npy throws naming the index.
+enum class NpyDtype { float32, float64, int8, int16, int32, int64, uint8, uint16, uint32, uint64 };
+
+inline const char* npy_dtype_name(NpyDtype d) {
+  constexpr const char* names[] = {"float32", "float64", "int8", "int16", "int32", "int64", "uint8", "uint16", "uint32", "uint64"};
+  return names[static_cast<int>(d)];
+}
+inline std::size_t npy_item_size(NpyDtype d) {
+  constexpr std::size_t sizes[] = {4, 8, 1, 2, 4, 8, 1, 2, 4, 8};
+  return sizes[static_cast<int>(d)];
+}
 
 struct NpyHeader {
   int major_version = 1;
@@ -46,7 +57,7 @@ struct NpyHeader {
   std::vector<std::int64_t> shape;
   std::size_t data_offset = 0;  // bytes before the first value
 
-  std::size_t item_size() const { return dtype == NpyDtype::float32 ? 4 : 8; }
+  std::size_t item_size() const { return npy_item_size(dtype); }
   std::size_t numel() const {
     std::size_t n = 1;
     for (auto s : shape) n *= static_cast<std::size_t>(s);
@@ -184,11 +195,23 @@ class NpyHeaderParser {
       if (d[2] == '4') return NpyDtype::float32;
       if (d[2] == '8') return NpyDtype::float64;
     }
-    if (d.size() == 3 && d[0] == '>' && d[1] == 'f' && (d[2] == '4' || d[2] == '8'))
-      fail<FileError>(file_, ": big-endian dtype '", d, "' is not supported; convert with arr.astype('<f",
+    // integers: '<i8', '<u4', '|i1', '|u1' (one byte has no byte order)
+    if (d.size() == 3 && (d[1] == 'i' || d[1] == 'u') &&
+        (d[0] == '<' || d[0] == '=' || (d[0] == '|' && d[2] == '1'))) {
+      const bool u = d[1] == 'u';
+      switch (d[2]) {
+        case '1': return u ? NpyDtype::uint8 : NpyDtype::int8;
+        case '2': return u ? NpyDtype::uint16 : NpyDtype::int16;
+        case '4': return u ? NpyDtype::uint32 : NpyDtype::int32;
+        case '8': return u ? NpyDtype::uint64 : NpyDtype::int64;
+        default: break;
+      }
+    }
+    if (d.size() == 3 && d[0] == '>' && (d[1] == 'f' || d[1] == 'i' || d[1] == 'u'))
+      fail<FileError>(file_, ": big-endian dtype '", d, "' is not supported; convert with arr.astype('<", d[1],
                       d[2], "')");
     fail<FileError>(file_, ": unsupported dtype '", d,
-                    "': expected float32 ('<f4') or float64 ('<f8'), little-endian");
+                    "': expected float32 ('<f4'), float64 ('<f8') or a little-endian integer ('<i8', '<u2', '|u1', ...)");
   }
 
   std::string_view text_;
@@ -230,7 +253,7 @@ inline NpyHeader parse_npy_header(const char* bytes, std::size_t size, const std
     need *= us;
   }
   const std::size_t have = size - h.data_offset;
-  const char* type = h.dtype == NpyDtype::float32 ? "float32" : "float64";
+  const char* type = npy_dtype_name(h.dtype);
   require<FileError>(have >= need, file, ": truncated data: shape ", detail::shape_string(h.shape), " of ", type,
                      " needs ", need, " bytes but the file has only ", have, " after the header");
   require<FileError>(have == need, file, ": shape/data size mismatch: shape ", detail::shape_string(h.shape),
@@ -263,6 +286,38 @@ struct NpyReadOptions {
   bool map = true;
 };
 
+namespace detail {
+// n integers of dtype d at src into out, each exactly (|v| <= 2^24), else FileError naming the index.
+inline void integers_to_float(NpyDtype d, const char* src, std::size_t n, float* out, const std::string& file) {
+  auto convert = [&](auto tag) {
+    using I = decltype(tag);
+    for (std::size_t i = 0; i < n; ++i) {
+      I x;
+      std::memcpy(&x, src + i * sizeof(I), sizeof(I));
+      if constexpr (sizeof(I) >= 4) {
+        constexpr I limit = I(1) << 24;
+        bool exact = x <= limit;
+        if constexpr (std::is_signed_v<I>) exact = exact && x >= -limit;
+        require<FileError>(exact, file, ": value ", static_cast<long long>(x), " at flat index ", i, " of ",
+                           npy_dtype_name(d), " data is not exactly a float32 (|v| > 2^24)");
+      }
+      out[i] = static_cast<float>(x);
+    }
+  };
+  switch (d) {
+    case NpyDtype::int8: convert(std::int8_t{}); break;
+    case NpyDtype::int16: convert(std::int16_t{}); break;
+    case NpyDtype::int32: convert(std::int32_t{}); break;
+    case NpyDtype::int64: convert(std::int64_t{}); break;
+    case NpyDtype::uint8: convert(std::uint8_t{}); break;
+    case NpyDtype::uint16: convert(std::uint16_t{}); break;
+    case NpyDtype::uint32: convert(std::uint32_t{}); break;
+    case NpyDtype::uint64: convert(std::uint64_t{}); break;
+    default: fail<FileError>(file, ": not an integer dtype");
+  }
+}
+}  // namespace detail
+
 inline NpyArray read_npy(const std::filesystem::path& path, const NpyReadOptions& opt = {}) {
   auto file = std::make_shared<detail::MappedFile>(path, !opt.map);
   const NpyHeader h = parse_npy_header(file->data(), file->size(), file->path());
@@ -279,12 +334,14 @@ inline NpyArray read_npy(const std::filesystem::path& path, const NpyReadOptions
     AlignedVector<float> v(n);
     if (h.dtype == NpyDtype::float32) {
       if (n > 0) std::memcpy(v.data(), src, n * sizeof(float));
-    } else {
+    } else if (h.dtype == NpyDtype::float64) {
       for (std::size_t i = 0; i < n; ++i) {
         double d;
         std::memcpy(&d, src + i * sizeof(double), sizeof(double));
         v[i] = static_cast<float>(d);
       }
+    } else {
+      detail::integers_to_float(h.dtype, src, n, v.data(), out.source);
     }
     out.values = detail::FloatStorage(std::move(v));
   }

@@ -3,7 +3,9 @@
 // commas (CSV). Lines that are empty or start with '#' are skipped; `skip_rows` header lines are
 // skipped first (-1: the first data line is skipped when one of its fields is not a number, a
 // header row naming the columns). A column map says which column holds value (n, a): columns[n·m + a]; without one
-// the columns are taken in order, taxel-major with the axis fastest.
+// the columns are taken in order, taxel-major with the axis fastest. A frame may span several
+// lines (`lines_per_frame`, as in the iCub grasp dataset's 7 lines per time slice): its columns are
+// those of its lines one after the other.
 //
 // The file is streamed line by line straight into the recording's buffer, so it is never held
 // twice. Every problem throws FileError as "<file>:<line>: <what>".
@@ -30,6 +32,7 @@ struct TextFormat {
   char delimiter = 0;        // ',' or ' ' (any whitespace); 0: ',' if the first data line has one
   int skip_rows = 0;         // header lines to skip before the data; -1: detect one header row
   bool require_finite = false;  // NaN/Inf (and "nan"/"inf" text) are errors
+  int lines_per_frame = 1;   // data lines that make one frame, their columns joined in order
 };
 
 namespace detail {
@@ -75,7 +78,9 @@ inline Recording read_text_recording(const std::filesystem::path& path, const Te
   require<ConfigError>(fmt.axes > 0, "read_text_recording(", file, "): axes = ", fmt.axes, ", expected > 0");
   require<ConfigError>(fmt.skip_rows >= -1, "read_text_recording(", file, "): skip_rows = ", fmt.skip_rows,
                        ", expected >= 0 (or -1: detect a header row)");
-  bool detect_header = fmt.skip_rows < 0;
+  require<ConfigError>(fmt.lines_per_frame >= 1, "read_text_recording(", file, "): lines_per_frame = ",
+                       fmt.lines_per_frame, ", expected >= 1");
+  bool detect_header = fmt.skip_rows < 0 && fmt.lines_per_frame == 1;
   require<ConfigError>(fmt.delimiter == 0 || fmt.delimiter == ',' || fmt.delimiter == ' ',
                        "read_text_recording(", file, "): delimiter '", fmt.delimiter, "', expected ',', ' ' or 0 (auto)");
   int taxels = fmt.taxels;
@@ -104,6 +109,9 @@ inline Recording read_text_recording(const std::filesystem::path& path, const Te
   std::size_t ncols = 0;  // columns per row, fixed by the first data row
   long lineno = 0;
   int frames = 0;
+  std::string joined;       // lines_per_frame > 1: the frame's lines so far, joined by the delimiter
+  int lines_in_frame = 0;
+  long frame_line = 0;      // the line a frame starts on: errors name it (and the column in the frame)
   while (std::getline(in, line)) {
     ++lineno;
     if (lineno <= fmt.skip_rows) continue;
@@ -112,6 +120,16 @@ inline Recording read_text_recording(const std::filesystem::path& path, const Te
     const auto first = sv.find_first_not_of(" \t");
     if (first == std::string_view::npos || sv[first] == '#') continue;
     if (delim == 0) delim = sv.find(',') != std::string_view::npos ? ',' : ' ';
+    if (fmt.lines_per_frame > 1) {
+      if (lines_in_frame == 0) joined.clear(), frame_line = lineno;
+      else joined += delim;
+      joined += sv;
+      if (++lines_in_frame < fmt.lines_per_frame) continue;
+      lines_in_frame = 0;
+      sv = joined;
+    } else {
+      frame_line = lineno;
+    }
     detail::split_fields(sv, delim, fields);
     if (detect_header) {
       detect_header = false;
@@ -124,19 +142,19 @@ inline Recording read_text_recording(const std::filesystem::path& path, const Te
     if (ncols == 0) {
       ncols = fields.size();
       if (fmt.columns.empty()) {
-        require<FileError>(ncols % static_cast<std::size_t>(fmt.axes) == 0, file, ":", lineno, ": ", ncols,
+        require<FileError>(ncols % static_cast<std::size_t>(fmt.axes) == 0, file, ":", frame_line, ": ", ncols,
                            " columns, expected a multiple of axes = ", fmt.axes,
                            " (other columns too, such as time or motors? give the taxels' columns)");
         if (taxels == 0) taxels = static_cast<int>(ncols) / fmt.axes;
-        require<FileError>(ncols == static_cast<std::size_t>(taxels) * fmt.axes, file, ":", lineno, ": ", ncols,
+        require<FileError>(ncols == static_cast<std::size_t>(taxels) * fmt.axes, file, ":", frame_line, ": ", ncols,
                            " columns, expected taxels*axes = ", taxels, "*", fmt.axes, " = ",
                            static_cast<std::size_t>(taxels) * fmt.axes);
       } else {
-        require<FileError>(static_cast<std::size_t>(max_col) < ncols, file, ":", lineno, ": ", ncols,
+        require<FileError>(static_cast<std::size_t>(max_col) < ncols, file, ":", frame_line, ": ", ncols,
                            " columns, but the column map refers to column ", max_col);
       }
     }
-    require<FileError>(fields.size() == ncols, file, ":", lineno, ": ", fields.size(), " columns, expected ", ncols,
+    require<FileError>(fields.size() == ncols, file, ":", frame_line, ": ", fields.size(), " columns, expected ", ncols,
                        " (as in the first data row)");
     const std::size_t base = values.size();
     const std::size_t per = static_cast<std::size_t>(taxels) * fmt.axes;
@@ -145,15 +163,17 @@ inline Recording read_text_recording(const std::filesystem::path& path, const Te
       const std::size_t c = fmt.columns.empty() ? k : static_cast<std::size_t>(fmt.columns[k]);
       float v;
       if (!detail::parse_float(fields[c], v))
-        fail<FileError>(file, ":", lineno, ": column ", c + 1, ": '", fields[c], "' is not a number");
+        fail<FileError>(file, ":", frame_line, ": column ", c + 1, ": '", fields[c], "' is not a number");
       if (fmt.require_finite && !std::isfinite(v))
-        fail<DataError>(file, ":", lineno, ": column ", c + 1, ": value ", fields[c], " (frame ", frames, ", taxel ",
+        fail<DataError>(file, ":", frame_line, ": column ", c + 1, ": value ", fields[c], " (frame ", frames, ", taxel ",
                         k / fmt.axes, ", axis ", k % fmt.axes, "), expected finite data");
       values[base + k] = v;
     }
     ++frames;
   }
   require<FileError>(!in.bad(), file, ": read error");
+  require<FileError>(lines_in_frame == 0, file, ":", frame_line, ": the last frame has ", lines_in_frame, " of its ",
+                     fmt.lines_per_frame, " lines (lines_per_frame = ", fmt.lines_per_frame, ")");
   require<FileError>(frames > 0, file, ": no data rows");
   return Recording(frames, taxels, fmt.axes, std::move(values), file);
 }

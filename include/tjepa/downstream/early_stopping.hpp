@@ -129,6 +129,8 @@ inline ValidationSplit split_for_validation(int S, double fraction, std::uint64_
 struct SampleGroups {
   std::vector<std::int64_t> group;  // [S] group id per sample; empty: no groups
   std::vector<int> stratum;         // [S] stratum per sample, the same within a group; empty: one stratum
+  std::vector<std::int64_t> held;   // groups that are the validation split (a trial table's val
+                                    // trials); empty: drawn by split_by_groups
 
   bool empty() const { return group.empty(); }
   void validate(const char* who, int S) const {
@@ -144,7 +146,8 @@ struct SampleGroups {
 
 // Validation by groups: each stratum's groups (in order of first appearance) are shuffled with the
 // seed and round(fraction·n) of its n groups are held out, at least one where n >= 2 and never
-// all; if that holds out nothing (every stratum has one group), one seeded group of all. Every
+// all; if that holds out nothing (every stratum has one group), one seeded group of all; groups
+// given in g.held are held out instead of drawn (fraction and seed unused). Every
 // sample of a held-out group is a validation sample, the rest fit (both in sample order).
 inline ValidationSplit split_by_groups(const SampleGroups& g, double fraction, std::uint64_t seed) {
   require<ConfigError>(fraction > 0 && fraction < 1, "split_by_groups: fraction = ", fraction, ", expected in (0, 1)");
@@ -181,6 +184,7 @@ inline ValidationSplit split_by_groups(const SampleGroups& g, double fraction, s
     held.insert(held.end(), mine.begin(), mine.begin() + k);
   }
   if (held.empty()) held.push_back(ids[static_cast<std::size_t>(rng.below(ids.size()))]);
+  if (!g.held.empty()) held = g.held;  // given: the draw above is not used
   std::sort(held.begin(), held.end());
   ValidationSplit s;
   for (std::size_t i = 0; i < g.group.size(); ++i)

@@ -1,0 +1,260 @@
+// Labelled trials end to end on slices of two real datasets (tests/data/fabricslide: FabricSlide,
+// MIT; tests/data/icub_grasp: the iCub grasp dataset, copyright kept): pre-training on the
+// training trials only, windows that never cross a trial, splits that never cut one, window- and
+// trial-level results, predictions per window and per trial, the linear read-out beside the
+// attentive probe, and the label checks a first real run trips over.
+#include <doctest/doctest.h>
+
+#include "../pretrain.hpp"
+#include "../probe.hpp"
+
+#include "../../../tests/support/files.hpp"
+
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+namespace fs = std::filesystem;
+using tjepa_test::read_file;
+using tjepa_test::TempDir;
+
+const fs::path data_dir = TJEPA_TEST_DATA_DIR;
+
+tjepa::cli::DataFormat fabric_format() {
+  tjepa::cli::DataFormat f;
+  f.axes = 1, f.columns = "3:19";
+  return f;
+}
+tjepa::cli::DataFormat icub_format() {
+  tjepa::cli::DataFormat f;
+  f.axes = 1, f.columns = "14:74", f.skip_rows = 1, f.lines_per_frame = 7;
+  return f;
+}
+
+tjepa::cli::PretrainOptions trial_run(const fs::path& set, const tjepa::cli::DataFormat& f, const fs::path& out, int tau) {
+  tjepa::cli::PretrainOptions po;
+  po.overrides = {{"dim", 16}, {"depth", 1}, {"heads", 2}, {"predictor_depth", 1}, {"batch", 8}, {"seed", 3},
+                  {"steps", 20}, {"warmup_steps", 2}, {"tau", tau}, {"layout", (set / "layout.csv").string()}};
+  po.trials.table = (set / "trials.csv").string();
+  po.format = f;
+  po.out = out.string();
+  po.quiet = true;
+  return po;
+}
+
+// Splits a CSV line; fields may be double-quoted (the row names hold commas).
+std::vector<std::string> fields(const std::string& line) {
+  std::vector<std::string> f(1);
+  bool quoted = false;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted && c == '"' && i + 1 < line.size() && line[i + 1] == '"') f.back() += '"', ++i;
+    else if (c == '"') quoted = !quoted;
+    else if (c == ',' && !quoted) f.emplace_back();
+    else f.back() += c;
+  }
+  return f;
+}
+}  // namespace
+
+TEST_SUITE("cli") {
+
+TEST_CASE("trials: FabricSlide slides pre-train on the training trials; the probe reads windows inside trials, per window and per trial") {
+  using namespace tjepa;
+  using namespace tjepa::cli;
+  TempDir t("trials_fabric");
+  const fs::path set = data_dir / "fabricslide";
+  std::ostringstream log;
+  REQUIRE(run_pretrain(trial_run(set, fabric_format(), t / "run", 10), log) == 0);
+  CHECK(log.str().find("trials: pre-training on the 12 training and validation trials of 12 training, 0 validation "
+                       "and 6 test trials of 18 (the table's split column); the test trials are left out") != std::string::npos);
+
+  ProbeOptions pb;
+  pb.checkpoint = (t / "run" / "checkpoint.safetensors").string();
+  pb.task = "classification";
+  pb.trials.table = (set / "trials.csv").string();
+  pb.format = fabric_format();
+  pb.probe.max_epochs = 4;
+  pb.probe.patience = 4;
+  pb.lr_grid = {1e-3, 3e-3};
+  pb.quiet = true;
+  pb.out = (t / "probe.json").string();
+  pb.predictions = (t / "pred.csv").string();
+  std::ostringstream out;
+  REQUIRE(run_probe(pb, out) == 0);
+  const std::string text = out.str();
+  CHECK(text.find("(12 / 6 trials)") != std::string::npos);
+  CHECK(text.find("| top-1 (%) ↑ | trial top-1 (%) ↑ |") != std::string::npos);
+  const auto j = nlohmann::json::parse(read_file(t / "probe.json"));
+  REQUIRE(j["results"].size() == 6u);
+  CHECK(j["classes"] == std::vector<std::string>{"BeigeCotton", "BrownCotton", "Canvas"});
+  CHECK(j["trials"]["test"] == 6);
+  for (const auto& f : j["trials"]["test_files"]) CHECK(f.get<std::string>().find("mmps_2.csv") != std::string::npos);
+  const std::vector<std::string> names{"constant (train mean / majority)", "ridge on raw windows",
+                                       "random encoder (frozen), linear", "random encoder (frozen), attentive",
+                                       "target encoder (frozen), linear", "target encoder (frozen), attentive"};
+  for (std::size_t r = 0; r < names.size(); ++r) {
+    CHECK(j["results"][r]["row"] == names[r]);
+    CHECK(j["results"][r].contains("accuracy"));
+    CHECK(j["results"][r]["trial"].contains("accuracy"));
+  }
+  // The attentive probe's rate was chosen on validation among the grid, and written down.
+  for (int r : {3, 5}) {
+    CHECK(j["results"][r]["lr_tried"].size() == 2u);
+    const double lr = j["results"][r]["lr"];
+    CHECK((lr == 1e-3 || lr == 3e-3));
+  }
+  // Attentive against linear on the same embeddings: within 2 points, or the row says so.
+  for (int r : {3, 5}) {
+    const double gap = j["results"][r - 1]["accuracy"].get<double>() - j["results"][r]["accuracy"].get<double>();
+    const std::string flag = j["results"][r]["flag"];
+    CAPTURE(gap);
+    CHECK((gap <= 0.02 || flag.find("less than the linear read-out per window") != std::string::npos));
+  }
+
+  // Predictions: every held-out window lies inside its trial, each trial appears once per row at
+  // trial level, and no held-out window comes from a training trial.
+  std::map<std::string, int> frames_of;
+  for (const auto& e : fs::directory_iterator(set))
+    if (e.path().extension() == ".csv" && e.path().filename().string().find("mmps_") != std::string::npos) {
+      std::ifstream f(e.path());
+      std::string line;
+      int n = -1;  // the header
+      while (std::getline(f, line)) n += !line.empty();
+      frames_of[e.path().filename().string()] = n;
+    }
+  std::ifstream pred(t / "pred.csv");
+  std::string line;
+  std::getline(pred, line);
+  CHECK(line == "row,level,trial,window,first_frame,frames,label,prediction");
+  std::map<std::string, int> trial_rows;
+  int windows = 0;
+  while (std::getline(pred, line)) {
+    const auto f = fields(line);
+    REQUIRE(f.size() == 8u);
+    CHECK(f[2].find("mmps_2.csv") != std::string::npos);
+    REQUIRE(frames_of.count(f[2]) == 1);
+    if (f[1] == "window") {
+      ++windows;
+      CHECK(std::stoi(f[4]) + std::stoi(f[5]) <= frames_of[f[2]]);
+    } else {
+      CHECK(f[1] == "trial");
+      CHECK(std::stoi(f[5]) == frames_of[f[2]]);
+      ++trial_rows[f[0]];
+    }
+    CHECK(f[6] == f[2].substr(0, f[2].find('_')));  // the label is the trial's
+  }
+  CHECK(windows == 6 * j["test_windows"].get<int>());
+  for (const auto& [row, n] : trial_rows) CHECK(n == 6);
+
+  // Flags that act or are refused by name.
+  ProbeOptions sub = pb;
+  sub.force = true;
+  sub.max_windows = 20;
+  std::ostringstream sout;
+  REQUIRE(run_probe(sub, sout) == 0);
+  CHECK(nlohmann::json::parse(read_file(t / "probe.json"))["train_windows"] == 20);
+  ProbeOptions no_task = sub;
+  no_task.task.clear();
+  CHECK_THROWS_WITH_AS(run_probe(no_task, sout), doctest::Contains("give --task regression or classification"), ConfigError);
+  ProbeOptions both = sub;
+  both.data = (set / "BeigeCotton_F120_V150mmps_0.csv").string();
+  both.labels = both.data;
+  CHECK_THROWS_WITH_AS(run_probe(both, sout), doctest::Contains("--task needs one of: --trials TABLE"), ConfigError);
+}
+
+TEST_CASE("trials: iCub grasps, a seeded split by trial stratified by object; the same split in pretrain and probe") {
+  using namespace tjepa;
+  using namespace tjepa::cli;
+  TempDir t("trials_icub");
+  const fs::path set = data_dir / "icub_grasp";
+  PretrainOptions po = trial_run(set, icub_format(), t / "run", 5);
+  po.test_fraction = 0.34;
+  std::ostringstream log;
+  REQUIRE(run_pretrain(po, log) == 0);
+  CHECK(log.str().find("12 training, 0 validation and 6 test trials of 18 (a seeded split by trial, stratified by label") !=
+        std::string::npos);
+  ProbeOptions pb;
+  pb.checkpoint = (t / "run" / "checkpoint.safetensors").string();
+  pb.task = "classification";
+  pb.trials.table = (set / "trials.csv").string();
+  pb.test_fraction = 0.34;
+  pb.format = icub_format();
+  pb.probe.max_epochs = 3;
+  pb.lr_grid = {1e-3};
+  pb.quiet = true;
+  pb.out = (t / "probe.json").string();
+  std::ostringstream out;
+  REQUIRE(run_probe(pb, out) == 0);
+  const auto j = nlohmann::json::parse(read_file(t / "probe.json"));
+  // Two grasps of each object held out, the same ones pre-training left out.
+  std::map<std::string, int> per_object;
+  for (const auto& f : j["trials"]["test_files"]) {
+    const std::string s = f;
+    ++per_object[s.substr(0, s.rfind('_'))];
+    CHECK(log.str().find(s) == std::string::npos);
+  }
+  CHECK(per_object == std::map<std::string, int>{{"blue_bear", 2}, {"book", 2}, {"lotion", 2}});
+  CHECK(j["results"][1]["trial"].contains("accuracy"));
+}
+
+TEST_CASE("label checks: [T] and int64 .npy labels, a stray id listed as its own class, a held-out class training never shows") {
+  using namespace tjepa;
+  using namespace tjepa::cli;
+  TempDir t("trials_labels");
+  const fs::path set = data_dir / "fabricslide";
+  std::ostringstream log;
+  REQUIRE(run_pretrain(trial_run(set, fabric_format(), t / "run", 10), log) == 0);
+  const Recording a = read_recording(set / "BeigeCotton_F120_V150mmps_0.csv", fabric_format());
+  const Recording b = read_recording(set / "Canvas_F120_V150mmps_0.csv", fabric_format());
+  auto ids = [](int frames, int first, int stray) {
+    std::vector<std::int64_t> v(static_cast<std::size_t>(frames));
+    for (int f = 0; f < frames; ++f) v[static_cast<std::size_t>(f)] = (f / 40) % 2 + first;
+    if (stray >= 0) v.back() = stray;
+    return v;
+  };
+  // Training labels as NumPy writes np.int64 ids of shape [T].
+  {
+    const std::vector<std::int64_t> v = ids(a.frames(), 0, 1000);
+    std::string h = "{'descr': '<i8', 'fortran_order': False, 'shape': (" + std::to_string(v.size()) + ",), }";
+    h.append((10 + h.size() + 1 + 63) / 64 * 64 - 10 - h.size() - 1, ' ');
+    h.push_back('\n');
+    std::ofstream f(t / "a.npy", std::ios::binary);
+    f.write("\x93NUMPY\x01\x00", 8);
+    const char len[2] = {static_cast<char>(h.size()), 0};
+    f.write(len, 2);
+    f << h;
+    f.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * 8));
+  }
+  std::ofstream(t / "b.csv") << [&] {
+    std::string s = "id\n";
+    for (auto v : ids(b.frames(), 1, -1)) s += std::to_string(v) + "\n";
+    return s;
+  }();
+  ProbeOptions pb;
+  pb.checkpoint = (t / "run" / "checkpoint.safetensors").string();
+  pb.task = "classification";
+  pb.train_data = (set / "BeigeCotton_F120_V150mmps_0.csv").string();
+  pb.test_data = (set / "Canvas_F120_V150mmps_0.csv").string();
+  pb.train_labels = (t / "a.npy").string();
+  pb.test_labels = (t / "b.csv").string();
+  pb.format = fabric_format();
+  pb.probe.max_epochs = 2;
+  pb.lr_grid = {1e-3};
+  pb.quiet = true;
+  std::ostringstream out;
+  REQUIRE(run_probe(pb, out) == 0);
+  // The classes are the ids present: 0, 1, 2 and the stray 1000, not 1001 classes.
+  CHECK(out.str().find("classes (training / held-out windows): 0 ") != std::string::npos);
+  CHECK(out.str().find(", 1000 ") != std::string::npos);
+  CHECK(out.str().find("4 classes") != std::string::npos);
+  CHECK(out.str().find("warning: class 2 has ") != std::string::npos);
+  CHECK(out.str().find("no training window: no head can predict it, they count as wrong") != std::string::npos);
+}
+
+}
