@@ -1,9 +1,11 @@
 #pragma once
-// tjepa embed: the frozen encoder over a recording's windows, written as embeddings .npy
-// [W, N, d].
+// tjepa embed: the frozen encoder over the windows of recordings (one, several, or a trial
+// table's trials; windows never cross two), written as embeddings .npy [W, N, d], and beside it a
+// CSV of which window is which: window, file, first frame, frames (and the trial's label and split).
 #include <CLI/CLI.hpp>
 
 #include <cstdint>
+#include <filesystem>
 #include <ostream>
 #include <span>
 #include <string>
@@ -15,11 +17,15 @@
 #include "options.hpp"
 #include "output.hpp"
 #include "setup.hpp"
+#include "trials.hpp"
 
 namespace tjepa::cli {
 
 struct EmbedOptions {
-  std::string checkpoint, data, out;
+  std::string checkpoint, out;
+  std::vector<std::string> data;      // recordings, windows cut inside each
+  TrialOptions trials;                // or a trial table: every trial, in table order
+  std::string windows;                // the windows CSV ("": out with .windows.csv)
   std::string encoder = "target";
   DataFormat format;                  // how recordings are read (axes, columns, header, NaN)
   int stride = 0;  // frames between windows (0 = tau)
@@ -28,20 +34,40 @@ struct EmbedOptions {
 };
 
 inline int run_embed(const EmbedOptions& o, std::ostream& out) {
-  require<ConfigError>(!o.checkpoint.empty() && !o.data.empty() && !o.out.empty(),
-                       "--checkpoint, --data and --out are required");
+  require<ConfigError>(!o.checkpoint.empty() && !o.out.empty(), "--checkpoint and --out are required");
+  require<ConfigError>(o.data.empty() != o.trials.table.empty(), "give the recordings as --data FILE... or --trials TABLE");
   require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
                        "', expected target or context");
   require<ConfigError>(parse_non_finite(o.format.non_finite) != NonFinite::drop,
                        "embed writes one row per window of the recording; --non-finite drop would shift them: use "
                        "hold, interpolate or zero");
+  const std::filesystem::path windows_csv =
+      !o.windows.empty() ? std::filesystem::path(o.windows) : std::filesystem::path(o.out).replace_extension(".windows.csv");
   OutputFiles::check_new(o.out, o.force);
+  OutputFiles::check_new(windows_csv, o.force);
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
-  Recording rec = in_layout_order(read_recording(o.data, o.format), load_skin(SkinSpec::of(m.config)), o.data);
-  require_fits(rec, m);
-  m.track(rec);
-  const WindowSource src(rec, window_spec(m.config.data.tau, o.format, o.stride), {}, m.pre);
+  const Skin skin = load_skin(SkinSpec::of(m.config));
+  std::vector<Recording> recs;
+  std::vector<std::string> label, split;  // per recording (trials)
+  if (!o.trials.table.empty()) {
+    const TrialTable t = read_trial_table(o.trials.table);
+    std::vector<int> all(t.size());
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+    TrialRecordings tr = read_trials(t, all, o.format, skin, m.config.data.tau, "trials", out);
+    recs = std::move(tr.recordings);
+    for (int i : tr.trial) {
+      label.push_back(t.trials[static_cast<std::size_t>(i)].label);
+      split.push_back(trial_split_name(t.trials[static_cast<std::size_t>(i)].split));
+    }
+  } else {
+    for (const std::string& p : o.data) recs.push_back(in_layout_order(read_recording(p, o.format), skin, p));
+  }
+  for (Recording& rec : recs) {
+    require_fits(rec, m);
+    m.track(rec);
+  }
+  const WindowSource src(recs, window_spec(m.config.data.tau, o.format, o.stride), {}, m.pre);
   std::vector<std::int64_t> ids(static_cast<std::size_t>(src.size()));
   for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = static_cast<std::int64_t>(i);
   ProgressLine bar("embed", src.size(), o.quiet);
@@ -50,9 +76,25 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
   OutputFiles files;
   write_npy(files.add(o.out), std::span<const float>(emb.data(), emb.size()),
             {src.size(), model.num_tokens(), model.dim()});
+  std::string csv = label.empty() ? "window,file,first_frame,frames\n" : "window,file,first_frame,frames,label,split\n";
+  auto quote = [](const std::string& v) {
+    if (v.find_first_of(",\"\n") == std::string::npos) return v;
+    std::string q = "\"";
+    for (char ch : v) q += ch == '"' ? std::string("\"\"") : std::string(1, ch);
+    return q + "\"";
+  };
+  for (std::int64_t w = 0; w < src.size(); ++w) {
+    const auto r = static_cast<std::size_t>(src.recording_of(w));
+    csv += std::to_string(w) + "," + quote(recs[r].source()) + "," + std::to_string(src.start_of(w)) + "," +
+           std::to_string(src.length());
+    if (!label.empty()) csv += "," + quote(label[r]) + "," + split[r];
+    csv += "\n";
+  }
+  write_file_atomic(files.add(windows_csv), csv);
   files.commit();
   out << "wrote " << o.out << ": [" << src.size() << ", " << model.num_tokens() << ", " << model.dim()
-      << "] embeddings of windows of " << m.config.data.tau << " frames\n";
+      << "] embeddings of windows of " << m.config.data.tau << " frames from " << recs.size() << " recording(s), and "
+      << windows_csv.string() << " (which window is which)\n";
   return 0;
 }
 
@@ -60,7 +102,9 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
 inline CLI::App* add_embed_command(CLI::App& app, EmbedOptions& o) {
   CLI::App* sub = app.add_subcommand("embed", "Frozen encoder over a recording's windows -> embeddings .npy [W, N, d]");
   sub->add_option("--checkpoint", o.checkpoint, "checkpoint of `tjepa pretrain`")->required();
-  sub->add_option("--data", o.data, "recording (.npy [T, N, m] or CSV)")->required();
+  sub->add_option("--data", o.data, "recordings (.npy [T, N, m] or CSV), windows cut inside each");
+  add_trial_options(sub, o.trials);
+  sub->add_option("--windows", o.windows, "the CSV of which window is which (default: --out with .windows.csv)");
   sub->add_option("--out", o.out, "output .npy")->required();
   sub->add_option("--encoder", o.encoder, "target | context")->capture_default_str();
   sub->add_option("--stride", o.stride, "frames between windows (0: tau)")->capture_default_str();

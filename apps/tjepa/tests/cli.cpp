@@ -253,7 +253,7 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
     write_npy(t.path / "rec.npy", sim.record(65).recording);
     EmbedOptions eo;
     eo.checkpoint = ck.string();
-    eo.data = (t.path / "rec.npy").string();
+    eo.data = {(t.path / "rec.npy").string()};
     eo.out = (t.path / "emb.npy").string();
     eo.quiet = true;
     std::ostringstream eout;
@@ -267,7 +267,7 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
     CHECK(e.data()[0] != e.data()[192 * 8]);
     // A recording of another sensor size is rejected, and no output appears.
     write_npy(t.path / "wrong.npy", Recording(20, 10, 3));
-    eo.data = (t.path / "wrong.npy").string();
+    eo.data = {(t.path / "wrong.npy").string()};
     eo.out = (t.path / "emb2.npy").string();
     CHECK_THROWS_AS(run_embed(eo, eout), ShapeError);
     CHECK_FALSE(fs::exists(eo.out));

@@ -58,7 +58,7 @@ TEST_SUITE("cli") {
     write_npy(t / "rec.npy", std::span<const float>(rec), std::span<const std::int64_t>(shape));
     cli::EmbedOptions eo;
     eo.checkpoint = co.out;
-    eo.data = (t / "rec.npy").string();
+    eo.data = {(t / "rec.npy").string()};
     eo.out = (t / "emb.npy").string();
     eo.quiet = true;
     REQUIRE(cli::run_embed(eo, out) == 0);

@@ -199,7 +199,8 @@ TEST_CASE("non-finite readings: an error at the file's line before any statistic
                        doctest::Contains("1 windows left out for NaN/Inf readings"), DataError);
   CHECK(window_spec(10, f).skip_non_finite);
   EmbedOptions eo;
-  eo.checkpoint = eo.data = eo.out = "unused";
+  eo.checkpoint = eo.out = "unused";
+  eo.data = {"unused"};
   eo.format = f;
   CHECK_THROWS_WITH_AS(run_embed(eo, std::cout), doctest::Contains("--non-finite drop would shift them"), ConfigError);
   f.non_finite = "skip";
@@ -363,16 +364,19 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
   CHECK(out.str().find("| constant (train mean / majority) |") != std::string::npos);
   CHECK(out.str().find("| ridge on raw windows |") != std::string::npos);
   const auto j = nlohmann::json::parse(read_file(t / "probe.json"));
-  REQUIRE(j["results"].size() == 4u);
-  CHECK(j["results"][2]["row"] == "random encoder (frozen)");
-  CHECK(j["results"][3]["row"] == "target encoder (frozen)");
+  REQUIRE(j["results"].size() == 6u);
+  CHECK(j["results"][2]["row"] == "random encoder (frozen), linear");
+  CHECK(j["results"][3]["row"] == "random encoder (frozen), attentive");
+  CHECK(j["results"][4]["row"] == "target encoder (frozen), linear");
+  CHECK(j["results"][5]["row"] == "target encoder (frozen), attentive");
   CHECK(j["train_windows"] == 30);
   CHECK(j["test_windows"] == 10);
   for (const auto& r : j["results"]) {
     REQUIRE(r["rmse"].size() == 2u);
     for (int a = 0; a < 2; ++a) CHECK(std::isfinite(r["rmse"][a].get<double>()));
   }
-  for (int r = 2; r < 4; ++r) CHECK(j["results"][r].contains("validation_loss"));
+  for (int r : {3, 5}) CHECK(j["results"][r].contains("validation_loss"));
+  for (int r : {2, 4}) CHECK(j["results"][r].contains("lambda"));
 
   // Repeats: each head row is the mean over seeds, with its standard deviation; the contact filter
   // (off by default for user labels) keeps the windows in which a taxel's reading stands out.
@@ -388,7 +392,7 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
     const auto r = nlohmann::json::parse(read_file(t / "probe.json"));
     CHECK(r["repeats"] == 2);
     CHECK(r["train_windows"].get<int>() <= 30);
-    for (int k = 2; k < 4; ++k) {
+    for (int k : {3, 5}) {
       CHECK(r["results"][k]["repeats"] == 2);
       CHECK(std::isfinite(r["results"][k]["sd"].get<double>()));
     }

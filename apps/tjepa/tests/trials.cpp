@@ -6,6 +6,7 @@
 #include <doctest/doctest.h>
 
 #include "../pretrain.hpp"
+#include "../embed.hpp"
 #include "../probe.hpp"
 
 #include "../../../tests/support/files.hpp"
@@ -151,6 +152,32 @@ TEST_CASE("trials: FabricSlide slides pre-train on the training trials; the prob
   }
   CHECK(windows == 6 * j["test_windows"].get<int>());
   for (const auto& [row, n] : trial_rows) CHECK(n == 6);
+
+  // embed over the table's trials: one row per window, and a CSV saying which is which.
+  EmbedOptions eo;
+  eo.checkpoint = pb.checkpoint;
+  eo.trials.table = pb.trials.table;
+  eo.format = fabric_format();
+  eo.out = (t / "emb.npy").string();
+  eo.quiet = true;
+  std::ostringstream eout;
+  REQUIRE(run_embed(eo, eout) == 0);
+  const NpyArray emb = read_npy(eo.out);
+  std::ifstream wcsv(t / "emb.windows.csv");
+  std::getline(wcsv, line);
+  CHECK(line == "window,file,first_frame,frames,label,split");
+  std::int64_t rows = 0;
+  while (std::getline(wcsv, line)) {
+    const auto f = fields(line);
+    REQUIRE(f.size() == 6u);
+    CHECK(std::stoll(f[0]) == rows++);
+    const std::string file = fs::path(f[1]).filename().string();
+    CHECK(std::stoi(f[2]) + std::stoi(f[3]) <= frames_of[file]);
+    CHECK(f[4] == file.substr(0, file.find('_')));
+  }
+  CHECK(rows == emb.shape[0]);
+  eo.data = {"x.csv"};
+  CHECK_THROWS_WITH_AS(run_embed(eo, eout), doctest::Contains("--data FILE... or --trials TABLE"), ConfigError);
 
   // Flags that act or are refused by name.
   ProbeOptions sub = pb;
