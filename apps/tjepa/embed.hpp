@@ -77,17 +77,12 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
   write_npy(files.add(o.out), std::span<const float>(emb.data(), emb.size()),
             {src.size(), model.num_tokens(), model.dim()});
   std::string csv = label.empty() ? "window,file,first_frame,frames\n" : "window,file,first_frame,frames,label,split\n";
-  auto quote = [](const std::string& v) {
-    if (v.find_first_of(",\"\n") == std::string::npos) return v;
-    std::string q = "\"";
-    for (char ch : v) q += ch == '"' ? std::string("\"\"") : std::string(1, ch);
-    return q + "\"";
-  };
+
   for (std::int64_t w = 0; w < src.size(); ++w) {
     const auto r = static_cast<std::size_t>(src.recording_of(w));
-    csv += std::to_string(w) + "," + quote(recs[r].source()) + "," + std::to_string(src.start_of(w)) + "," +
+    csv += std::to_string(w) + "," + csv_field(recs[r].source()) + "," + std::to_string(src.start_of(w)) + "," +
            std::to_string(src.length());
-    if (!label.empty()) csv += "," + quote(label[r]) + "," + split[r];
+    if (!label.empty()) csv += "," + csv_field(label[r]) + "," + split[r];
     csv += "\n";
   }
   write_file_atomic(files.add(windows_csv), csv);

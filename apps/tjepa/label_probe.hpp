@@ -96,8 +96,8 @@ inline WindowLabels window_labels(const WindowSource& src, std::span<const Recor
   const int K = per_recording[0].taxels();
   const int classes = static_cast<int>(class_ids.size());
   if (task == LabelTask::classification)
-    require<ShapeError>(K == 1, file, ": ", K, " label columns, a classification takes one (the class id; choose it ",
-                        "with --label-columns)");
+    require<ShapeError>(K == 1, per_recording[0].source(), ": ", K,
+                        " label columns, a classification takes one (the class id; choose it with --label-columns)");
   w.targets.regression = task == LabelTask::regression ? K : 0;
   w.targets.classes = task == LabelTask::classification ? classes : 0;
   for (std::int64_t i = 0; i < src.size(); ++i) {
@@ -625,12 +625,7 @@ inline std::string label_predictions_csv(const std::vector<LabelProbeRow>& rows,
                                          const WindowLabels& test, std::span<const std::string> class_names,
                                          std::span<const std::string> trial_names) {
   const int R = test.targets.regression, C = test.targets.classes, out = R + C;
-  auto quote = [](const std::string& v) {
-    if (v.find_first_of(",\"\n") == std::string::npos) return v;
-    std::string q = "\"";
-    for (char ch : v) q += ch == '"' ? std::string("\"\"") : std::string(1, ch);
-    return q + "\"";
-  };
+
   std::string s = "row,level,trial,window,first_frame,frames";
   if (C > 0) s += ",label,prediction";
   for (int a = 0; a < R; ++a) s += ",label_" + std::to_string(a) + ",prediction_" + std::to_string(a);
@@ -640,8 +635,8 @@ inline std::string label_predictions_csv(const std::vector<LabelProbeRow>& rows,
     std::string v;
     if (C > 0) {
       const double* r = y.data() + k * out + R;
-      v += "," + quote(class_names[static_cast<std::size_t>(t.label[k])]) + "," +
-           quote(class_names[static_cast<std::size_t>(std::max_element(r, r + C) - r)]);
+      v += "," + csv_field(class_names[static_cast<std::size_t>(t.label[k])]) + "," +
+           csv_field(class_names[static_cast<std::size_t>(std::max_element(r, r + C) - r)]);
     }
     for (int a = 0; a < R; ++a) {
       std::snprintf(buf, sizeof buf, ",%.7g,%.7g", static_cast<double>(t.value[k * R + a]), y[k * out + a]);
@@ -651,11 +646,11 @@ inline std::string label_predictions_csv(const std::vector<LabelProbeRow>& rows,
   };
   for (const auto& r : rows) {
     if (r.outputs.empty()) continue;
-    const std::string row = quote(r.name);
+    const std::string row = csv_field(r.name);
     for (std::size_t k = 0; k < static_cast<std::size_t>(test.targets.size()); ++k) {
       const std::int64_t w = test.window[k];
       const std::string trial = test.trial.empty() ? std::to_string(src.recording_of(w))
-                                                   : quote(trial_names[static_cast<std::size_t>(test.trial[k])]);
+                                                   : csv_field(trial_names[static_cast<std::size_t>(test.trial[k])]);
       s += row + ",window," + trial + "," + std::to_string(w) + "," + std::to_string(src.start_of(w)) + "," +
            std::to_string(src.length()) + values(r.outputs, k, test.targets) + "\n";
     }
@@ -664,7 +659,7 @@ inline std::string label_predictions_csv(const std::vector<LabelProbeRow>& rows,
     for (std::size_t k = 0; k < v.trial.size(); ++k) {
       const auto first = std::find(test.trial.begin(), test.trial.end(), v.trial[k]) - test.trial.begin();
       const int frames = src.recordings()[static_cast<std::size_t>(src.recording_of(test.window[static_cast<std::size_t>(first)]))].frames();
-      s += row + ",trial," + quote(trial_names[static_cast<std::size_t>(v.trial[k])]) + ",,," + std::to_string(frames) +
+      s += row + ",trial," + csv_field(trial_names[static_cast<std::size_t>(v.trial[k])]) + ",,," + std::to_string(frames) +
            values(v.outputs, k, v.targets) + "\n";
     }
   }

@@ -72,6 +72,14 @@ class OutputFiles {
   bool committed_ = false;
 };
 
+// A CSV field: as it is, or double-quoted (quotes doubled) when it holds a comma, quote or newline.
+inline std::string csv_field(const std::string& v) {
+  if (v.find_first_of(",\"\n") == std::string::npos) return v;
+  std::string q = "\"";
+  for (char ch : v) q += ch == '"' ? std::string("\"\"") : std::string(1, ch);
+  return q + "\"";
+}
+
 inline std::string format_duration(double seconds) {
   if (!std::isfinite(seconds) || seconds < 0) return "--:--";
   const auto s = static_cast<long long>(seconds + 0.5);

@@ -150,8 +150,14 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
   TrainConfig run = !o.config.empty()   ? TrainConfig::from_file(o.config)
                     : !o.resume.empty() ? load_trained_model(o.resume).config
                                         : TrainConfig{};
-  run.update(o.overrides, "command line");
-  fit_default_warmup(run, o.overrides, out);
+  // --steps 0: the initialization itself, written as a checkpoint (a random encoder to compare
+  // against, with the data statistics of the run); its schedule says 1 step, none taken.
+  const bool init_only = o.overrides.contains("steps") && o.overrides["steps"].is_number() && o.overrides["steps"] == 0;
+  require<ConfigError>(!init_only || o.resume.empty(), "--steps 0 writes an initialization; it does not resume a run");
+  nlohmann::json overrides = o.overrides;
+  if (init_only) overrides["steps"] = 1, overrides["warmup_steps"] = 0;
+  run.update(overrides, "command line");
+  fit_default_warmup(run, overrides, out);
   run.validate();
   SkinSpec spec = SkinSpec::of(run);
   spec.strict = o.strict;
@@ -227,6 +233,14 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
       << run.schedule.steps << " steps of " << run.batch
       << (o.parallel.active() ? " on " + std::to_string(o.parallel.ranks) + " MPI ranks" : std::string()) << "\n";
+  if (init_only) {
+    if (!lead) return 0;
+    trainer.save(files.add(dir / "checkpoint.safetensors"));
+    files.commit();
+    out << "--steps 0: wrote the initialization (seed " << run.seed << ", no training step) to "
+        << (dir / "checkpoint.safetensors").string() << "\n";
+    return 0;
+  }
   const PretrainOutcome r = pretrain(trainer, o.quiet || !lead, o.stop_after);
   if (!lead) return 0;
   write_pretrain_outputs(dir, trainer, r, files,

@@ -350,7 +350,7 @@ TEST_SUITE("data") {
 }
 
 TEST_SUITE("data") {
-  TEST_CASE("npy: integer arrays (label ids) read as exact floats, one-byte ones without a byte order") {
+  TEST_CASE("npy: integer arrays (label ids) read as exact floats / one-byte ones without a byte order") {
     using namespace tjepa;
     TempDir t("npy_int");
     std::string i8;

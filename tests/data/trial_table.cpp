@@ -19,7 +19,7 @@ void write(const fs::path& p, const std::string& s) { std::ofstream(p, std::ios:
 
 TEST_SUITE("data") {
 
-TEST_CASE("read_trial_table: columns in any order, quoted fields, paths from the table's folder, splits and groups") {
+TEST_CASE("read_trial_table: columns in any order / quoted fields / paths from the table's folder / splits and groups") {
   using namespace tjepa;
   TempDir t("trials");
   fs::create_directories(t / "rec");
@@ -52,7 +52,7 @@ TEST_CASE("read_trial_table: columns in any order, quoted fields, paths from the
   CHECK(lf.trials[0].label_file == t / "rec/c_labels.csv");
 }
 
-TEST_CASE("read_trial_table: every bad table is a FileError naming the table, the line and the problem") {
+TEST_CASE("read_trial_table: every bad table is a FileError naming the table / the line and the problem") {
   using namespace tjepa;
   TempDir t("trials_bad");
   write(t / "a.csv", "1\n");
@@ -60,7 +60,7 @@ TEST_CASE("read_trial_table: every bad table is a FileError naming the table, th
   auto bad = [&](const std::string& text, const std::string& what) {
     write(t / "t.csv", text);
     CAPTURE(text);
-    CHECK_THROWS_WITH_AS(read_trial_table(t / "t.csv"), doctest::Contains(what), FileError);
+    CHECK_THROWS_WITH_AS(read_trial_table(t / "t.csv"), doctest::Contains(what.c_str()), FileError);
   };
   bad("", "t.csv: empty");
   bad("file,label\n", "a header and no trial");
@@ -77,7 +77,7 @@ TEST_CASE("read_trial_table: every bad table is a FileError naming the table, th
   CHECK_THROWS_WITH_AS(read_trial_table(t / "none.csv"), doctest::Contains("none.csv: cannot open the trial table"), FileError);
 }
 
-TEST_CASE("text recordings: a frame over several lines (the iCub grasp format), and a cut last frame named") {
+TEST_CASE("text recordings: a frame over several lines (the iCub grasp format) / and a cut last frame named") {
   using namespace tjepa;
   TempDir t("lines_per_frame");
   write(t / "g.txt", "-10000\n1 2 3 \n4 5\n6 7 8\n10 20 30 \n40 50\n60 70 80\n");

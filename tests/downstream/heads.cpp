@@ -6,6 +6,7 @@
 // plain-loop reference; training).
 #include <doctest/doctest.h>
 
+#include <tjepa/sim.hpp>
 #include <tjepa/tjepa.hpp>
 
 #include <algorithm>
@@ -305,59 +306,6 @@ TEST_CASE("TokenComponents: per-token residuals on the leading principal directi
   CHECK_THROWS_WITH_AS(TokenComponents::fit(flat, N, d, rows, 2), doctest::Contains("do not vary"), DataError);
 }
 
-TEST_CASE("score_linear_readouts: fits on the training embeddings and scores the test ones") {
-  // 4 tokens in pads {0, 0, 1, 1}, d = 3. Sample s of a split: x[s, n] = base_n + a_s e0 on pad 0's
-  // tokens + b_s e1 on token 3 only. Force is linear in a (pad 0's mean), the object is sign(a), the
-  // pose is linear in b (token 3's residual along its direction). Both read-outs must find what is
-  // linear in their features on held-out samples; fitted on the test split (or scored on the
-  // training one) they could not, since a and b are drawn independently per split.
-  const int N = 4, d = 3, Str = 70, Ste = 70, L = 2;  // equal sizes: the swapped call below is valid
-  const std::vector<int> group{0, 0, 1, 1};
-  auto split = [&](int S, std::uint64_t seed, std::vector<float>& x, GraspTasks& t) {
-    Rng rng(seed);
-    x.assign(static_cast<std::size_t>(S) * N * d, 0.0f);
-    t = GraspTasks{};
-    t.object.classes = 2;
-    t.force.regression = 3;
-    t.pose.length = L;
-    t.pose.outputs = 3;
-    for (int s = 0; s < S; ++s) {
-      const double a = rng.normal(0.0, 1.0), b = rng.normal(0.0, 1.0);
-      for (int n = 0; n < N; ++n)
-        for (int i = 0; i < d; ++i) {
-          double v = 0.3 * n - 0.1 * i;
-          if (n < 2 && i == 0) v += a;
-          if (n == 3 && i == 1) v += b;
-          x[static_cast<std::size_t>((s * N + n) * d + i)] = float(v);
-        }
-      t.windows.push_back(s);
-      t.object_rows.push_back(s);
-      t.object.label.push_back(a > 0 ? 1 : 0);
-      t.force_rows.push_back(s);
-      for (double f : {a, 2 * a, -a}) t.force.value.push_back(float(f));
-      t.pose.window.push_back(s);  // sequences of L = 2 windows: s and s again (only rows matter here)
-      t.pose.window.push_back(s);
-      for (int l = 0; l < L; ++l)
-        for (double y : {b, 0.5 * b, 3 * b}) t.pose.value.push_back(float(y));
-    }
-  };
-  std::vector<float> xtr, xte;
-  GraspTasks tr, te;
-  split(Str, 1, xtr, tr);
-  split(Ste, 2, xte, te);
-  const LinearReadoutScores r = score_linear_readouts(xtr, tr, xte, te, N, d, LinearReadoutConfig{group, 2, 2, 7});
-  CHECK(r.group_means[kForceRmse] < 0.05);      // |force| ~ 2.4 N RMS
-  CHECK(r.group_means[kObjectAccuracy] > 90.0);
-  CHECK(r.token_components[kForceRmse] < 0.05);
-  CHECK(r.token_components[kPoseTheta] < 0.1);  // θ ~ 3 RMS
-  CHECK(r.token_components[kObjectAccuracy] > 90.0);
-  // The same call with the splits' embeddings exchanged fits on samples whose a and b do not go
-  // with the training labels: no read-out can then be accurate.
-  const LinearReadoutScores swapped = score_linear_readouts(xte, tr, xtr, te, N, d, LinearReadoutConfig{group, 2, 2, 7});
-  CHECK(swapped.group_means[kForceRmse] > 1.0);
-  CHECK(swapped.token_components[kPoseTheta] > 1.0);
-}
-
 namespace {
 // n rows of p features ~ N(mean_j, scale_j²) (scales and offsets differ, to exercise the
 // standardization).
@@ -429,7 +377,7 @@ TEST_CASE("fit_ridge: recovers a known linear map and picks the small lambda wit
     const Eigen::MatrixXd e = predict(f, rows(X, split.validation)) - rows(Yn, split.validation);
     CHECK(grouped.validation[j] == doctest::Approx(e.squaredNorm() / static_cast<double>(e.size())).epsilon(1e-12));
   }
-  CHECK_THROWS_AS(fit_ridge(X, Y, lambdas, 0.25, 1, SampleGroups{{1, 2}, {}}), ShapeError);
+  CHECK_THROWS_AS(fit_ridge(X, Y, lambdas, 0.25, 1, SampleGroups{{1, 2}, {}, {}}), ShapeError);
 }
 
 TEST_CASE("fit_ridge_classifier: separable classes by argmax of one-hot ridge") {
@@ -644,14 +592,14 @@ TEST_CASE("split_by_groups: whole groups - stratified - seeded / validation_spli
   CHECK(split_by_groups(g, 0.2, 7).validation == s.validation);
   CHECK(split_by_groups(g, 0.2, 8).validation != s.validation);
   // One group per stratum: one seeded group is held out.
-  const SampleGroups lone{{5, 5, 6, 6, 7}, {0, 0, 1, 1, 2}};
+  const SampleGroups lone{{5, 5, 6, 6, 7}, {0, 0, 1, 1, 2}, {}};
   const ValidationSplit l = split_by_groups(lone, 0.2, 1);
   REQUIRE(!l.validation.empty());
   std::set<std::int64_t> lv;
   for (auto i : l.validation) lv.insert(lone.group[static_cast<std::size_t>(i)]);
   CHECK(lv.size() == 1u);
-  CHECK_THROWS_WITH_AS(split_by_groups(SampleGroups{{1, 1, 1}, {}}, 0.2, 1), doctest::Contains("1 group(s)"), DataError);
-  CHECK_THROWS_WITH_AS(split_by_groups(SampleGroups{{1, 1, 2}, {0, 1, 1}}, 0.2, 1),
+  CHECK_THROWS_WITH_AS(split_by_groups(SampleGroups{{1, 1, 1}, {}, {}}, 0.2, 1), doctest::Contains("1 group(s)"), DataError);
+  CHECK_THROWS_WITH_AS(split_by_groups(SampleGroups{{1, 1, 2}, {0, 1, 1}, {}}, 0.2, 1),
                        doctest::Contains("one stratum per group"), DataError);
   // validation_split: groups win when present, blocks with groups are an error, no groups: the old split.
   HeadTrainConfig cfg;

@@ -19,7 +19,7 @@ using tjepa_test::TempDir;
 
 TEST_SUITE("downstream") {
 
-TEST_CASE("split_trials: whole trials and groups, stratified, seeded; the table's split column as written") {
+TEST_CASE("split_trials: whole trials and groups / stratified / seeded / the table's split column as written") {
   using namespace tjepa;
   TempDir t("split");
   std::ofstream(t / "r.csv") << "1\n";
@@ -34,14 +34,15 @@ TEST_CASE("split_trials: whole trials and groups, stratified, seeded; the table'
   CHECK(a.test == b.test);
   CHECK(a.test != c.test);
   CHECK(a.train.size() + a.test.size() == 40);
+  CHECK(a.test.size() == 11);
   std::set<int> all(a.train.begin(), a.train.end());
   for (int i : a.test) CHECK(all.insert(i).second);  // no trial on both sides
   // Stratified: each label keeps its share on the test side.
   std::map<std::string, int> test_count;
   for (int i : a.test) ++test_count[tab.trials[static_cast<std::size_t>(i)].label];
-  CHECK(test_count["rare"] == 2);   // 10 trials · 0.25, rounded
-  CHECK(test_count["odd"] == 5);
-  CHECK(test_count["even"] == 5);
+  CHECK(test_count["rare"] == 3);   // 10 trials · 0.25 = 2.5, rounded half away from zero
+  CHECK(test_count["odd"] == 5);    // 20 · 0.25
+  CHECK(test_count["even"] == 3);
   CHECK(a.how.find("stratified by label") != std::string::npos);
 
   // Groups: every trial of a group on one side; groups holding two labels are not stratified.

@@ -65,7 +65,7 @@ std::vector<std::string> fields(const std::string& line) {
 
 TEST_SUITE("cli") {
 
-TEST_CASE("trials: FabricSlide slides pre-train on the training trials; the probe reads windows inside trials, per window and per trial") {
+TEST_CASE("trials: FabricSlide slides pre-train on the training trials / the probe reads windows inside trials / per window and per trial") {
   using namespace tjepa;
   using namespace tjepa::cli;
   TempDir t("trials_fabric");
@@ -195,7 +195,7 @@ TEST_CASE("trials: FabricSlide slides pre-train on the training trials; the prob
   CHECK_THROWS_WITH_AS(run_probe(both, sout), doctest::Contains("--task needs one of: --trials TABLE"), ConfigError);
 }
 
-TEST_CASE("trials: iCub grasps, a seeded split by trial stratified by object; the same split in pretrain and probe") {
+TEST_CASE("trials: iCub grasps / a seeded split by trial stratified by object / the same split in pretrain and probe") {
   using namespace tjepa;
   using namespace tjepa::cli;
   TempDir t("trials_icub");
@@ -228,9 +228,29 @@ TEST_CASE("trials: iCub grasps, a seeded split by trial stratified by object; th
   }
   CHECK(per_object == std::map<std::string, int>{{"blue_bear", 2}, {"book", 2}, {"lotion", 2}});
   CHECK(j["results"][1]["trial"].contains("accuracy"));
+
+  // --center-tokens acts: the probe reads other embeddings.
+  ProbeOptions centred = pb;
+  centred.center_tokens = true;
+  centred.force = true;
+  centred.out = (t / "centred.json").string();
+  REQUIRE(run_probe(centred, out) == 0);
+  const auto c = nlohmann::json::parse(read_file(t / "centred.json"));
+  CHECK(c["probe"]["center_tokens"] == true);
+  CHECK(c["results"][5]["validation_loss"] != j["results"][5]["validation_loss"]);
+
+  // --steps 0 writes the initialization, which the probe reads like any checkpoint.
+  PretrainOptions init = po;
+  init.overrides["steps"] = 0;
+  init.out = (t / "init").string();
+  std::ostringstream ilog;
+  REQUIRE(run_pretrain(init, ilog) == 0);
+  CHECK(ilog.str().find("--steps 0: wrote the initialization (seed 3, no training step)") != std::string::npos);
+  const TrainedModel m = load_trained_model(t / "init" / "checkpoint.safetensors");
+  CHECK(m.config.seed == 3);
 }
 
-TEST_CASE("label checks: [T] and int64 .npy labels, a stray id listed as its own class, a held-out class training never shows") {
+TEST_CASE("label checks: [T] and int64 .npy labels / a stray id listed as its own class / a held-out class training never shows") {
   using namespace tjepa;
   using namespace tjepa::cli;
   TempDir t("trials_labels");
@@ -282,6 +302,70 @@ TEST_CASE("label checks: [T] and int64 .npy labels, a stray id listed as its own
   CHECK(out.str().find("4 classes") != std::string::npos);
   CHECK(out.str().find("warning: class 2 has ") != std::string::npos);
   CHECK(out.str().find("no training window: no head can predict it, they count as wrong") != std::string::npos);
+  // A two-column label file is named as the one at fault; a [T, N, 2] recording names --axes.
+  {
+    std::ofstream f(t / "two.csv");
+    f << "id,other\n";
+    for (int i = 0; i < b.frames(); ++i) f << i % 2 << ",0\n";
+  }
+  pb.test_labels = (t / "two.csv").string();
+  CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("two.csv: 2 label columns"),
+                       ShapeError);
+  write_npy(t / "r2.npy", Recording(20, 4, 2));
+  CHECK_THROWS_WITH_AS(read_recording(t / "r2.npy", DataFormat{}), doctest::Contains("on the command line --axes 2"),
+                       ShapeError);
+}
+
+}
+
+TEST_SUITE("cli") {
+
+TEST_CASE("collapse_warning fires on a constructed collapse and on the spreads the real runs showed / auto preprocessing ignores how files are split") {
+  using namespace tjepa;
+  using namespace tjepa::cli;
+  auto log = [](std::vector<std::pair<double, double>> within_across) {
+    CsvTable t;
+    t.header = pretrain_log_columns();
+    double step = 0;
+    for (const auto& [w, a] : within_across) t.rows.push_back({step += 100, 1, 1e-4, 0.04, 0.996, 1, w, 1000, 1, a});
+    return t;
+  };
+  CHECK(collapse_warning(log({{0.5, 0.45}, {0.5, 0.4}}), "standardize").empty());
+  // 0.45 -> 0.066 over windows (the 36-object set): fallen under a quarter, though not under a tenth of 0.5.
+  const std::string fell = collapse_warning(log({{0.5, 0.45}, {0.5, 0.2}, {0.5, 0.066}}), "standardize");
+  CHECK(fell.find("fell from 0.45 at step 100 to 0.066 at step 300") != std::string::npos);
+  CHECK(fell.find("--preprocess baseline") != std::string::npos);
+  // 0.013 over windows against 0.7 inside one (iCub): under a tenth.
+  const std::string flat = collapse_warning(log({{0.7, 0.013}}), "baseline");
+  CHECK(flat.find("hardly differ between windows") != std::string::npos);
+  CHECK(flat.find("--preprocess baseline") == std::string::npos);
+
+  // The same FabricSlide frames as one file or as slides give the same preprocessing choice.
+  const fs::path set = data_dir / "fabricslide";
+  std::vector<Recording> slides;
+  AlignedVector<float> all;
+  int frames = 0;
+  for (const char* f : {"BeigeCotton_F120_V150mmps_0.csv", "Canvas_F120_V-150mmps_1.csv", "BrownCotton_F120_V150mmps_2.csv"}) {
+    slides.push_back(read_recording(set / f, fabric_format()));
+    all.insert(all.end(), slides.back().values().begin(), slides.back().values().end());
+    frames += slides.back().frames();
+  }
+  const Recording one(frames, 16, 1, std::move(all), "one.csv");
+  const PreprocessChoice a = choose_preprocessing("auto", slides);
+  const PreprocessChoice b = choose_preprocessing("auto", std::span<const Recording>(&one, 1));
+  CHECK(a.mode == b.mode);
+  CHECK(a.reason == b.reason);
+
+  // A no-contact mean from a recording that moves like the data is warned about; one at rest is not.
+  Recording rest(200, 4, 1), data(400, 4, 1);
+  for (int t = 0; t < 200; ++t)
+    for (int n = 0; n < 4; ++n) rest.at(t, n, 0) = 100.0f * n + 0.1f * static_cast<float>((t * 7 + n) % 5);
+  for (int t = 0; t < 400; ++t)
+    for (int n = 0; n < 4; ++n) data.at(t, n, 0) = 100.0f * n + ((t / 20) % 4 == n ? 30.0f : 0.0f);
+  CHECK(baseline_contact_warning(rest, std::span<const Recording>(&data, 1)).empty());
+  data.set_source("grasp_1.txt");
+  CHECK(baseline_contact_warning(data, std::span<const Recording>(&data, 1)).find("taken from grasp_1.txt") !=
+        std::string::npos);
 }
 
 }

@@ -372,7 +372,7 @@ inline Recording read_recording_npy(const std::filesystem::path& path, int axes 
   auto fits_int = [](std::int64_t v) { return v <= std::numeric_limits<int>::max(); };
   if (s.size() == 3) {
     require<ShapeError>(axes <= 0 || s[2] == axes, a.source, ": shape ", detail::shape_string(s), " has ", s[2],
-                        " axes, expected ", axes);
+                        " axes, expected ", axes, " (read it with axes = ", s[2], "; on the command line --axes ", s[2], ")");
     require<ShapeError>(s[1] > 0 && s[2] > 0 && fits_int(s[0]) && fits_int(s[1]) && fits_int(s[2]), a.source,
                         ": shape ", detail::shape_string(s), ", expected [frames, taxels > 0, axes > 0]");
     return Recording(static_cast<int>(s[0]), static_cast<int>(s[1]), static_cast<int>(s[2]), std::move(a.values),
