@@ -10,7 +10,7 @@ tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" clang libclang-rt-14-dev
 seconds=${1:-30}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(safetensors checkpoint npy text_recording layout_csv edges_csv run_config reference_checkpoint)
+[ ${#targets[@]} -gt 0 ] || targets=(safetensors checkpoint npy text_recording layout_csv edges_csv run_config reference_checkpoint trial_table)
 cmake --preset fuzz >/dev/null
 cmake --build --preset fuzz -j "$(nproc)"
 bin=build/fuzz/tests/fuzz/tjepa_fuzz

@@ -62,6 +62,9 @@ void write_corpus(const fs::path& root) {
   tjepa::write_file_atomic(dir("text_recording") / "frames.csv",
                            "t0x,t0y,t0z,t1x,t1y,t1z\n0.1,0.2,0.3,1,2,3\n-1,-2,-3,4.5,5.5,6.5\n0,0,0,1e3,nan,2\n");
   tjepa::write_file_atomic(dir("text_recording") / "frames_no_header.txt", "0.5 1 2 3 4 5\n6 7 8 9 10 11\n");
+  tjepa::write_file_atomic(dir("text_recording") / "icub_slices.txt", "-10000\n1 2 3 \n4 5\n6 7 8\n10 20 30 \n40 50\n60 70 80\n");
+  tjepa::write_file_atomic(dir("trial_table") / "table.csv",
+                           "# trials\nlabel,file,split,group\nbook,\"a,1.csv\",train,s1\n\"x\"\"y\",b.csv,test,\n");
   // layouts and edges, by tjepa's CSV writers.
   {
     const tjepa::Skin grid = grid4();

@@ -20,6 +20,7 @@
 #include <tjepa/core/error.hpp>
 #include <tjepa/data/npy.hpp>
 #include <tjepa/data/text_reader.hpp>
+#include <tjepa/data/trial_table.hpp>
 #include <tjepa/train/reference_checkpoint.hpp>
 #include <tjepa/io/safetensors.hpp>
 #include <tjepa/sensors/csv.hpp>
@@ -95,8 +96,21 @@ inline int text_recording(const std::uint8_t* data, std::size_t size) {
   TextFormat strict;
   strict.skip_rows = 1;
   strict.require_finite = true;
+  TextFormat lines;  // the iCub grasp dataset's layout: a first line, then frames of 3 lines
+  lines.axes = 1, lines.skip_rows = 1, lines.lines_per_frame = 3;
   expect_tjepa_errors([&] { (void)read_text_recording(p, three); });
+  expect_tjepa_errors([&] { (void)read_text_recording(p, lines); });
   return expect_tjepa_errors([&] { (void)read_text_recording(p, strict); });
+}
+
+// A trial table: its rows name files that do not exist next to the scratch file (errors), unless
+// the input names the scratch file itself.
+inline int trial_table(const std::uint8_t* data, std::size_t size) {
+  const auto p = write_input(data, size, ".trials.csv");
+  return expect_tjepa_errors([&] {
+    const TrialTable t = read_trial_table(p);
+    if (!t.labels_are_files()) (void)trial_classes(t);
+  });
 }
 
 inline int layout_csv(const std::uint8_t* data, std::size_t size) {
@@ -147,7 +161,7 @@ inline int reference_checkpoint(const std::uint8_t* data, std::size_t size) {
 inline constexpr Target targets[] = {
     {"safetensors", safetensors}, {"checkpoint", checkpoint}, {"npy", npy},           {"text_recording", text_recording},
     {"layout_csv", layout_csv},   {"edges_csv", edges_csv},   {"run_config", run_config},
-    {"reference_checkpoint", reference_checkpoint},
+    {"reference_checkpoint", reference_checkpoint}, {"trial_table", trial_table},
 };
 
 }  // namespace tjepa::fuzz
