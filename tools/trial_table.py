@@ -50,6 +50,7 @@ def main():
             row = ['"' + v.replace('"', '""') + '"' for v in row]
         rows.append(",".join(row))
     header = "file,label" + (",split" if test else "") + (",group" if group else "")
+    os.makedirs(base, exist_ok=True)
     tmp = a.out + ".tmp"
     with open(tmp, "w") as fh:
         fh.write(header + "\n" + "\n".join(rows) + "\n")
