@@ -29,6 +29,7 @@
 #include <filesystem>
 #include <limits>
 #include <ostream>
+#include <set>
 #include <span>
 #include <string>
 #include <tuple>
@@ -138,12 +139,27 @@ inline std::vector<int> frame_class_ids(std::span<const Recording> label_frames)
 
 // Keeps the windows of w with at least min_frames frames in which some taxel's preprocessed
 // reading (what the encoder sees) has a norm over its axes above threshold.
+// The windows kept[0], kept[1], ... of w (indices into w), with their targets, trials and groups.
+inline WindowLabels select_windows(const WindowLabels& w, std::span<const std::size_t> kept) {
+  WindowLabels k;
+  const int R = w.targets.regression;
+  k.targets.regression = R, k.targets.classes = w.targets.classes, k.targets.groups.held = w.targets.groups.held;
+  for (std::size_t u : kept) {
+    k.window.push_back(w.window[u]);
+    if (!w.trial.empty()) k.trial.push_back(w.trial[u]);
+    for (int a = 0; a < R; ++a) k.targets.value.push_back(w.targets.value[u * R + a]);
+    if (w.targets.classes > 0) k.targets.label.push_back(w.targets.label[u]);
+    if (!w.targets.groups.empty()) {
+      k.targets.groups.group.push_back(w.targets.groups.group[u]);
+      if (!w.targets.groups.stratum.empty()) k.targets.groups.stratum.push_back(w.targets.groups.stratum[u]);
+    }
+  }
+  return k;
+}
+
 inline void keep_contact_windows(WindowLabels& w, const WindowSource& src, int min_frames, double threshold,
                                  const std::string& file) {
-  const int R = w.targets.regression;
-  WindowLabels kept;
-  kept.targets.regression = R;
-  kept.targets.classes = w.targets.classes;
+  std::vector<std::size_t> kept;
   WindowBatch wb;
   const std::size_t chunk = 256;
   for (std::size_t first = 0; first < w.window.size(); first += chunk) {
@@ -164,24 +180,13 @@ inline void keep_contact_windows(WindowLabels& w, const WindowSource& src, int m
       }
       if (frames < min_frames) continue;
       const std::size_t i = first + b;
-      kept.window.push_back(w.window[i]);
-      if (!w.trial.empty()) kept.trial.push_back(w.trial[i]);
-      if (!w.targets.groups.empty()) {
-        kept.targets.groups.group.push_back(w.targets.groups.group[i]);
-        if (!w.targets.groups.stratum.empty()) kept.targets.groups.stratum.push_back(w.targets.groups.stratum[i]);
-      }
-      if (R > 0)
-        kept.targets.value.insert(kept.targets.value.end(), w.targets.value.begin() + std::ptrdiff_t(i * R),
-                                  w.targets.value.begin() + std::ptrdiff_t((i + 1) * R));
-      else
-        kept.targets.label.push_back(w.targets.label[i]);
+      kept.push_back(i);
     }
   }
-  kept.targets.groups.held = w.targets.groups.held;
-  require<DataError>(kept.window.size() >= 4, file, ": ", kept.window.size(), " of ", w.window.size(),
+  require<DataError>(kept.size() >= 4, file, ": ", kept.size(), " of ", w.window.size(),
                      " labelled windows have ", min_frames, " frames in contact (a taxel above ", threshold,
                      "), expected at least 4: lower --min-contact or --contact-threshold");
-  w = std::move(kept);
+  w = select_windows(w, kept);
 }
 
 // What a row scores: RMSE per regression output and top-1 (NaN without classes).
@@ -551,8 +556,7 @@ inline std::string label_probe_markdown(const std::vector<LabelProbeRow>& rows, 
                                         int train_windows, int train_trials = 0) {
   const int R = test.targets.regression, C = test.targets.classes;
   const bool trials = !test.trial.empty();
-  const int test_trials = trials ? static_cast<int>(trial_view(std::vector<double>(static_cast<std::size_t>(test.targets.size()) * (R + C)),
-                                                               test.targets, test.trial).trial.size()) : 0;
+  const int test_trials = static_cast<int>(std::set<int>(test.trial.begin(), test.trial.end()).size());
   std::string s = "### Probe: " + std::string(R > 0 ? std::to_string(R) + " regression output(s)" : "") +
                   (R > 0 && C > 0 ? " and " : "") + (C > 0 ? std::to_string(C) + " classes" : "") + ", " +
                   std::to_string(train_windows) + " training / " + std::to_string(test.targets.size()) + " held-out windows" +

@@ -260,28 +260,11 @@ struct ProbeOptions {
 
 // A seeded subset of at most `limit` windows of w (0: all), kept in order.
 inline void limit_windows(WindowLabels& w, int limit, std::uint64_t seed) {
-  const std::size_t S = w.window.size();
-  if (limit <= 0 || S <= static_cast<std::size_t>(limit)) return;
-  std::vector<std::int64_t> pick(S);
-  for (std::size_t i = 0; i < S; ++i) pick[i] = static_cast<std::int64_t>(i);
-  Rng(seed, 0x6c6162656c).shuffle(std::span<std::int64_t>(pick));  // "label"
-  pick.resize(static_cast<std::size_t>(limit));
-  std::sort(pick.begin(), pick.end());
-  WindowLabels k;
-  const int R = w.targets.regression;
-  k.targets.regression = R, k.targets.classes = w.targets.classes, k.targets.groups.held = w.targets.groups.held;
-  for (std::int64_t i : pick) {
-    const auto u = static_cast<std::size_t>(i);
-    k.window.push_back(w.window[u]);
-    if (!w.trial.empty()) k.trial.push_back(w.trial[u]);
-    for (int a = 0; a < R; ++a) k.targets.value.push_back(w.targets.value[u * R + a]);
-    if (w.targets.classes > 0) k.targets.label.push_back(w.targets.label[u]);
-    if (!w.targets.groups.empty()) {
-      k.targets.groups.group.push_back(w.targets.groups.group[u]);
-      if (!w.targets.groups.stratum.empty()) k.targets.groups.stratum.push_back(w.targets.groups.stratum[u]);
-    }
-  }
-  w = std::move(k);
+  if (limit <= 0 || w.window.size() <= static_cast<std::size_t>(limit)) return;
+  std::vector<std::int64_t> all(w.window.size());
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::int64_t>(i);
+  const std::vector<std::int64_t> pick = seeded_subset(std::move(all), limit, seed);
+  w = select_windows(w, std::vector<std::size_t>(pick.begin(), pick.end()));
 }
 
 // The labelled windows of trials: each window takes its trial's label (class or value) or, with
@@ -305,15 +288,13 @@ inline WindowLabels trial_window_labels(const TrialTable& t, const TrialRecordin
       else w.targets.value.push_back(value_of_trial[trial]);
     }
   }
-  const std::vector<std::string> keys = t.group_keys();
-  std::map<std::string, std::int64_t> gid;
-  for (const std::string& k : keys) gid.emplace(k, static_cast<std::int64_t>(gid.size()));
+  const std::vector<std::int64_t> gid = t.group_ids();
   std::map<std::int64_t, int> class_of_group;
   bool stratify = task == LabelTask::classification;
   for (std::size_t s = 0; s < w.window.size(); ++s) {
     const int trial = trials.trial[static_cast<std::size_t>(src.recording_of(w.window[s]))];
     w.trial.push_back(trial);
-    const std::int64_t g = gid.at(keys[static_cast<std::size_t>(trial)]);
+    const std::int64_t g = gid[static_cast<std::size_t>(trial)];
     w.targets.groups.group.push_back(g);
     if (stratify) {
       const auto [at, fresh] = class_of_group.emplace(g, w.targets.label[s]);
@@ -323,7 +304,7 @@ inline WindowLabels trial_window_labels(const TrialTable& t, const TrialRecordin
   if (stratify) w.targets.groups.stratum = w.targets.label;
   for (std::size_t i = 0; i < t.size(); ++i)
     if (t.trials[i].split == TrialSplit::val) {
-      const std::int64_t g = gid.at(keys[i]);
+      const std::int64_t g = gid[i];
       if (std::find(w.targets.groups.held.begin(), w.targets.groups.held.end(), g) == w.targets.groups.held.end())
         w.targets.groups.held.push_back(g);
     }

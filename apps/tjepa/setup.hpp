@@ -357,18 +357,24 @@ inline std::vector<float> frame_label_array(std::span<const FrameLabel> labels) 
   return v;
 }
 
+// At most `limit` of ids (0: all), a seeded random subset kept in the order given.
+template <class Id>
+std::vector<Id> seeded_subset(std::vector<Id> ids, int limit, std::uint64_t seed) {
+  if (limit > 0 && static_cast<int>(ids.size()) > limit) {
+    Rng(seed, 0x6c6162656c).shuffle(std::span<Id>(ids));  // "label"
+    ids.resize(static_cast<std::size_t>(limit));
+    std::sort(ids.begin(), ids.end());
+  }
+  return ids;
+}
+
 // Windows with at least min_contact frames in contact, at most `limit` of them (a seeded random
 // subset, kept in time order), for probes.
 inline std::vector<std::int64_t> labelled_windows(const WindowSource& src, int min_contact, int limit,
                                                   std::uint64_t seed) {
   std::vector<std::int64_t> ids = src.windows_with_contact(min_contact);
   require<DataError>(!ids.empty(), "no window has >= ", min_contact, " frames in contact");
-  if (limit > 0 && static_cast<int>(ids.size()) > limit) {
-    Rng(seed, 0x6c6162656c).shuffle(std::span<std::int64_t>(ids));  // "label"
-    ids.resize(static_cast<std::size_t>(limit));
-    std::sort(ids.begin(), ids.end());
-  }
-  return ids;
+  return seeded_subset(std::move(ids), limit, seed);
 }
 
 // Throws unless rec has the checkpoint's taxels and axes per frame.

@@ -19,6 +19,7 @@
 // takes the trials as separate recordings).
 #include <algorithm>
 #include <charconv>
+#include <cstdint>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -61,6 +62,13 @@ struct TrialTable {
     for (std::size_t i = 0; i < trials.size(); ++i)
       g.push_back(trials[i].group.empty() ? "\x01trial " + std::to_string(i) : trials[i].group);
     return g;
+  }
+  // Each trial's group as a number: the groups in order of first appearance, 0, 1, ...
+  std::vector<std::int64_t> group_ids() const {
+    std::vector<std::int64_t> id;
+    std::map<std::string, std::int64_t> seen;
+    for (const std::string& k : group_keys()) id.push_back(seen.emplace(k, static_cast<std::int64_t>(seen.size())).first->second);
+    return id;
   }
 };
 

@@ -31,9 +31,8 @@ inline TrialSplits split_trials(const TrialTable& t, double test_fraction, std::
     require<ConfigError>(test_fraction > 0 && test_fraction < 1, "--test-fraction ", test_fraction,
                          ", expected in (0, 1)");
     const std::vector<std::string> keys = t.group_keys();
-    std::map<std::string, std::int64_t> gid;
     SampleGroups g;
-    for (const std::string& k : keys) g.group.push_back(gid.emplace(k, static_cast<std::int64_t>(gid.size())).first->second);
+    g.group = t.group_ids();
     // Stratify by label when the labels are classes of whole groups.
     bool stratify = !t.labels_are_files();
     std::map<std::string, std::string> label_of_group;
