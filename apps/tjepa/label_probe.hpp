@@ -279,6 +279,13 @@ inline std::string under_read_flag(const LabelProbeRow& attentive, const LabelPr
   return s.empty() || attentive.name.find(", attentive") == std::string::npos ? s : s + " (--probe-pooling taxel reads each taxel)";
 }
 
+// The flag of a head whose best validation loss came in its last epoch at the epoch limit: it was
+// still improving when training stopped.
+inline std::string epoch_limit_flag(const LabelProbeRow& head, const HeadTrainConfig& cfg) {
+  if (head.best_epoch < 0 || head.epochs < cfg.max_epochs || head.best_epoch + 1 < head.epochs) return "";
+  return "still improving at the epoch limit (" + std::to_string(head.epochs) + " epochs): raise --epochs";
+}
+
 inline int distinct_classes(std::span<const int> labels) {
   std::vector<int> seen;
   for (int c : labels)
@@ -534,6 +541,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
       attentive = mean_of_runs(std::move(runs));
       attentive.flag = join(join(one_class, head_flag(attentive.validation, constant)), held_out_flag(attentive, rows.front()));
       attentive.flag = join(attentive.flag, under_read_flag(attentive, linear));
+      attentive.flag = join(attentive.flag, epoch_limit_flag(attentive, cfg));
       if (diverged > 0 && set.repeats > 1)
         attentive.flag = join(attentive.flag, std::to_string(diverged) + " of " + std::to_string(set.repeats) +
                                                   " repeats diverged and are left out of the mean");

@@ -102,6 +102,27 @@ inline CsvTable earlier_log_rows(const std::filesystem::path& path, std::int64_t
 // A collapse in a pre-training log: at the last row, the target embeddings' std over windows
 // (target_sample_std) is under a tenth of their std inside a window (target_std), or has fallen
 // under a quarter of its value at the first row. "" when neither.
+// The sizes of the run's masks in a line, and a warning when most targets are one token (a small
+// skin, or parts of a few taxels with per-part targets): the predictor then fills single taxels.
+inline std::string mask_size_note(const MaskCollator& c, const TrainConfig& run) {
+  const MaskSizeSummary m = summarize_mask_sizes(c, streams::masks(run.seed));
+  if (m.target_max == 0) return "";  // the block scheme: sizes per sample
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "masks: contexts of %d-%d tokens, %d targets of %d-%d tokens (mean %.1f)%s\n",
+                m.context_min, m.context_max, c.num_targets(), m.target_min, m.target_max, m.target_mean,
+                c.per_part() ? ", per part" : "");
+  std::string s = buf;
+  if (m.target_mean < 2) {
+    std::snprintf(buf, sizeof buf, "warning: mask targets of %d-%d tokens (mean %.1f), most of them one token", m.target_min,
+                  m.target_max, m.target_mean);
+    s += std::string(buf) +
+         (c.per_part() ? " (per-part targets on parts of a few taxels)" : "") +
+         ": the predictor mostly fills single taxels from their neighbours; raise masks.target_ratio in --config" +
+         (c.per_part() ? ", or masks.part_targets \"whole\" (targets across the parts)" : "") + "\n";
+  }
+  return s;
+}
+
 inline std::string collapse_warning(const CsvTable& log, const std::string& preprocessing) {
   if (log.rows.empty()) return "";
   const double within = log.rows.back()[6], across = log.rows.back()[9], first = log.rows.front()[9];
@@ -176,9 +197,7 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
     require<ConfigError>(o.data.empty(), "--trials and --data both name the recordings; give one");
     const TrialTable table = read_trial_table(o.trials.table);
     const TrialSplits sp = split_trials(table, o.test_fraction, o.trials.seed);
-    std::vector<int> fit = sp.train;
-    fit.insert(fit.end(), sp.val.begin(), sp.val.end());
-    std::sort(fit.begin(), fit.end());
+    const std::vector<int> fit = sp.fit();
     out << "trials: pre-training on the " << fit.size() << " training and validation trials of " << describe_split(table, sp)
         << "; the test trials are left out\n";
     TrialRecordings tr = read_trials(table, fit, o.format, skin, run.data.tau, "training trials", out);
@@ -233,6 +252,8 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
       << run.schedule.steps << " steps of " << run.batch
       << (o.parallel.active() ? " on " + std::to_string(o.parallel.ranks) + " MPI ranks" : std::string()) << "\n";
+  const std::string masks = mask_size_note(trainer.objective().collator(), run);
+  if (!masks.empty() && lead) out << masks;
   if (init_only) {
     if (!lead) return 0;
     trainer.save(files.add(dir / "checkpoint.safetensors"));

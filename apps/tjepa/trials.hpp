@@ -35,15 +35,17 @@ struct TrialRecordings {
   std::vector<int> trial;  // table index per recording
 };
 
-inline TrialRecordings read_trials(const TrialTable& t, std::span<const int> ids, const DataFormat& fmt,
-                                   const Skin& skin, int tau, const std::string& what, std::ostream& out) {
+// The trials `ids` that have tau frames, each recording from get(i) (named name(i) in the note on
+// the ones left out); source names the trials' origin in the error when none is long enough.
+template <class Get, class Name>
+TrialRecordings keep_trials(std::span<const int> ids, Get get, Name name, int tau, const std::string& what,
+                            const std::string& source, std::ostream& out) {
   TrialRecordings r;
   std::vector<std::string> short_ones;
   for (int i : ids) {
-    const Trial& trial = t.trials[static_cast<std::size_t>(i)];
-    Recording rec = in_layout_order(read_recording(trial.file, fmt), skin, trial.file.string());
+    Recording rec = get(i);
     if (rec.frames() < tau) {
-      short_ones.push_back(trial.file.filename().string() + " (" + std::to_string(rec.frames()) + " frames)");
+      short_ones.push_back(name(i) + " (" + std::to_string(rec.frames()) + " frames)");
       continue;
     }
     r.recordings.push_back(std::move(rec));
@@ -56,9 +58,17 @@ inline TrialRecordings read_trials(const TrialTable& t, std::span<const int> ids
     if (short_ones.size() > 8) out << ", ...";
     out << "\n";
   }
-  require<DataError>(!r.recordings.empty(), t.source, ": ", what, ": none of its ", ids.size(),
+  require<DataError>(!r.recordings.empty(), source, ": ", what, ": none of its ", ids.size(),
                      " trials has tau = ", tau, " frames");
   return r;
+}
+
+inline TrialRecordings read_trials(const TrialTable& t, std::span<const int> ids, const DataFormat& fmt,
+                                   const Skin& skin, int tau, const std::string& what, std::ostream& out) {
+  auto file = [&](int i) -> const std::filesystem::path& { return t.trials[static_cast<std::size_t>(i)].file; };
+  return keep_trials(
+      ids, [&](int i) { return in_layout_order(read_recording(file(i), fmt), skin, file(i).string()); },
+      [&](int i) { return file(i).filename().string(); }, tau, what, t.source, out);
 }
 
 // The trials' names for messages and predictions: their files as the table writes them.

@@ -8,7 +8,9 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
+#include <vector>
 
 namespace fs = std::filesystem;
 using tjepa_test::TempDir;
@@ -75,6 +77,24 @@ TEST_CASE("read_trial_table: every bad table is a FileError naming the table / t
   bad("file,label\na.csv,nolabels.npy\n", "t.csv:2: no such label file");
   bad("file,label\na.csv,x\na.csv,a_lab.csv\n", "t.csv:3: label 'a_lab.csv' is a label file, line 2's a value");
   CHECK_THROWS_WITH_AS(read_trial_table(t / "none.csv"), doctest::Contains("none.csv: cannot open the trial table"), FileError);
+}
+
+TEST_CASE("frame_trials: runs of equal ids in order / an id that comes back or is not finite is named by frame") {
+  using namespace tjepa;
+  const std::vector<float> ids{7, 7, 7, 3, 3, 9};
+  const std::vector<FrameTrial> t = frame_trials(ids, "labels.csv");
+  REQUIRE(t.size() == 3u);
+  CHECK((t[0].begin == 0 && t[0].end == 3 && t[0].id == 7));
+  CHECK((t[1].begin == 3 && t[1].end == 5 && t[1].id == 3));
+  CHECK((t[2].begin == 5 && t[2].end == 6 && t[2].id == 9));
+  const std::vector<float> back{1, 1, 2, 1};
+  CHECK_THROWS_WITH_AS(frame_trials(back, "labels.csv"),
+                       "labels.csv: frame 3 has trial id 1 again after other trials (its frames begin at 0); a trial's "
+                       "frames must be consecutive",
+                       DataError);
+  const std::vector<float> nan{1, std::numeric_limits<float>::quiet_NaN()};
+  CHECK_THROWS_WITH_AS(frame_trials(nan, "labels.csv"), doctest::Contains("labels.csv: frame 1 has trial id nan"), DataError);
+  CHECK_THROWS_AS(frame_trials(std::vector<float>{}, "labels.csv"), DataError);
 }
 
 TEST_CASE("text recordings: a frame over several lines (the iCub grasp format) / and a cut last frame named") {

@@ -264,6 +264,35 @@ TEST_SUITE("masks") {
     for (int v = 0; v < g.num_nodes(); ++v) CHECK(hits[v] > 0);
   }
 
+  TEST_CASE("summarize_mask_sizes: the range and mean of what the batches draw / per-part targets on parts of 12 tokens") {
+    auto g = two_part_graph({16, 16, 4, 4, 1.0}, {12, 10, 4, 5, 1.0});  // 256 + 120
+    tjepa::MaskCollator col(g, one_thread());
+    const tjepa::MaskSizeSummary m = tjepa::summarize_mask_sizes(col, 99, 64);
+    int lo = 1 << 30, hi = 0, clo = 1 << 30, chi = 0;
+    double sum = 0, csum = 0;
+    for (std::uint64_t step = 0; step < 64; ++step) {
+      const auto z = col.batch_sizes(99, step);
+      clo = std::min(clo, z.context), chi = std::max(chi, z.context), csum += z.context;
+      for (int t : z.target) lo = std::min(lo, t), hi = std::max(hi, t), sum += t;
+    }
+    CHECK(m.batches == 64);
+    CHECK(m.target_min == lo);
+    CHECK(m.target_max == hi);
+    CHECK(m.target_mean == doctest::Approx(sum / (64.0 * col.num_targets())));
+    CHECK(m.context_min == clo);
+    CHECK(m.context_max == chi);
+    CHECK(m.context_mean == doctest::Approx(csum / 64));
+    CHECK(m.target_min >= 12);   // floor(120 * 0.10)
+    CHECK(m.target_max <= 46);   // floor(256 * 0.18)
+    // Two parts of 12 tokens: floor(12 * U(0.10, 0.18)) is 1 or 2, mostly 1.
+    auto small = two_part_graph({4, 3, 4, 4, 1.0}, {4, 3, 4, 4, 1.0});
+    const tjepa::MaskSizeSummary s = tjepa::summarize_mask_sizes(tjepa::MaskCollator(small, one_thread()), 7);
+    CHECK(s.target_min == 1);
+    CHECK(s.target_max == 2);
+    CHECK(s.target_mean < 1.5);
+    CHECK_THROWS_AS(tjepa::summarize_mask_sizes(col, 7, 0), tjepa::ConfigError);
+  }
+
   TEST_CASE("ablations on a two-part graph: 4 local or 4 global or local context or whole-sensor targets") {
     auto g = two_part_graph({16, 16, 4, 4, 1.0}, {14, 14, 7, 7, 1.0});  // 256 + 196
     struct Case {

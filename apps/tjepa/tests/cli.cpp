@@ -234,10 +234,10 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
     write_npy(t.path / "test_labels.npy", std::span<const float>(lb), {b.recording.frames(), 4});
     ProbeOptions pb;
     pb.checkpoint = ck.string();
-    pb.train_data = (t.path / "train.npy").string();
-    pb.train_labels = (t.path / "train_labels.npy").string();
-    pb.test_data = (t.path / "test.npy").string();
-    pb.test_labels = (t.path / "test_labels.npy").string();
+    pb.train_data = {(t.path / "train.npy").string()};
+    pb.train_labels = {(t.path / "train_labels.npy").string()};
+    pb.test_data = {(t.path / "test.npy").string()};
+    pb.test_labels = {(t.path / "test_labels.npy").string()};
     pb.probe.max_epochs = 1;
     pb.probe.batch = 8;
     pb.quiet = true;

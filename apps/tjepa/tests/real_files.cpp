@@ -350,10 +350,10 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
 
   ProbeOptions pb;
   pb.checkpoint = (t / "run" / "checkpoint.safetensors").string();
-  pb.train_data = (t / "train.txt").string();
-  pb.test_data = (t / "test.txt").string();
-  pb.train_labels = (t / "train_labels.csv").string();
-  pb.test_labels = (t / "test_labels.csv").string();
+  pb.train_data = {(t / "train.txt").string()};
+  pb.test_data = {(t / "test.txt").string()};
+  pb.train_labels = {(t / "train_labels.csv").string()};
+  pb.test_labels = {(t / "test_labels.csv").string()};
   pb.task = "regression";
   pb.label_columns = "1:3";
   pb.probe.max_epochs = 3;
@@ -409,7 +409,7 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
   const auto c = nlohmann::json::parse(read_file(t / "probe.json"));
   CHECK(c["results"][0].contains("accuracy"));
   CHECK(c["results"][0]["flag"] == "");
-  pb.train_labels = (t / "one_class.csv").string();
+  pb.train_labels = {(t / "one_class.csv").string()};
   REQUIRE(run_probe(pb, out) == 0);
   const auto one = nlohmann::json::parse(read_file(t / "probe.json"));
   for (const auto& r : one["results"]) CHECK(r["flag"].get<std::string>().find("the training windows hold one class") != std::string::npos);
@@ -435,10 +435,10 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
   session.test_fraction = 0.99;
   CHECK_THROWS_WITH_AS(run_probe(session, out), doctest::Contains("leave fewer than two windows"), DataError);
   // Labels that do not fit the recording, and a class id that is not one.
-  pb.train_labels = (t / "test_labels.csv").string();
+  pb.train_labels = {(t / "test_labels.csv").string()};
   CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("test_labels.csv: labels for 100 frames, the recording has 300"),
                        ShapeError);
-  pb.train_labels = (t / "train_labels.csv").string();
+  pb.train_labels = {(t / "train_labels.csv").string()};
   pb.label_columns = "1";
   CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("expected an integer id"), DataError);
   pb.task = "ranking";

@@ -206,6 +206,31 @@ TEST_CASE("trials: iCub grasps / a seeded split by trial stratified by object / 
   REQUIRE(run_pretrain(po, log) == 0);
   CHECK(log.str().find("12 training, 0 validation and 6 test trials of 18 (a seeded split by trial, stratified by label") !=
         std::string::npos);
+  CHECK(log.str().find("masks: contexts of ") != std::string::npos);
+  CHECK(log.str().find("most of them one token") == std::string::npos);
+  // The fingertips as five parts of 12 taxels: per-part targets of 10-18 % are mostly one taxel.
+  {
+    std::ifstream in(set / "layout.csv");
+    std::ofstream parts(t / "parts.csv");
+    for (std::string line; std::getline(in, line);) {
+      const auto at = line.find(",hand,");
+      if (at != std::string::npos) {
+        const auto group_end = line.find(',', at + 6);
+        line = line.substr(0, at + 1) + line.substr(at + 6, group_end - at - 6) + line.substr(at + 5);
+      }
+      parts << line << "\n";
+    }
+  }
+  PretrainOptions five = po;
+  five.overrides["layout"] = (t / "parts.csv").string();
+  five.overrides["steps"] = 0;
+  five.out = (t / "five").string();
+  std::ostringstream flog;
+  REQUIRE(run_pretrain(five, flog) == 0);
+  CHECK(flog.str().find("10 targets of 1-2 tokens (mean 1.") != std::string::npos);
+  CHECK(flog.str().find("), per part\n") != std::string::npos);
+  CHECK(flog.str().find("warning: mask targets of 1-2 tokens (mean 1.") != std::string::npos);
+  CHECK(flog.str().find("most of them one token (per-part targets on parts of a few taxels)") != std::string::npos);
   ProbeOptions pb;
   pb.checkpoint = (t / "run" / "checkpoint.safetensors").string();
   pb.task = "classification";
@@ -286,10 +311,10 @@ TEST_CASE("label checks: [T] and int64 .npy labels / a stray id listed as its ow
   ProbeOptions pb;
   pb.checkpoint = (t / "run" / "checkpoint.safetensors").string();
   pb.task = "classification";
-  pb.train_data = (set / "BeigeCotton_F120_V150mmps_0.csv").string();
-  pb.test_data = (set / "Canvas_F120_V150mmps_0.csv").string();
-  pb.train_labels = (t / "a.npy").string();
-  pb.test_labels = (t / "b.csv").string();
+  pb.train_data = {(set / "BeigeCotton_F120_V150mmps_0.csv").string()};
+  pb.test_data = {(set / "Canvas_F120_V150mmps_0.csv").string()};
+  pb.train_labels = {(t / "a.npy").string()};
+  pb.test_labels = {(t / "b.csv").string()};
   pb.format = fabric_format();
   pb.probe.max_epochs = 2;
   pb.lr_grid = {1e-3};
@@ -308,7 +333,7 @@ TEST_CASE("label checks: [T] and int64 .npy labels / a stray id listed as its ow
     f << "id,other\n";
     for (int i = 0; i < b.frames(); ++i) f << i % 2 << ",0\n";
   }
-  pb.test_labels = (t / "two.csv").string();
+  pb.test_labels = {(t / "two.csv").string()};
   CHECK_THROWS_WITH_AS(run_probe(pb, out), doctest::Contains("two.csv: 2 label columns"),
                        ShapeError);
   write_npy(t / "r2.npy", Recording(20, 4, 2));
@@ -366,6 +391,109 @@ TEST_CASE("collapse_warning fires on a constructed collapse and on the spreads t
   data.set_source("grasp_1.txt");
   CHECK(baseline_contact_warning(data, std::span<const Recording>(&data, 1)).find("taken from grasp_1.txt") !=
         std::string::npos);
+}
+
+TEST_CASE("one file of concatenated trials: --trial-column splits by trial / several training recordings / a trial id that comes back is refused") {
+  using namespace tjepa;
+  using namespace tjepa::cli;
+  TempDir t("trials_column");
+  const fs::path set = data_dir / "fabricslide";
+  std::ostringstream log;
+  REQUIRE(run_pretrain(trial_run(set, fabric_format(), t / "run", 10), log) == 0);
+  // The 18 slides as one recording, and a label file with each frame's class and trial id.
+  const TrialTable table = read_trial_table(set / "trials.csv");
+  const TrialClasses classes = trial_classes(table);
+  AlignedVector<float> values;
+  std::string labels = "class,trial\n";
+  std::map<std::string, int> frames_of;  // trial name -> frames
+  int frames = 0;
+  for (std::size_t i = 0; i < table.size(); ++i) {
+    const Recording r = read_recording(table.trials[i].file, fabric_format());
+    values.insert(values.end(), r.values().begin(), r.values().end());
+    for (int f = 0; f < r.frames(); ++f) labels += std::to_string(classes.of_trial[i]) + "," + std::to_string(100 + i) + "\n";
+    frames_of["all.npy trial " + std::to_string(100 + i)] = r.frames();
+    frames += r.frames();
+  }
+  write_npy(t / "all.npy", Recording(frames, 16, 1, std::move(values), "all"));
+  std::ofstream(t / "labels.csv") << labels;
+  ProbeOptions pb;
+  pb.checkpoint = (t / "run" / "checkpoint.safetensors").string();
+  pb.task = "classification";
+  pb.data = (t / "all.npy").string();
+  pb.labels = (t / "labels.csv").string();
+  pb.label_columns = "0";
+  pb.trial_column = 1;
+  pb.test_fraction = 0.34;
+  pb.format.axes = 1;
+  pb.probe.max_epochs = 2;
+  pb.lr_grid = {1e-3};
+  pb.quiet = true;
+  pb.out = (t / "probe.json").string();
+  pb.predictions = (t / "predictions.csv").string();
+  std::ostringstream out;
+  REQUIRE(run_probe(pb, out) == 0);
+  CHECK(out.str().find("by --trial-column 1: 12 training, 0 validation and 6 test trials of 18 (a seeded split by trial, "
+                       "stratified by label") != std::string::npos);
+  const auto j = nlohmann::json::parse(read_file(t / "probe.json"));
+  CHECK(j["trials"]["test"] == 6);
+  // Every held-out window lies inside its trial; every row scores the 6 held-out trials.
+  std::ifstream p(t / "predictions.csv");
+  std::string line;
+  std::getline(p, line);
+  std::map<std::string, int> trial_rows;
+  int windows = 0;
+  while (std::getline(p, line)) {
+    const auto f = fields(line);
+    REQUIRE(f.size() == 8u);
+    REQUIRE(frames_of.count(f[2]) == 1);
+    if (f[1] == "window") {
+      ++windows;
+      CHECK(std::stoi(f[4]) + std::stoi(f[5]) <= frames_of[f[2]]);
+    } else {
+      ++trial_rows[f[0]];
+      CHECK(std::stoi(f[5]) == frames_of[f[2]]);
+    }
+  }
+  CHECK(windows == 6 * j["test_windows"].get<int>());
+  CHECK(trial_rows.size() == 6u);
+  for (const auto& [row, n] : trial_rows) CHECK(n == 6);
+
+  // A trial id that comes back after another trial's frames; the flag's misuses, named.
+  std::ofstream(t / "back.csv") << labels << "0,100\n";
+  write_npy(t / "back.npy", Recording(frames + 1, 16, 1));
+  ProbeOptions back = pb;
+  back.data = (t / "back.npy").string(), back.labels = (t / "back.csv").string(), back.force = true;
+  CHECK_THROWS_WITH_AS(run_probe(back, out), doctest::Contains("trial id 100 again after other trials (its frames begin at 0)"),
+                       DataError);
+  ProbeOptions no_columns = pb;
+  no_columns.label_columns.clear(), no_columns.force = true;
+  CHECK_THROWS_WITH_AS(run_probe(no_columns, out), doctest::Contains("--trial-column 1 needs --label-columns"), ConfigError);
+  ProbeOptions with_table = pb;
+  with_table.data.clear(), with_table.labels.clear(), with_table.force = true;
+  with_table.trials.table = (set / "trials.csv").string();
+  CHECK_THROWS_WITH_AS(run_probe(with_table, out), doctest::Contains("--trial-column is for one recording"), ConfigError);
+
+  // Several training recordings, each its own: no window crosses from one to the next.
+  const fs::path a = set / "BeigeCotton_F120_V150mmps_0.csv", b = set / "Canvas_F120_V150mmps_0.csv",
+                 c = set / "BrownCotton_F120_V150mmps_0.csv";
+  auto constant_labels = [&](const fs::path& data, int cls, const fs::path& file) {
+    std::ofstream f(file);
+    f << "class\n";
+    for (int k = 0; k < read_recording(data, fabric_format()).frames(); ++k) f << (cls < 0 ? (k / 40) % 2 : cls) << "\n";
+  };
+  constant_labels(a, 0, t / "a.csv"), constant_labels(b, 1, t / "b.csv"), constant_labels(c, -1, t / "c.csv");
+  ProbeOptions many;
+  many.checkpoint = pb.checkpoint, many.task = "classification", many.format = fabric_format();
+  many.probe.max_epochs = 2, many.lr_grid = {1e-3}, many.quiet = true, many.out = (t / "many.json").string();
+  many.train_data = {a.string(), b.string()}, many.train_labels = {(t / "a.csv").string(), (t / "b.csv").string()};
+  many.test_data = {c.string()}, many.test_labels = {(t / "c.csv").string()};
+  REQUIRE(run_probe(many, out) == 0);
+  const int tau = 10;
+  const int expect = (read_recording(a, fabric_format()).frames() - tau) / tau + 1 +
+                     (read_recording(b, fabric_format()).frames() - tau) / tau + 1;
+  CHECK(nlohmann::json::parse(read_file(t / "many.json"))["train_windows"] == expect);
+  many.train_labels.pop_back(), many.force = true;
+  CHECK_THROWS_WITH_AS(run_probe(many, out), doctest::Contains("--train-data has 2 file(s) and --train-labels 1"), ConfigError);
 }
 
 }

@@ -24,6 +24,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -222,6 +223,33 @@ inline std::vector<float> trial_values(const TrialTable& t) {
     v.push_back(x);
   }
   return v;
+}
+
+// Trials of one recording that concatenates them: each frame's trial id (a label column), the
+// frames of a trial consecutive. A trial is a run of equal ids [begin, end); an id that comes back
+// after another trial's frames, or one that is not finite, is a DataError naming the frame.
+struct FrameTrial {
+  int begin = 0, end = 0;  // frames [begin, end)
+  double id = 0;           // as the column holds it
+};
+
+inline std::vector<FrameTrial> frame_trials(std::span<const float> id, const std::string& source) {
+  std::vector<FrameTrial> t;
+  std::map<double, int> first_frame;
+  for (std::size_t f = 0; f < id.size(); ++f) {
+    const double v = id[f];
+    require<DataError>(std::isfinite(v), source, ": frame ", f, " has trial id ", v, ", expected a finite number");
+    if (!t.empty() && t.back().id == v) {
+      t.back().end = static_cast<int>(f) + 1;
+      continue;
+    }
+    const auto [at, fresh] = first_frame.emplace(v, static_cast<int>(f));
+    require<DataError>(fresh, source, ": frame ", f, " has trial id ", v, " again after other trials (its frames begin at ",
+                       at->second, "); a trial's frames must be consecutive");
+    t.push_back({static_cast<int>(f), static_cast<int>(f) + 1, v});
+  }
+  require<DataError>(!t.empty(), source, ": no frame, so no trial");
+  return t;
 }
 
 }  // namespace tjepa

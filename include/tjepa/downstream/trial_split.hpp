@@ -5,6 +5,7 @@
 // two groups and no group holds two labels (classes), not stratified otherwise (regression values,
 // groups across labels). pretrain and probe call it with the same table, fraction and seed, so
 // pre-training never sees the trials a probe holds out.
+#include <algorithm>
 #include <map>
 #include <string>
 #include <vector>
@@ -18,6 +19,14 @@ namespace tjepa {
 struct TrialSplits {
   std::vector<int> train, val, test;  // trial indices, in table order
   std::string how;                    // in words, for the log
+
+  // The trials heads and pre-training see: training and validation, in table order.
+  std::vector<int> fit() const {
+    std::vector<int> f = train;
+    f.insert(f.end(), val.begin(), val.end());
+    std::sort(f.begin(), f.end());
+    return f;
+  }
 };
 
 inline TrialSplits split_trials(const TrialTable& t, double test_fraction, std::uint64_t seed) {
