@@ -12,15 +12,18 @@
 //   constant                 the training mean / the majority class;
 //   ridge on raw windows     closed-form ridge on pad sums and taxel means (downstream/ridge.hpp);
 //   <encoder>, linear        ridge on the frozen embeddings' group means, λ chosen on validation;
-//   <encoder>, attentive     an attentive probe (ProbeHead) on the frozen embeddings, trained with
-//                            early stopping, its learning rate chosen on the validation split;
+//   <encoder>, probe (P)     a probe head (ProbeHead) on the frozen embeddings, trained with early
+//                            stopping, its pooling P (attentive, the paper's, or taxel) and learning
+//                            rate chosen on the validation split (one pooling given: "<encoder>,
+//                            attentive" or "<encoder>, taxel probe");
 // for a random initialization of the checkpoint's architecture and for the checkpoint's encoder.
 // Validation splits are drawn by trial (by the targets' SampleGroups) when there are trials. With
 // repeats, one head per seed, averaged with their standard deviation. Optionally only windows in
 // contact count (keep_contact_windows; off by default). Flagged: a head whose best validation loss
 // is not 2 % below the constant's on the same split (it learned nothing), a row no better than the
-// constant on the held-out windows, a split whose windows hold one class, and an attentive probe
-// that reads more than 2 points (2 % RMSE) less than the linear read-out of the same embeddings.
+// constant on the held-out windows, a split whose windows hold one class, a probe that reads more
+// than 2 points (2 % RMSE) less than the linear read-out of the same embeddings, and a head still
+// improving at the epoch limit.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -211,8 +214,13 @@ struct LabelProbeRow {
   double window_sd = std::numeric_limits<double>::quiet_NaN(), trial_sd = window_sd;
   double validation = std::numeric_limits<double>::quiet_NaN();  // heads: best validation loss
   int best_epoch = -1, epochs = 0;
-  double lr = std::numeric_limits<double>::quiet_NaN();      // attentive probes: the learning rate used
-  std::vector<std::pair<double, double>> lr_validation;      // the rates tried and their validation loss
+  double lr = std::numeric_limits<double>::quiet_NaN();      // probes: the learning rate used
+  std::string pooling;                                       // probes: the pooling used (attentive, taxel)
+  struct Tried {
+    std::string pooling;
+    double lr, validation;
+  };
+  std::vector<Tried> tried;                                  // the poolings and rates tried, their validation loss
   double lambda = std::numeric_limits<double>::quiet_NaN();  // ridge rows: the λ chosen on validation
   std::string flag;                 // why the row says little ("" = nothing to say)
   double seconds = 0;
@@ -276,13 +284,16 @@ inline std::string under_read_flag(const LabelProbeRow& attentive, const LabelPr
   };
   check(attentive.window, linear.window, "window");
   check(attentive.trial, linear.trial, "trial");
-  return s.empty() || attentive.name.find(", attentive") == std::string::npos ? s : s + " (--probe-pooling taxel reads each taxel)";
+  return s.empty() || attentive.name.find(", attentive") == std::string::npos ? s : s + " (--probe-pooling auto or taxel reads each taxel)";
 }
 
-// The flag of a head whose best validation loss came in its last epoch at the epoch limit: it was
-// still improving when training stopped.
-inline std::string epoch_limit_flag(const LabelProbeRow& head, const HeadTrainConfig& cfg) {
-  if (head.best_epoch < 0 || head.epochs < cfg.max_epochs || head.best_epoch + 1 < head.epochs) return "";
+// The flag of a head that ran to the epoch limit with its best validation loss in the last 5 % of
+// its epochs: it was still improving when training stopped. Not when that loss is already under
+// 1 % of the constant's (constant): a head that fits validation to 0.001 keeps shaving digits.
+inline std::string epoch_limit_flag(const LabelProbeRow& head, const HeadTrainConfig& cfg, double constant) {
+  if (head.best_epoch < 0 || head.epochs < cfg.max_epochs || head.best_epoch + 1 <= head.epochs - std::max(1, head.epochs / 20) ||
+      !(head.validation >= 0.01 * constant))
+    return "";
   return "still improving at the epoch limit (" + std::to_string(head.epochs) + " epochs): raise --epochs";
 }
 
@@ -392,7 +403,10 @@ inline LabelProbeRow mean_of_runs(std::vector<LabelProbeRow> runs) {
 // validation split (empty: cfg.lr alone), and centring the token embeddings first.
 struct LabelProbeSettings {
   std::vector<double> lr_grid;
-  PoolingConfig pooling;  // the probe's pooling: attentive (the paper's) or taxel
+  // The probe's poolings to choose from on the validation split with the rates (one: fixed):
+  // attentive (the paper's) and taxel; the components of the taxel pooling.
+  std::vector<PoolingKind> poolings{PoolingKind::attentive, PoolingKind::taxel};
+  int components = PoolingConfig{}.components;
   bool center_tokens = false;
   int repeats = 1;
   bool quiet = false;
@@ -492,19 +506,25 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
                                      group_mean_embeddings(ete, N, d, all_te, layout.group, layout.num_groups()));
     linear.seconds = embed_seconds + since(t0);
     t0 = std::chrono::steady_clock::now();
-    const std::string probe_kind = set.pooling.kind == PoolingKind::taxel ? ", taxel probe" : ", attentive";
+    require<ConfigError>(!set.poolings.empty(), "label probe: no pooling to try");
+    // A fixed pooling names the row by it; a choice says which won.
+    auto probe_name = [&](PoolingKind k) {
+      const char* kind = k == PoolingKind::taxel ? "taxel" : "attentive";
+      return set.poolings.size() > 1 ? name + ", probe (" + kind + ")" : name + (k == PoolingKind::taxel ? ", taxel probe" : ", attentive");
+    };
     FrozenFeatures<float> ftr(std::move(etr), N, d);
     FrozenFeatures<float> fte(std::move(ete), N, d);
-    // One head per learning rate of the grid (seed cfg.seed); the lowest validation loss wins.
-    auto fit = [&](double lr, std::uint64_t seed) {
+    // One head per pooling and learning rate of the grid (seed cfg.seed); the lowest validation
+    // loss wins, and the repeats use its pooling and rate.
+    auto fit = [&](PoolingKind kind, double lr, std::uint64_t seed) {
       HeadTrainConfig c = cfg;
       c.lr = lr, c.seed = seed;
-      PoolingConfig pc = set.pooling;
-      pc.tokens = N;
+      PoolingConfig pc{.kind = kind, .tokens = N, .components = set.components};
       ProbeHead<float> head(d, m.config.model.heads, R, C, seed, 0, pc);
       const HeadTrainResult r = train_head(head, ftr, tr, c);
       LabelProbeRow row;
-      row.name = name + probe_kind;
+      row.name = probe_name(kind);
+      row.pooling = to_string(kind);
       row.validation = r.best_validation;
       row.best_epoch = r.best_epoch;
       row.epochs = r.epochs();
@@ -515,43 +535,46 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     };
     const std::vector<double> grid = set.lr_grid.empty() ? std::vector<double>{cfg.lr} : set.lr_grid;
     std::vector<LabelProbeRow> runs;
-    std::vector<std::pair<double, double>> tried;
-    for (double lr : grid) {
-      LabelProbeRow r = fit(lr, cfg.seed);
-      tried.emplace_back(lr, r.validation);
-      if (runs.empty() || (std::isfinite(r.validation) && !(r.validation >= runs.front().validation)))
-        runs.assign(1, std::move(r));
-    }
+    std::vector<LabelProbeRow::Tried> tried;
+    for (PoolingKind kind : set.poolings)
+      for (double lr : grid) {
+        LabelProbeRow r = fit(kind, lr, cfg.seed);
+        tried.push_back({r.pooling, lr, r.validation});
+        if (runs.empty() || (std::isfinite(r.validation) && !(r.validation >= runs.front().validation)))
+          runs.assign(1, std::move(r));
+      }
     const double lr = runs.front().lr;
+    const PoolingKind kind = parse_pooling(runs.front().pooling);
     int diverged = std::isfinite(runs.front().validation) ? 0 : 1;
     if (diverged && set.repeats > 1) runs.clear();
     for (int rep = 1; rep < set.repeats; ++rep) {
-      LabelProbeRow r = fit(lr, cfg.seed + static_cast<std::uint64_t>(rep));
+      LabelProbeRow r = fit(kind, lr, cfg.seed + static_cast<std::uint64_t>(rep));
       if (!std::isfinite(r.validation)) {
         ++diverged;
         continue;
       }
       runs.push_back(std::move(r));
     }
-    LabelProbeRow attentive;
+    LabelProbeRow probe;
     if (runs.empty()) {  // every repeat diverged
-      attentive.name = name + probe_kind;
-      attentive.flag = "all " + std::to_string(set.repeats) + " repeats diverged (validation loss not finite)";
+      probe.name = probe_name(kind);
+      probe.flag = "all " + std::to_string(set.repeats) + " repeats diverged (validation loss not finite)";
     } else {
-      attentive = mean_of_runs(std::move(runs));
-      attentive.flag = join(join(one_class, head_flag(attentive.validation, constant)), held_out_flag(attentive, rows.front()));
-      attentive.flag = join(attentive.flag, under_read_flag(attentive, linear));
-      attentive.flag = join(attentive.flag, epoch_limit_flag(attentive, cfg));
+      probe = mean_of_runs(std::move(runs));
+      probe.flag = join(join(one_class, head_flag(probe.validation, constant)), held_out_flag(probe, rows.front()));
+      probe.flag = join(probe.flag, under_read_flag(probe, linear));
+      probe.flag = join(probe.flag, epoch_limit_flag(probe, cfg, constant));
       if (diverged > 0 && set.repeats > 1)
-        attentive.flag = join(attentive.flag, std::to_string(diverged) + " of " + std::to_string(set.repeats) +
-                                                  " repeats diverged and are left out of the mean");
+        probe.flag = join(probe.flag, std::to_string(diverged) + " of " + std::to_string(set.repeats) +
+                                              " repeats diverged and are left out of the mean");
     }
-    attentive.repeats = set.repeats;
-    attentive.lr = lr;
-    attentive.lr_validation = tried;
-    attentive.seconds = embed_seconds + since(t0);
+    probe.repeats = set.repeats;
+    probe.lr = lr;
+    probe.pooling = to_string(kind);
+    probe.tried = tried;
+    probe.seconds = embed_seconds + since(t0);
     rows.push_back(std::move(linear));
-    rows.push_back(std::move(attentive));
+    rows.push_back(std::move(probe));
   };
   const auto random = make_jepa_model(m.config, skin.graph, m.model->config.in_dim / m.config.data.tau,
                                       m.config.seed ^ 0x72616e646f6dull);  // "random"
@@ -618,10 +641,12 @@ inline nlohmann::json label_probe_json(const std::vector<LabelProbeRow>& rows) {
     if (r.best_epoch >= 0) j["best_epoch"] = r.best_epoch + 1, j["epochs"] = r.epochs;
     if (r.repeats > 1) j["repeats"] = r.repeats;
     if (std::isfinite(r.lr)) j["lr"] = r.lr;
-    if (!r.lr_validation.empty()) {
+    if (!r.pooling.empty()) j["pooling"] = r.pooling;
+    if (!r.tried.empty()) {
       nlohmann::json t = nlohmann::json::array();
-      for (const auto& [lr, v] : r.lr_validation) t.push_back({{"lr", lr}, {"validation_loss", std::isfinite(v) ? nlohmann::json(v) : nlohmann::json()}});
-      j["lr_tried"] = t;
+      for (const auto& [pooling, lr, v] : r.tried)
+        t.push_back({{"pooling", pooling}, {"lr", lr}, {"validation_loss", std::isfinite(v) ? nlohmann::json(v) : nlohmann::json()}});
+      j["tried"] = t;
     }
     if (std::isfinite(r.lambda)) j["lambda"] = r.lambda;
     a.push_back(std::move(j));

@@ -253,7 +253,8 @@ struct ProbeOptions {
   int trial_column = -1;                   // --data: the label file's column of each frame's trial id (-1: none)
   TrialOptions trials;                     // --trials TABLE: labelled trials (trials.hpp)
   std::vector<double> lr_grid{3e-4, 1e-3, 3e-3};  // --task: the attentive probe's rates, chosen on validation
-  PoolingConfig pooling;                   // --task: the probe's pooling (attentive or taxel)
+  // --task: the probe's poolings, chosen on validation with the rate (auto: both; or one of them).
+  std::vector<PoolingKind> poolings{PoolingKind::attentive, PoolingKind::taxel};
   std::string predictions;                 // --task: per-window and per-trial predictions CSV ("" = none)
   std::string out;                         // results JSON ("" = none)
   bool force = false;
@@ -518,7 +519,9 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
       out << "note: " << per_epoch << " steps per epoch: heads train up to " << cfg.max_epochs
           << " epochs with a patience of " << cfg.patience << " (--epochs and --patience set them)\n";
   }
-  const LabelProbeSettings set{o.lr_grid, o.pooling, o.center_tokens, o.repeats, o.quiet};
+  LabelProbeSettings set;
+  set.lr_grid = o.lr_grid, set.poolings = o.poolings, set.center_tokens = o.center_tokens, set.repeats = o.repeats,
+  set.quiet = o.quiet;
   const std::vector<LabelProbeRow> rows = label_probe_rows(
       m, o.encoder == "target" ? model.target : model.context, o.encoder, train_src, train, test_src, test, skin,
       cfg, set);
@@ -534,7 +537,11 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
                      {"probe", {{"lr_grid", o.lr_grid.empty() ? std::vector<double>{cfg.lr} : o.lr_grid},
                                 {"max_epochs", cfg.max_epochs}, {"patience", cfg.patience}, {"batch", cfg.batch},
                                 {"validation_fraction", cfg.validation_fraction}, {"center_tokens", o.center_tokens},
-                                {"pooling", to_string(o.pooling.kind)}}},
+                                {"poolings", [&] {
+                                   std::vector<std::string> v;
+                                   for (PoolingKind k : o.poolings) v.push_back(to_string(k));
+                                   return v;
+                                 }()}}},
                      {"results", label_probe_json(rows)}};
     if (!class_names.empty()) j["classes"] = class_names;
     if (table) {
@@ -562,8 +569,8 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   if (!o.out.empty()) OutputFiles::check_new(o.out, o.force);
   if (!o.task.empty()) return run_label_probe(o, out);
   require<ConfigError>(o.trials.table.empty() && o.predictions.empty() && o.data.empty() && o.labels.empty() &&
-                           o.trial_column < 0,
-                       "--trials, --predictions, --data, --labels and --trial-column are for your own labels: give --task regression ",
+                           o.trial_column < 0 && o.poolings.size() == 2,
+                       "--trials, --predictions, --data, --labels, --trial-column and --probe-pooling are for your own labels: give --task regression ",
                        "or classification");
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
@@ -677,8 +684,14 @@ inline CLI::App* add_probe_command(CLI::App& app, ProbeOptions& o) {
   sub->add_option("--predictions", o.predictions, "--task: write one row per held-out window and per trial here (CSV)");
   add_trial_options(sub, o.trials);
   sub->add_option_function<std::string>(
-      "--probe-pooling", [&o](const std::string& v) { o.pooling.kind = parse_pooling(v); },
-      "--task: the probe's pooling of a window: attentive (the paper's, default) or taxel (per-taxel read-out)");
+      "--probe-pooling",
+      [&o](const std::string& v) {
+        o.poolings = v == "auto" ? std::vector<PoolingKind>{PoolingKind::attentive, PoolingKind::taxel}
+                                 : std::vector<PoolingKind>{parse_pooling(v)};
+      },
+      "--task: the probe's pooling of a window: auto (default: attentive and taxel, the better on validation), "
+      "attentive (the paper's) or taxel (per-taxel read-out)")
+      ->check(CLI::IsMember({"auto", "attentive", "taxel"}));
   add_data_format(sub, o.format);
   sub->add_option("--out", o.out, "write the results as JSON here");
   sub->add_flag("--force", o.force, "overwrite --out");

@@ -19,6 +19,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <string>
 
@@ -699,6 +700,33 @@ TEST_CASE("tjepa eval's command line: flags land in the options and the pre-trai
   EvalCommand b;
   add_eval_command(app3, b);
   CHECK_THROWS_AS(app3.parse(4, bad), CLI::ValidationError);
+}
+
+TEST_CASE("tjepa probe's command line: --probe-pooling auto tries both poolings / one fixes it / --lr-grid takes commas") {
+  using namespace tjepa;
+  using namespace tjepa::cli;
+  auto parse = [](std::vector<const char*> argv) {
+    CLI::App app;
+    auto o = std::make_unique<ProbeOptions>();
+    add_probe_command(app, *o);
+    app.parse(static_cast<int>(argv.size()), argv.data());
+    return o;
+  };
+  const auto d = parse({"tjepa", "probe", "--checkpoint", "c"});
+  CHECK(d->poolings == std::vector<PoolingKind>{PoolingKind::attentive, PoolingKind::taxel});
+  CHECK(d->lr_grid == std::vector<double>{3e-4, 1e-3, 3e-3});
+  CHECK(parse({"tjepa", "probe", "--checkpoint", "c", "--probe-pooling", "taxel"})->poolings ==
+        std::vector<PoolingKind>{PoolingKind::taxel});
+  CHECK(parse({"tjepa", "probe", "--checkpoint", "c", "--probe-pooling", "auto"})->poolings.size() == 2u);
+  CHECK(parse({"tjepa", "probe", "--checkpoint", "c", "--lr-grid", "1e-3,3e-3"})->lr_grid == std::vector<double>{1e-3, 3e-3});
+  CHECK(parse({"tjepa", "probe", "--checkpoint", "c", "--lr-grid", "1e-3", "3e-3"})->lr_grid == std::vector<double>{1e-3, 3e-3});
+  CHECK_THROWS_AS(parse({"tjepa", "probe", "--checkpoint", "c", "--probe-pooling", "mean"}), CLI::ValidationError);
+  // Without --task the force and indenter probe has no pooling choice: the flag is refused by name.
+  ProbeOptions o;
+  o.checkpoint = "none.safetensors";
+  o.poolings = {PoolingKind::taxel};
+  std::ostringstream out;
+  CHECK_THROWS_WITH_AS(run_probe(o, out), doctest::Contains("--probe-pooling are for your own labels"), ConfigError);
 }
 
 }  // TEST_SUITE

@@ -97,18 +97,29 @@ TEST_CASE("trials: FabricSlide slides pre-train on the training trials / the pro
   CHECK(j["trials"]["test"] == 6);
   for (const auto& f : j["trials"]["test_files"]) CHECK(f.get<std::string>().find("mmps_2.csv") != std::string::npos);
   const std::vector<std::string> names{"constant (train mean / majority)", "ridge on raw windows",
-                                       "random encoder (frozen), linear", "random encoder (frozen), attentive",
-                                       "target encoder (frozen), linear", "target encoder (frozen), attentive"};
+                                       "random encoder (frozen), linear", "random encoder (frozen), probe (",
+                                       "target encoder (frozen), linear", "target encoder (frozen), probe ("};
   for (std::size_t r = 0; r < names.size(); ++r) {
-    CHECK(j["results"][r]["row"] == names[r]);
+    CHECK(j["results"][r]["row"].get<std::string>().starts_with(names[r]));
     CHECK(j["results"][r].contains("accuracy"));
     CHECK(j["results"][r]["trial"].contains("accuracy"));
   }
-  // The attentive probe's rate was chosen on validation among the grid, and written down.
+  // The probe's pooling and rate were chosen on validation among both poolings and the grid: the
+  // lowest validation loss tried, and the row's name and JSON say which.
   for (int r : {3, 5}) {
-    CHECK(j["results"][r]["lr_tried"].size() == 2u);
+    const auto& tried = j["results"][r]["tried"];
+    REQUIRE(tried.size() == 4u);
     const double lr = j["results"][r]["lr"];
+    const std::string pooling = j["results"][r]["pooling"];
     CHECK((lr == 1e-3 || lr == 3e-3));
+    CHECK(j["results"][r]["row"].get<std::string>().ends_with(", probe (" + pooling + ")"));
+    double best = 1e300;
+    std::string best_pooling;
+    for (const auto& e : tried)
+      if (e["validation_loss"].is_number() && e["validation_loss"].get<double>() < best)
+        best = e["validation_loss"], best_pooling = e["pooling"];
+    CHECK(best_pooling == pooling);
+    CHECK(std::set<std::string>{tried[0]["pooling"], tried[2]["pooling"]} == std::set<std::string>{"attentive", "taxel"});
   }
   // Attentive against linear on the same embeddings: within 2 points, or the row says so.
   for (int r : {3, 5}) {
