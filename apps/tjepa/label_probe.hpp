@@ -404,9 +404,8 @@ inline LabelProbeRow mean_of_runs(std::vector<LabelProbeRow> runs) {
 struct LabelProbeSettings {
   std::vector<double> lr_grid;
   // The probe's poolings to choose from on the validation split with the rates (one: fixed):
-  // attentive (the paper's) and taxel; the components of the taxel pooling.
+  // attentive (the paper's) and taxel.
   std::vector<PoolingKind> poolings{PoolingKind::attentive, PoolingKind::taxel};
-  int components = PoolingConfig{}.components;
   bool center_tokens = false;
   int repeats = 1;
   bool quiet = false;
@@ -509,8 +508,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     require<ConfigError>(!set.poolings.empty(), "label probe: no pooling to try");
     // A fixed pooling names the row by it; a choice says which won.
     auto probe_name = [&](PoolingKind k) {
-      const char* kind = k == PoolingKind::taxel ? "taxel" : "attentive";
-      return set.poolings.size() > 1 ? name + ", probe (" + kind + ")" : name + (k == PoolingKind::taxel ? ", taxel probe" : ", attentive");
+      return set.poolings.size() > 1 ? name + ", probe (" + to_string(k) + ")" : name + (k == PoolingKind::taxel ? ", taxel probe" : ", attentive");
     };
     FrozenFeatures<float> ftr(std::move(etr), N, d);
     FrozenFeatures<float> fte(std::move(ete), N, d);
@@ -519,7 +517,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     auto fit = [&](PoolingKind kind, double lr, std::uint64_t seed) {
       HeadTrainConfig c = cfg;
       c.lr = lr, c.seed = seed;
-      PoolingConfig pc{.kind = kind, .tokens = N, .components = set.components};
+      const PoolingConfig pc{.kind = kind, .tokens = N};
       ProbeHead<float> head(d, m.config.model.heads, R, C, seed, 0, pc);
       const HeadTrainResult r = train_head(head, ftr, tr, c);
       LabelProbeRow row;
@@ -536,15 +534,15 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     const std::vector<double> grid = set.lr_grid.empty() ? std::vector<double>{cfg.lr} : set.lr_grid;
     std::vector<LabelProbeRow> runs;
     std::vector<LabelProbeRow::Tried> tried;
-    for (PoolingKind kind : set.poolings)
+    PoolingKind kind = set.poolings.front();
+    for (PoolingKind k : set.poolings)
       for (double lr : grid) {
-        LabelProbeRow r = fit(kind, lr, cfg.seed);
+        LabelProbeRow r = fit(k, lr, cfg.seed);
         tried.push_back({r.pooling, lr, r.validation});
         if (runs.empty() || (std::isfinite(r.validation) && !(r.validation >= runs.front().validation)))
-          runs.assign(1, std::move(r));
+          runs.assign(1, std::move(r)), kind = k;
       }
     const double lr = runs.front().lr;
-    const PoolingKind kind = parse_pooling(runs.front().pooling);
     int diverged = std::isfinite(runs.front().validation) ? 0 : 1;
     if (diverged && set.repeats > 1) runs.clear();
     for (int rep = 1; rep < set.repeats; ++rep) {
