@@ -43,6 +43,7 @@
 
 #include <tjepa/downstream/embed.hpp>
 #include <tjepa/downstream/ridge.hpp>
+#include <tjepa/downstream/score_table.hpp>
 #include <tjepa/tjepa.hpp>
 
 #include "output.hpp"
@@ -208,10 +209,12 @@ struct LabelScores {
 struct LabelProbeRow {
   std::string name;
   LabelScores window, trial;        // held-out windows; held-out trials (empty without trials)
-  // Heads with repeats > 1: the mean over the repeats that did not diverge, and the sample
-  // standard deviation of their primary score (top-1, or the mean RMSE) per level.
-  int repeats = 1;
-  double window_sd = std::numeric_limits<double>::quiet_NaN(), trial_sd = window_sd;
+  // The scores of each run: one, or with repeats > 1 each repeat that did not diverge (window and
+  // trial above are then their mean); none when every repeat diverged.
+  struct Run {
+    LabelScores window, trial;
+  };
+  std::vector<Run> runs;
   double validation = std::numeric_limits<double>::quiet_NaN();  // heads: best validation loss
   int best_epoch = -1, epochs = 0;
   double lr = std::numeric_limits<double>::quiet_NaN();      // probes: the learning rate used
@@ -369,11 +372,12 @@ inline void score_row(LabelProbeRow& row, std::vector<double> outputs, const Win
     const TrialView v = trial_view(outputs, test.targets, test.trial);
     row.trial = score_outputs(v.outputs, v.targets);
   }
+  row.runs = {{row.window, row.trial}};
   row.outputs = std::move(outputs);
 }
 
-// The mean of repeated rows (all scored on the same held-out windows), the sample standard
-// deviation of their primary scores.
+// The mean of repeated rows (all scored on the same held-out windows), each repeat's scores kept
+// in runs (the table takes their spread).
 inline LabelProbeRow mean_of_runs(std::vector<LabelProbeRow> runs) {
   LabelProbeRow row = runs.front();
   if (runs.size() < 2) return row;
@@ -387,15 +391,16 @@ inline LabelProbeRow mean_of_runs(std::vector<LabelProbeRow> runs) {
       for (std::size_t a = 0; a < m.rmse.size(); ++a) m.rmse[a] += s.rmse[a] / k;
       if (std::isfinite(m.accuracy)) m.accuracy += s.accuracy / k;
     }
-    double ss = 0;
-    for (const auto& r : runs) ss += (get(r).primary() - m.primary()) * (get(r).primary() - m.primary());
-    return std::pair{m, std::sqrt(ss / (k - 1))};
+    return m;
   };
-  std::tie(row.window, row.window_sd) = mean([](const LabelProbeRow& r) -> const LabelScores& { return r.window; });
-  if (!row.trial.rmse.empty() || std::isfinite(row.trial.accuracy))
-    std::tie(row.trial, row.trial_sd) = mean([](const LabelProbeRow& r) -> const LabelScores& { return r.trial; });
+  row.window = mean([](const LabelProbeRow& r) -> const LabelScores& { return r.window; });
+  row.trial = mean([](const LabelProbeRow& r) -> const LabelScores& { return r.trial; });
+  row.runs.clear();
   row.validation = 0;
-  for (const auto& r : runs) row.validation += r.validation / k;
+  for (const auto& r : runs) {
+    row.runs.push_back({r.window, r.trial});
+    row.validation += r.validation / k;
+  }
   return row;
 }
 
@@ -434,13 +439,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     LabelProbeRow row;
     row.name = "constant (train mean / majority)";
     row.flag = join(one_class, one_class_test);
-    const auto constant = ConstantBaseline::fit(tr.value, R, tr.label, C);
-    std::vector<double> y(static_cast<std::size_t>(te.size()) * out, 0.0);
-    for (int s = 0; s < te.size(); ++s) {
-      for (int a = 0; a < R; ++a) y[static_cast<std::size_t>(s) * out + a] = constant.mean[static_cast<std::size_t>(a)];
-      if (C > 0) y[static_cast<std::size_t>(s) * out + R + constant.majority] = 1.0;
-    }
-    score_row(row, std::move(y), test);
+    score_row(row, ConstantBaseline::fit(tr.value, R, tr.label, C).outputs(static_cast<std::size_t>(te.size())), test);
     row.validation = constant_validation_loss(tr, cfg);
     rows.push_back(row);
   }
@@ -566,7 +565,6 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
         probe.flag = join(probe.flag, std::to_string(diverged) + " of " + std::to_string(set.repeats) +
                                               " repeats diverged and are left out of the mean");
     }
-    probe.repeats = set.repeats;
     probe.lr = lr;
     probe.pooling = to_string(kind);
     probe.tried = tried;
@@ -581,75 +579,59 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
   return rows;
 }
 
-inline std::string label_probe_markdown(const std::vector<LabelProbeRow>& rows, const WindowLabels& test,
-                                        int train_windows, int train_trials = 0) {
+// The rows as a score table (downstream/score_table.hpp): per regression output its RMSE (and their
+// mean with more than one), top-1 with classes, each also per trial with trials; a sample per
+// repeat; best epoch and the row's flag beside; the row's settings in its JSON.
+inline ScoreTable label_score_table(const std::vector<LabelProbeRow>& rows, const WindowLabels& test, int train_windows,
+                                    int train_trials = 0) {
   const int R = test.targets.regression, C = test.targets.classes;
   const bool trials = !test.trial.empty();
   const int test_trials = static_cast<int>(std::set<int>(test.trial.begin(), test.trial.end()).size());
-  std::string s = "### Probe: " + std::string(R > 0 ? std::to_string(R) + " regression output(s)" : "") +
-                  (R > 0 && C > 0 ? " and " : "") + (C > 0 ? std::to_string(C) + " classes" : "") + ", " +
-                  std::to_string(train_windows) + " training / " + std::to_string(test.targets.size()) + " held-out windows" +
-                  (trials ? " (" + std::to_string(train_trials) + " / " + std::to_string(test_trials) + " trials)" : "") + "\n\n";
-  s += "| row |";
-  for (int a = 0; a < R; ++a) s += " RMSE " + std::to_string(a) + " ↓ |";
-  if (R > 1) s += " mean RMSE ↓ |";
-  if (R > 0 && trials) s += " trial mean RMSE ↓ |";
-  if (C > 0) s += " top-1 (%) ↑ |";
-  if (C > 0 && trials) s += " trial top-1 (%) ↑ |";
-  s += " best epoch | note |\n|---|";
-  const int cols = R + (R > 1) + (R > 0 && trials) + (C > 0) + (C > 0 && trials) + 2;
-  for (int a = 0; a < cols; ++a) s += "---|";
-  s += "\n";
-  char buf[64];
-  auto cell = [&](double v, double sd, const char* fmt, const char* fmt_sd) {
-    std::snprintf(buf, sizeof buf, std::isfinite(sd) ? fmt_sd : fmt, v, sd);
-    s += buf;
+  ScoreTable t;
+  t.title = "Probe: " + std::string(R > 0 ? std::to_string(R) + " regression output(s)" : "") + (R > 0 && C > 0 ? " and " : "") +
+            (C > 0 ? std::to_string(C) + " classes" : "") + ", " + std::to_string(train_windows) + " training / " +
+            std::to_string(test.targets.size()) + " held-out windows" +
+            (trials ? " (" + std::to_string(train_trials) + " / " + std::to_string(test_trials) + " trials)" : "");
+  t.row_header = "row";
+  t.sample_name = "repeats";
+  t.columns = {"best epoch"};
+  t.note_column = true;
+  auto rmse = [](std::string key, std::string name, bool primary) {
+    return ScoreMetric{std::move(key), std::move(name), "", false, primary, 1, "%.4g", "%.2g"};
   };
-  for (const auto& r : rows) {
-    s += "| " + r.name + " |";
-    for (std::size_t a = 0; a < r.window.rmse.size(); ++a)
-      cell(r.window.rmse[a], R == 1 ? r.window_sd : NAN, " %.4g |", " %.4g ± %.2g |");
-    if (r.window.rmse.empty() && R > 0)
-      for (int a = 0; a < R; ++a) s += " - |";
-    if (R > 1) cell(r.window.primary(), r.window_sd, " %.4g |", " %.4g ± %.2g |");
-    if (R > 0 && trials) cell(r.trial.primary(), r.trial_sd, " %.4g |", " %.4g ± %.2g |");
-    if (C > 0) cell(100 * r.window.accuracy, 100 * r.window_sd, " %.1f |", " %.1f ± %.1f |");
-    if (C > 0 && trials) cell(100 * r.trial.accuracy, 100 * r.trial_sd, " %.1f |", " %.1f ± %.1f |");
-    s += r.best_epoch >= 0 ? " " + std::to_string(r.best_epoch + 1) + " of " + std::to_string(r.epochs) + " |" : " - |";
-    s += " " + (r.flag.empty() ? std::string() : "**" + r.flag + "**") + " |\n";
-  }
-  return s;
-}
-
-inline nlohmann::json label_scores_json(const LabelScores& s, double sd) {
-  nlohmann::json j = nlohmann::json::object();
-  if (!s.rmse.empty()) j["rmse"] = s.rmse;
-  if (std::isfinite(s.accuracy)) j["accuracy"] = s.accuracy;
-  if (std::isfinite(sd)) j["sd"] = sd;
-  return j;
-}
-
-inline nlohmann::json label_probe_json(const std::vector<LabelProbeRow>& rows) {
-  nlohmann::json a = nlohmann::json::array();
-  for (const auto& r : rows) {
-    nlohmann::json j = {{"row", r.name}, {"flag", r.flag}, {"seconds", r.seconds}};
-    j.update(label_scores_json(r.window, r.window_sd));
-    if (!r.trial.rmse.empty() || std::isfinite(r.trial.accuracy)) j["trial"] = label_scores_json(r.trial, r.trial_sd);
+  auto top1 = [](std::string key, std::string name) { return ScoreMetric{std::move(key), std::move(name), "%", true, true, 100, "%.1f", "%.1f"}; };
+  for (int a = 0; a < R; ++a) t.metrics.push_back(rmse("rmse_" + std::to_string(a), "RMSE " + std::to_string(a), R == 1));
+  if (R > 1) t.metrics.push_back(rmse("mean_rmse", "mean RMSE", true));
+  if (R > 0 && trials) t.metrics.push_back(rmse("trial_rmse", "trial mean RMSE", true));
+  if (C > 0) t.metrics.push_back(top1("top1", "top-1"));
+  if (C > 0 && trials) t.metrics.push_back(top1("trial_top1", "trial top-1"));
+  for (const LabelProbeRow& r : rows) {
+    ScoreRow& row = t.row(r.name);
+    for (const LabelProbeRow::Run& run : r.runs) {
+      std::vector<double> v(run.window.rmse.begin(), run.window.rmse.end());
+      if (R > 1) v.push_back(run.window.primary());
+      if (R > 0 && trials) v.push_back(run.trial.primary());
+      if (C > 0) v.push_back(run.window.accuracy);
+      if (C > 0 && trials) v.push_back(run.trial.accuracy);
+      row.runs.push_back({std::move(v)});
+    }
+    row.cells = {r.best_epoch >= 0 ? std::to_string(r.best_epoch + 1) + " of " + std::to_string(r.epochs) : "-"};
+    row.note = r.flag;
+    nlohmann::json& j = row.info;
+    j["seconds"] = r.seconds;
     if (std::isfinite(r.validation)) j["validation_loss"] = r.validation;
     if (r.best_epoch >= 0) j["best_epoch"] = r.best_epoch + 1, j["epochs"] = r.epochs;
-    if (r.repeats > 1) j["repeats"] = r.repeats;
     if (std::isfinite(r.lr)) j["lr"] = r.lr;
     if (!r.pooling.empty()) j["pooling"] = r.pooling;
     if (!r.tried.empty()) {
-      nlohmann::json t = nlohmann::json::array();
+      nlohmann::json tried = nlohmann::json::array();
       for (const auto& [pooling, lr, v] : r.tried)
-        t.push_back({{"pooling", pooling}, {"lr", lr}, {"validation_loss", std::isfinite(v) ? nlohmann::json(v) : nlohmann::json()}});
-      j["tried"] = t;
+        tried.push_back({{"pooling", pooling}, {"lr", lr}, {"validation_loss", std::isfinite(v) ? nlohmann::json(v) : nlohmann::json()}});
+      j["tried"] = tried;
     }
     if (std::isfinite(r.lambda)) j["lambda"] = r.lambda;
-    a.push_back(std::move(j));
   }
-  return a;
+  return t;
 }
 
 // The predictions of every row (its first repeat) as CSV: one line per held-out window

@@ -48,125 +48,81 @@ struct ProbeMetrics {
 
 struct ProbeRow {
   std::string name;
-  ProbeMetrics metrics;               // one probe, or the mean over `runs`
+  std::vector<ProbeMetrics> runs;  // one probe, or the repeats averaged into the row
+  std::vector<double> lr;          // each run's learning rate (none for the constant)
   double seconds = 0;
-  double lr = 0;                      // the probe's learning rate
-  std::vector<double> lr_objective;   // unused (kept for the JSON's schema)
-  std::vector<ProbeRow> runs;         // the repeats averaged into metrics (empty: a single probe)
-  ProbeMetrics spread;                // their sample standard deviation (0 for a single probe)
-  std::string flag;                   // why the row says little ("" = nothing to say)
+  std::string flag;                // why the row says little ("" = nothing to say)
 };
 
-// The mean (and sample standard deviation) of repeated probes: other probe seeds, and for a random
-// encoder other initializations. One probe on 600 labelled windows moves by as much as the
-// differences between encoders; the demo compares means.
-// A repeat whose head diverged is left out of the mean (and the row says so), unless all did.
-inline ProbeRow average_rows(std::string name, std::vector<ProbeRow> runs) {
-  require<ConfigError>(!runs.empty(), "average_rows: no probes");
-  ProbeRow row{std::move(name), {}, 0, 0, {}, {}, {}, {}};
+// Repeated probes as one row: other probe seeds, and for a random encoder other initializations.
+// One probe on 600 labelled windows moves by as much as the differences between encoders; the
+// table compares means. A repeat whose head diverged is left out (and the row says so), unless
+// all did.
+inline ProbeRow average_rows(std::string name, const std::vector<ProbeRow>& repeats) {
+  require<ConfigError>(!repeats.empty(), "average_rows: no probes");
+  ProbeRow row{std::move(name), {}, {}, 0, {}};
   std::vector<const ProbeRow*> kept;
-  for (const ProbeRow& r : runs)
+  for (const ProbeRow& r : repeats)
     if (r.flag.find("diverged") == std::string::npos) kept.push_back(&r);
-  if (kept.size() < runs.size())
-    row.flag = std::to_string(runs.size() - kept.size()) + " of " + std::to_string(runs.size()) + " repeats diverged" +
+  if (kept.size() < repeats.size())
+    row.flag = std::to_string(repeats.size() - kept.size()) + " of " + std::to_string(repeats.size()) + " repeats diverged" +
                (kept.empty() ? "" : ", left out of the mean");
   if (kept.empty())
-    for (const ProbeRow& r : runs) kept.push_back(&r);
-  const double n = static_cast<double>(kept.size());
-  auto stat = [&](auto get, double& mean, double& sd) {
-    double s = 0, s2 = 0;
-    for (const ProbeRow* r : kept) s += get(r->metrics);
-    mean = s / n;
-    for (const ProbeRow* r : kept) s2 += (get(r->metrics) - mean) * (get(r->metrics) - mean);
-    sd = kept.size() > 1 ? std::sqrt(s2 / (n - 1)) : 0.0;
-  };
-  for (int a = 0; a < force_axes; ++a)
-    stat([a](const ProbeMetrics& m) { return m.force_rmse[static_cast<std::size_t>(a)]; },
-         row.metrics.force_rmse[static_cast<std::size_t>(a)], row.spread.force_rmse[static_cast<std::size_t>(a)]);
-  stat([](const ProbeMetrics& m) { return m.indenter_accuracy; }, row.metrics.indenter_accuracy,
-       row.spread.indenter_accuracy);
-  row.metrics.majority_accuracy = runs.front().metrics.majority_accuracy;
-  row.metrics.windows = runs.front().metrics.windows;
-  for (const ProbeRow& r : runs) row.seconds += r.seconds;
-  row.runs = std::move(runs);
+    for (const ProbeRow& r : repeats) kept.push_back(&r);
+  for (const ProbeRow* r : kept) {
+    row.runs.insert(row.runs.end(), r->runs.begin(), r->runs.end());
+    row.lr.insert(row.lr.end(), r->lr.begin(), r->lr.end());
+  }
+  for (const ProbeRow& r : repeats) row.seconds += r.seconds;
   return row;
 }
 
-// Averaged rows print "mean ± sd" over their repeats, and the rate each repeat chose.
-inline void print_probe_table(std::ostream& out, const std::vector<ProbeRow>& rows) {
-  char buf[384];
-  std::snprintf(buf, sizeof buf, "%-34s %15s %15s %15s %9s %14s  %s\n", "encoder", "RMSE u/N", "RMSE v/N",
-                "RMSE n/N", "RMSE avg", "indenter", "probe lr");
-  out << buf;
-  auto cell = [](double mean, double sd, bool percent) {
-    char c[40];
-    if (percent)
-      std::snprintf(c, sizeof c, sd > 0 ? "%.1f%% ± %.1f" : "%.1f%%", 100 * mean, 100 * sd);
-    else
-      std::snprintf(c, sizeof c, sd > 0 ? "%.3f ± %.3f" : "%.3f", mean, sd);
-    return std::string(c);
+// The rows as a score table (downstream/score_table.hpp): RMSE per force axis and their mean,
+// indenter top-1, a sample per repeat ("mean ± sd"), the learning rates beside.
+inline ScoreTable probe_score_table(const std::vector<ProbeRow>& rows) {
+  ScoreTable t;
+  t.row_header = "encoder";
+  t.sample_name = "repeats";
+  t.columns = {"probe lr"};
+  auto rmse = [](std::string key, std::string name, bool primary) {
+    return ScoreMetric{std::move(key), std::move(name), "N", false, primary, 1, "%.3f", "%.3f"};
   };
-  for (const auto& r : rows) {
-    const auto& m = r.metrics;
+  t.metrics = {rmse("force_rmse_u", "RMSE u", false), rmse("force_rmse_v", "RMSE v", false),
+               rmse("force_rmse_n", "RMSE n", false), rmse("force_rmse", "RMSE avg", true),
+               ScoreMetric{"indenter_accuracy", "indenter top-1", "%", true, true, 100, "%.1f", "%.1f"}};
+  for (const ProbeRow& r : rows) {
+    ScoreRow& row = t.row(r.name);
+    for (const ProbeMetrics& m : r.runs)
+      row.runs.push_back({{m.force_rmse[0], m.force_rmse[1], m.force_rmse[2],
+                           (m.force_rmse[0] + m.force_rmse[1] + m.force_rmse[2]) / 3, m.indenter_accuracy}});
     std::string lrs;
-    for (const ProbeRow& x : r.runs.empty() ? std::vector<ProbeRow>{r} : r.runs) {
-      char lr[16] = "-";
-      if (x.lr > 0) std::snprintf(lr, sizeof lr, "%.0e", x.lr);
-      if (!lrs.empty()) lrs += ',';
-      lrs += lr;
+    for (double lr : r.lr) {
+      char buf[16];
+      std::snprintf(buf, sizeof buf, "%.0e", lr);
+      lrs += (lrs.empty() ? "" : ",") + std::string(buf);
     }
-    std::snprintf(buf, sizeof buf, "%-34s %15s %15s %15s %9.3f %14s  %s\n", r.name.c_str(),
-                  cell(m.force_rmse[0], r.spread.force_rmse[0], false).c_str(),
-                  cell(m.force_rmse[1], r.spread.force_rmse[1], false).c_str(),
-                  cell(m.force_rmse[2], r.spread.force_rmse[2], false).c_str(),
-                  (m.force_rmse[0] + m.force_rmse[1] + m.force_rmse[2]) / 3,
-                  cell(m.indenter_accuracy, r.spread.indenter_accuracy, true).c_str(), lrs.c_str());
-    out << buf;
+    row.cells = {lrs.empty() ? "-" : lrs};
+    row.note = r.flag;
+    row.info = {{"lr", r.lr}, {"seconds", r.seconds}};
+    if (!r.runs.empty())
+      row.info.update({{"windows", r.runs.front().windows}, {"majority_accuracy", r.runs.front().majority_accuracy}});
   }
-  for (const auto& r : rows)
-    if (!r.flag.empty()) out << "note: " << r.name << ": " << r.flag << '\n';
-}
-
-inline nlohmann::json probe_rows_json(const std::vector<ProbeRow>& rows) {
-  nlohmann::json a = nlohmann::json::array();
-  for (const auto& r : rows) {
-    nlohmann::json j = {{"encoder", r.name},
-                        {"force_rmse", r.metrics.force_rmse},
-                        {"indenter_accuracy", r.metrics.indenter_accuracy},
-                        {"majority_accuracy", r.metrics.majority_accuracy},
-                        {"windows", r.metrics.windows},
-                        {"probe_lr", r.lr},
-                        {"probe_lr_validation_objective", r.lr_objective},
-                        {"seconds", r.seconds},
-                        {"flag", r.flag}};
-    if (!r.runs.empty()) {
-      j["force_rmse_sd"] = r.spread.force_rmse;
-      j["indenter_accuracy_sd"] = r.spread.indenter_accuracy;
-      j["repeats"] = probe_rows_json(r.runs);
-    }
-    a.push_back(std::move(j));
-  }
-  return a;
+  return t;
 }
 
 // The mean-force / majority-class row: what a probe must beat to have learned anything.
 inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& test, int classes) {
-  const auto c = ConstantBaseline::fit(train.force, force_axes, train.indenter, classes);
-  std::vector<float> y(static_cast<std::size_t>(test.size()) * (force_axes + classes), 0.0f);
-  for (int i = 0; i < test.size(); ++i) {
-    float* r = y.data() + static_cast<std::size_t>(i) * (force_axes + classes);
-    for (int a = 0; a < force_axes; ++a) r[a] = static_cast<float>(c.mean[static_cast<std::size_t>(a)]);
-    r[force_axes + c.majority] = 1.0f;
-  }
-  ProbeRow row{"constant (train mean / majority)", {}, 0, 0, {}, {}, {}, {}};
+  const std::vector<double> y =
+      ConstantBaseline::fit(train.force, force_axes, train.indenter, classes).outputs(static_cast<std::size_t>(test.size()));
+  ProbeMetrics m;
   const auto rm = rmse_per_column(y.data(), static_cast<std::size_t>(force_axes + classes), test.force.data(),
                                   test.size(), force_axes);
-  std::copy(rm.begin(), rm.end(), row.metrics.force_rmse.begin());
-  row.metrics.indenter_accuracy = accuracy(y.data() + force_axes, static_cast<std::size_t>(force_axes + classes),
-                                           test.indenter.data(), test.size(), classes);
-  row.metrics.majority_accuracy = majority_accuracy(test.indenter.data(), test.size(), classes);
-  row.metrics.windows = test.size();
-  return row;
+  std::copy(rm.begin(), rm.end(), m.force_rmse.begin());
+  m.indenter_accuracy = accuracy(y.data() + force_axes, static_cast<std::size_t>(force_axes + classes),
+                                 test.indenter.data(), test.size(), classes);
+  m.majority_accuracy = majority_accuracy(test.indenter.data(), test.size(), classes);
+  m.windows = test.size();
+  return ProbeRow{"constant (train mean / majority)", {m}, {}, 0, {}};
 }
 
 // A probe head (3 force outputs + the indenter logits) trained early-stopped on the frozen
@@ -208,18 +164,19 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
       std::cerr << "  probe " << label << ": best epoch " << fit.best_epoch + 1 << " of " << fit.epochs()
                 << " (validation loss " << fit.best_validation << ")\n";
     const HeadMetrics hm = evaluate_head(head, ftest, test_targets);
-    ProbeRow row{label, {}, 0, c.lr, {}, {}, {}, {}};
+    ProbeRow row{label, {ProbeMetrics{}}, {c.lr}, 0, {}};
     if (!std::isfinite(fit.best_validation)) row.flag = "diverged (validation loss not finite)";
-    std::copy_n(hm.rmse.begin(), force_axes, row.metrics.force_rmse.begin());
-    row.metrics.indenter_accuracy = hm.accuracy;
-    row.metrics.majority_accuracy = hm.majority_accuracy;
-    row.metrics.windows = hm.samples;
+    ProbeMetrics& m = row.runs.front();
+    std::copy_n(hm.rmse.begin(), force_axes, m.force_rmse.begin());
+    m.indenter_accuracy = hm.accuracy;
+    m.majority_accuracy = hm.majority_accuracy;
+    m.windows = hm.samples;
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count() +
                   (r == 0 ? embed_seconds : 0.0);
     runs.push_back(std::move(row));
   }
   if (repeats == 1) return runs.front();
-  return average_rows(name, std::move(runs));
+  return average_rows(name, runs);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -526,9 +483,11 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
       m, o.encoder == "target" ? model.target : model.context, o.encoder, train_src, train, test_src, test, skin,
       cfg, set);
   const int n_train_trials = table ? static_cast<int>(train_trials.recordings.size()) : 0;
-  out << label_probe_markdown(rows, test, static_cast<int>(train.window.size()), n_train_trials);
+  const ScoreTable results = label_score_table(rows, test, static_cast<int>(train.window.size()), n_train_trials);
+  out << results.markdown();
   OutputFiles files;
   if (!o.out.empty()) {
+    const nlohmann::json scores = results.to_json();
     nlohmann::json j{{"checkpoint", o.checkpoint},
                      {"task", o.task},
                      {"train_windows", train.window.size()},
@@ -542,7 +501,9 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
                                    for (PoolingKind k : o.poolings) v.push_back(to_string(k));
                                    return v;
                                  }()}}},
-                     {"results", label_probe_json(rows)}};
+                     {"metrics", scores["metrics"]},
+                     {"results", scores["rows"]},
+                     {"comparisons", scores["comparisons"]}};
     if (!class_names.empty()) j["classes"] = class_names;
     if (table) {
       j["trials"] = {{"table", trials ? o.trials.table : o.labels}, {"train", train_trials.recordings.size()},
@@ -626,10 +587,14 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
     if (distinct_classes(labels->indenter) < 2)
       for (ProbeRow& r : rows)
         r.flag += std::string(r.flag.empty() ? "" : "; ") + "the " + which + " windows hold one indenter class";
-  print_probe_table(out, rows);
+  const ScoreTable table = probe_score_table(rows);
+  out << table.markdown();
   if (!o.out.empty()) {
     OutputFiles files;
-    write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint}, {"results", probe_rows_json(rows)}}.dump(2));
+    const nlohmann::json scores = table.to_json();
+    write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint}, {"metrics", scores["metrics"]},
+                                                       {"results", scores["rows"]}, {"comparisons", scores["comparisons"]}}
+                                            .dump(2));
     files.commit();
   }
   return 0;

@@ -7,6 +7,5 @@
 #include "tjepa/baselines.hpp"
 
 #include "tjepa/eval/grasp_tasks.hpp"
-#include "tjepa/eval/eval_table.hpp"
 #include "tjepa/eval/pretrain_cache.hpp"
 #include "tjepa/eval/grasp_eval.hpp"

@@ -115,5 +115,6 @@
 #include "tjepa/downstream/probe_labels.hpp"
 #include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/downstream/ridge.hpp"
+#include "tjepa/downstream/score_table.hpp"
 #include "tjepa/downstream/trial_split.hpp"
 #include "tjepa/downstream/welch.hpp"

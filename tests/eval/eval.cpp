@@ -1,5 +1,5 @@
 // The paper's evaluation protocol on the simulated grasping hand: the tasks
-// (eval/grasp_tasks.hpp), the table and its statistics (eval/eval_table.hpp), the whole protocol
+// (eval/grasp_tasks.hpp), the protocol's score table (grasp_score_table), the whole protocol
 // at toy size (eval/grasp_eval.hpp) and its pre-training cache (eval/pretrain_cache.hpp).
 #include <doctest/doctest.h>
 
@@ -122,18 +122,19 @@ TEST_CASE("grasp scores: accuracy and force and pose errors by hand and the cons
   CHECK(c[kPoseTheta] == doctest::Approx(5.0));
 }
 
-TEST_CASE("EvalTable: head means per seed then mean ± sd over seeds and the best two with Welch test") {
+TEST_CASE("grasp_score_table: head means per seed then mean ± sd over seeds and the best two with Welch test") {
   auto scores = [](double acc, double force) {
     GraspScores s{};
     s[kObjectAccuracy] = acc;
     s[kForceRmse] = force;
     return s;
   };
-  EvalTable t;
-  t.title = "toy";
-  t.rows.push_back({"a", {{scores(50, 1.0), scores(52, 1.2)}, {scores(54, 1.1), scores(54, 1.1)}, {scores(60, 0.9), scores(58, 0.9)}}});
-  t.rows.push_back({"b", {{scores(40, 0.5)}, {scores(41, 0.6)}, {scores(42, 0.7)}}});
-  t.rows.push_back({"c <&>", {{scores(10, 2.0)}, {scores(10, 2.0)}, {scores(10, 2.0)}}});
+  ScoreTable t = grasp_score_table("toy");
+  for (const auto& seed : std::vector<std::vector<GraspScores>>{{scores(50, 1.0), scores(52, 1.2)}, {scores(54, 1.1), scores(54, 1.1)}, {scores(60, 0.9), scores(58, 0.9)}})
+    t.row("a").add_sample(seed);
+  for (const GraspScores& k : {scores(40, 0.5), scores(41, 0.6), scores(42, 0.7)}) t.row("b").add_sample(std::vector<GraspScores>{k});
+  for (int k = 0; k < 3; ++k) t.row("c <&>").add_sample(std::vector<GraspScores>{scores(10, 2.0)});
+  CHECK(t.markdown().find("| method | object top-1 (%) ↑ | force RMSE (N) ↓ |") != std::string::npos);
   CHECK(t.rows[0].samples(kObjectAccuracy) == std::vector<double>{51, 54, 59});
   CHECK(t.rows[0].summary(kObjectAccuracy).mean == doctest::Approx(54.6666667));
   CHECK(t.rows[0].summary(kObjectAccuracy).sd == doctest::Approx(std::sqrt(((51 - 54.6666667) * (51 - 54.6666667) + (54 - 54.6666667) * (54 - 54.6666667) + (59 - 54.6666667) * (59 - 54.6666667)) / 2)));
@@ -221,11 +222,11 @@ TEST_CASE("run_grasp_eval at toy size: every row and the ablation - seed 1 alone
   CHECK(r.ablation_linear.rows[1].runs == r.linear.rows[8].runs);
   CHECK(r.ablation_linear.rows[3].name == "4L: token components");
   CHECK(r.ablation_linear.rows[9].name == "2L+2G, local context: token components");
-  for (const EvalTable* t : {&r.main, &r.ablation, &r.linear, &r.ablation_linear})
-    for (const EvalRow& row : t->rows) {
+  for (const ScoreTable* t : {&r.main, &r.ablation, &r.linear, &r.ablation_linear})
+    for (const ScoreRow& row : t->rows) {
       REQUIRE(row.runs.size() == 2);
       for (const auto& heads : row.runs)
-        for (const GraspScores& s : heads)
+        for (const auto& s : heads)
           for (double v : s) CHECK(std::isfinite(v));
     }
   CHECK(r.info["pretraining"].size() == 2 * 8);  // JEPA, MAE, DINO, BYOL and 4 mask variants per seed
@@ -283,8 +284,8 @@ TEST_CASE("run_grasp_eval at toy size: standardized features and the other pooli
   CHECK(s.linear.rows[3].name == "Tactile-JEPA: pad means");
   CHECK(s.linear.to_json() == r.linear.to_json());
   for (std::size_t i : {2, 3}) CHECK(s.main.rows[i].runs.front() != r.main.rows[i].runs.front());
-  for (const EvalRow& row : s.main.rows)
-    for (const GraspScores& sc : row.runs.front())
+  for (const ScoreRow& row : s.main.rows)
+    for (const auto& sc : row.runs.front())
       for (double v : sc) CHECK(std::isfinite(v));
   CHECK(cs.to_json()["heads"]["standardize_features"] == true);
   CHECK(cs.to_json()["heads"]["sequence_pooling"] == "attentive");
@@ -365,7 +366,7 @@ TEST_CASE("run_grasp_eval with a pre-training cache: the tables and pre-training
   REQUIRE(restored.main.rows.size() == 2);  // constant, Tactile-JEPA
   CHECK(restored.main.rows[1].name == "Tactile-JEPA, frozen");
   const auto first_jepa = std::find_if(first.main.rows.begin(), first.main.rows.end(),
-                                       [](const EvalRow& row) { return row.name == "Tactile-JEPA, frozen"; });
+                                       [](const ScoreRow& row) { return row.name == "Tactile-JEPA, frozen"; });
   REQUIRE(first_jepa != first.main.rows.end());
   CHECK(restored.main.rows[1].runs == first_jepa->runs);
 

@@ -217,12 +217,14 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
     const auto j = nlohmann::json::parse(read_file(pb.out));
     REQUIRE(j["results"].size() == 2);
     for (const auto& r : j["results"]) {
-      CHECK(r["indenter_accuracy"].get<double>() >= 0.0);
-      CHECK(r["indenter_accuracy"].get<double>() <= 1.0);
-      for (double v : r["force_rmse"]) CHECK(std::isfinite(v));
+      CHECK(r["mean"]["indenter_accuracy"].get<double>() >= 0.0);
+      CHECK(r["mean"]["indenter_accuracy"].get<double>() <= 1.0);
+      for (const char* k : {"force_rmse_u", "force_rmse_v", "force_rmse_n", "force_rmse"})
+        CHECK(std::isfinite(r["mean"][k].get<double>()));
       CHECK(r["windows"].get<int>() > 0);
     }
-    CHECK(pout.str().find("RMSE u/N") != std::string::npos);
+    CHECK(pout.str().find("| encoder | RMSE u (N) ↓ | RMSE v (N) ↓ | RMSE n (N) ↓ | RMSE avg (N) ↓ | indenter top-1 (%) ↑ | probe lr |") !=
+          std::string::npos);
   }
 
   SUBCASE("probe on labelled files") {
@@ -536,47 +538,48 @@ TEST_CASE("run config: the objective's reference options reach the training step
   CHECK(back.to_json() == r.to_json());
 }
 
-TEST_CASE("probe rows: repeats average to the mean with the sample standard deviation") {
+TEST_CASE("probe rows: repeats as samples of one row / mean ± sd in the score table / diverged repeats left out") {
   std::vector<ProbeRow> runs(3);
   const double u[3] = {1.0, 2.0, 4.0}, acc[3] = {0.5, 0.25, 0.75};
   for (int i = 0; i < 3; ++i) {
-    runs[static_cast<std::size_t>(i)].metrics.force_rmse = {u[i], 2 * u[i], 0.5};
-    runs[static_cast<std::size_t>(i)].metrics.indenter_accuracy = acc[i];
-    runs[static_cast<std::size_t>(i)].metrics.windows = 10;
-    runs[static_cast<std::size_t>(i)].lr = 1e-3 * (i + 1);
-    runs[static_cast<std::size_t>(i)].seconds = 1.5;
+    ProbeMetrics m;
+    m.force_rmse = {u[i], 2 * u[i], 0.5};
+    m.indenter_accuracy = acc[i];
+    m.windows = 10;
+    runs[static_cast<std::size_t>(i)] = ProbeRow{"#" + std::to_string(i), {m}, {1e-3 * (i + 1)}, 1.5, {}};
   }
   const ProbeRow r = average_rows("avg", runs);
-  CHECK(r.metrics.force_rmse[0] == doctest::Approx(7.0 / 3));
-  CHECK(r.metrics.force_rmse[1] == doctest::Approx(14.0 / 3));
-  CHECK(r.metrics.force_rmse[2] == doctest::Approx(0.5));
-  // sample sd of {1, 2, 4}: sqrt(((4/3)^2 + (1/3)^2 + (5/3)^2) / 2) = sqrt(7/3)
-  CHECK(r.spread.force_rmse[0] == doctest::Approx(std::sqrt(7.0 / 3)));
-  CHECK(r.spread.force_rmse[1] == doctest::Approx(2 * std::sqrt(7.0 / 3)));
-  CHECK(r.spread.force_rmse[2] == doctest::Approx(0.0));
-  CHECK(r.metrics.indenter_accuracy == doctest::Approx(0.5));
-  CHECK(r.spread.indenter_accuracy == doctest::Approx(0.25));
-  CHECK(r.metrics.windows == 10);
-  CHECK(r.seconds == doctest::Approx(4.5));
   CHECK(r.runs.size() == 3);
-  std::ostringstream out;
-  print_probe_table(out, {r});
-  CHECK(out.str().find("2.333 ± 1.528") != std::string::npos);
-  CHECK(out.str().find("50.0% ± 25.0") != std::string::npos);
-  CHECK(out.str().find("1e-03,2e-03,3e-03") != std::string::npos);
-  const auto j = probe_rows_json({r});
-  CHECK(j[0]["repeats"].size() == 3);
-  CHECK(j[0]["flag"] == "");
+  CHECK(r.seconds == doctest::Approx(4.5));
+  const ScoreTable t = probe_score_table({r});
+  const ScoreRow& row = t.rows.front();
+  CHECK(row.summary(0).mean == doctest::Approx(7.0 / 3));
+  CHECK(row.summary(1).mean == doctest::Approx(14.0 / 3));
+  CHECK(row.summary(2).mean == doctest::Approx(0.5));
+  // sample sd of {1, 2, 4}: sqrt(((4/3)^2 + (1/3)^2 + (5/3)^2) / 2) = sqrt(7/3)
+  CHECK(row.summary(0).sd == doctest::Approx(std::sqrt(7.0 / 3)));
+  CHECK(row.summary(1).sd == doctest::Approx(2 * std::sqrt(7.0 / 3)));
+  CHECK(row.summary(2).sd == doctest::Approx(0.0));
+  CHECK(row.summary(3).mean == doctest::Approx((7.0 / 3 + 14.0 / 3 + 0.5) / 3));  // the axes' mean
+  CHECK(row.summary(4).mean == doctest::Approx(0.5));
+  CHECK(row.summary(4).sd == doctest::Approx(0.25));
+  const std::string md = t.markdown();
+  CAPTURE(md);
+  CHECK(md.find("| avg | 2.333 ± 1.528 | 4.667 ± 3.055 | 0.500 ± 0.000 |") != std::string::npos);
+  CHECK(md.find("| 50.0 ± 25.0 | 1e-03,2e-03,3e-03 |") != std::string::npos);
+  const auto j = t.to_json();
+  CHECK(j["rows"][0]["runs"].size() == 3);
+  CHECK(!j["rows"][0].contains("note"));
+  CHECK(j["rows"][0]["windows"] == 10);
+  CHECK(j["rows"][0]["sd"]["force_rmse_u"].get<double>() == doctest::Approx(std::sqrt(7.0 / 3)));
   // A diverged repeat is left out of the mean and named, not averaged into "66.7 % ± 57.7".
   runs[1].flag = "diverged (validation loss not finite)";
   const ProbeRow d = average_rows("avg", runs);
-  CHECK(d.metrics.force_rmse[0] == doctest::Approx(2.5));
-  CHECK(d.metrics.indenter_accuracy == doctest::Approx(0.625));
+  const ScoreTable td = probe_score_table({d});
+  CHECK(td.rows[0].summary(0).mean == doctest::Approx(2.5));
+  CHECK(td.rows[0].summary(4).mean == doctest::Approx(0.625));
   CHECK(d.flag == "1 of 3 repeats diverged, left out of the mean");
-  std::ostringstream noted;
-  print_probe_table(noted, {d});
-  CHECK(noted.str().find("note: avg: 1 of 3 repeats diverged") != std::string::npos);
-  CHECK(j[0]["force_rmse_sd"][0].get<double>() == doctest::Approx(std::sqrt(7.0 / 3)));
+  CHECK(td.markdown().find("note: avg: 1 of 3 repeats diverged") != std::string::npos);
   CHECK_THROWS_WITH_AS(average_rows("none", {}), doctest::Contains("no probes"), ConfigError);
 }
 

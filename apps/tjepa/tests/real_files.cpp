@@ -365,16 +365,14 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
   CHECK(out.str().find("| ridge on raw windows |") != std::string::npos);
   const auto j = nlohmann::json::parse(read_file(t / "probe.json"));
   REQUIRE(j["results"].size() == 6u);
-  CHECK(j["results"][2]["row"] == "random encoder (frozen), linear");
-  CHECK(j["results"][3]["row"].get<std::string>().starts_with("random encoder (frozen), probe ("));
-  CHECK(j["results"][4]["row"] == "target encoder (frozen), linear");
-  CHECK(j["results"][5]["row"].get<std::string>().starts_with("target encoder (frozen), probe ("));
+  CHECK(j["results"][2]["name"] == "random encoder (frozen), linear");
+  CHECK(j["results"][3]["name"].get<std::string>().starts_with("random encoder (frozen), probe ("));
+  CHECK(j["results"][4]["name"] == "target encoder (frozen), linear");
+  CHECK(j["results"][5]["name"].get<std::string>().starts_with("target encoder (frozen), probe ("));
   CHECK(j["train_windows"] == 30);
   CHECK(j["test_windows"] == 10);
-  for (const auto& r : j["results"]) {
-    REQUIRE(r["rmse"].size() == 2u);
-    for (int a = 0; a < 2; ++a) CHECK(std::isfinite(r["rmse"][a].get<double>()));
-  }
+  for (const auto& r : j["results"])
+    for (const char* k : {"rmse_0", "rmse_1", "mean_rmse"}) CHECK(std::isfinite(r["mean"][k].get<double>()));
   for (int r : {3, 5}) CHECK(j["results"][r].contains("validation_loss"));
   for (int r : {2, 4}) CHECK(j["results"][r].contains("lambda"));
 
@@ -393,8 +391,8 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
     CHECK(r["repeats"] == 2);
     CHECK(r["train_windows"].get<int>() <= 30);
     for (int k : {3, 5}) {
-      CHECK(r["results"][k]["repeats"] == 2);
-      CHECK(std::isfinite(r["results"][k]["sd"].get<double>()));
+      CHECK(std::isfinite(r["results"][k]["sd"]["mean_rmse"].get<double>()));
+      CHECK(r["results"][k]["runs"].size() == 2);
     }
     CHECK(rout.str().find(" ± ") != std::string::npos);
     rep.contact_threshold = 1e6;
@@ -407,12 +405,12 @@ TEST_CASE("probe --task: the user's own labels / constant / ridge / random and c
   pb.force = true;
   REQUIRE(run_probe(pb, out) == 0);
   const auto c = nlohmann::json::parse(read_file(t / "probe.json"));
-  CHECK(c["results"][0].contains("accuracy"));
-  CHECK(c["results"][0]["flag"] == "");
+  CHECK(c["results"][0]["mean"].contains("top1"));
+  CHECK(!c["results"][0].contains("note"));
   pb.train_labels = {(t / "one_class.csv").string()};
   REQUIRE(run_probe(pb, out) == 0);
   const auto one = nlohmann::json::parse(read_file(t / "probe.json"));
-  for (const auto& r : one["results"]) CHECK(r["flag"].get<std::string>().find("the training windows hold one class") != std::string::npos);
+  for (const auto& r : one["results"]) CHECK(r["note"].get<std::string>().find("the training windows hold one class") != std::string::npos);
 
   // One session and its labels, split in time: the first 80 % train, the last 20 % are held out.
   {

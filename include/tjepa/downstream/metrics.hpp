@@ -63,6 +63,7 @@ inline double majority_accuracy(const int* labels, int B, int C) {
 struct ConstantBaseline {
   std::vector<double> mean;  // [columns]: the training values' mean per column (summed in double)
   int majority = -1;         // the most frequent training class; -1 without classes
+  int num_classes = 0;
 
   // values [S, columns] (columns 0: none); labels [S'] in [0, classes) (classes 0: none).
   static ConstantBaseline fit(std::span<const float> values, int columns, std::span<const int> labels, int classes) {
@@ -86,6 +87,7 @@ struct ConstantBaseline {
         ++count[std::size_t(l)];
       }
       c.majority = static_cast<int>(std::max_element(count.begin(), count.end()) - count.begin());
+      c.num_classes = classes;
     }
     return c;
   }
@@ -98,6 +100,17 @@ struct ConstantBaseline {
     return out;
   }
   std::vector<int> classes(std::size_t rows) const { return std::vector<int>(majority >= 0 ? rows : 0, majority); }
+  // A head's outputs for `rows` samples: [rows, columns + classes], the values, then class scores
+  // with 1 for the majority class and 0 for the others.
+  std::vector<double> outputs(std::size_t rows) const {
+    const std::size_t out = mean.size() + static_cast<std::size_t>(num_classes);
+    std::vector<double> y(rows * out, 0.0);
+    for (std::size_t r = 0; r < rows; ++r) {
+      std::copy(mean.begin(), mean.end(), y.begin() + static_cast<std::ptrdiff_t>(r * out));
+      if (majority >= 0) y[r * out + mean.size() + static_cast<std::size_t>(majority)] = 1.0;
+    }
+    return y;
+  }
 };
 
 }  // namespace tjepa

@@ -21,7 +21,7 @@
 //            default), 4L, 4G, 4 I-JEPA blocks, and 2L+2G with a local (connected) context
 //   protocol (paper, Sec. IV-D, evaluation protocol) for each pre-training seed s in `seeds`:
 //            pre-train, then `head_seeds` heads per task (head seed s·1000 + h); the table
-//            (eval/eval_table.hpp) averages the heads per seed, reports mean ± sd over seeds, and
+//            (downstream/score_table.hpp) averages the heads per seed, reports mean ± sd over seeds, and
 //            Welch-tests the best two rows
 //
 // Everything is a function of the config: the same config gives the same table (at the same
@@ -39,7 +39,6 @@
 #include "tjepa/data/drift_tracker.hpp"
 #include "tjepa/data/preprocessor.hpp"
 #include "tjepa/data/window_source.hpp"
-#include "tjepa/eval/eval_table.hpp"
 #include "tjepa/eval/grasp_tasks.hpp"
 #include "tjepa/eval/pretrain_cache.hpp"
 #include "tjepa/graph/skin.hpp"
@@ -239,8 +238,19 @@ inline std::vector<MaskVariant> grasp_mask_ablation(const TrainConfig& c) {
 struct GraspEvalResult {
   // linear: the linear read-outs of the main rows' frozen encoders; ablation_linear: of the
   // ablation's encoders (both with linear_readout).
-  EvalTable main, ablation, linear, ablation_linear;
+  ScoreTable main = grasp_score_table("Simulated grasping hand: frozen encoders, baselines, end to end");
+  ScoreTable ablation = grasp_score_table("Mask ablation (Tactile-JEPA, frozen)");
+  ScoreTable linear =
+      grasp_score_table("Linear read-outs of the frozen encoders (ridge on pad-mean embeddings, on token components)");
+  ScoreTable ablation_linear = grasp_score_table("Mask ablation: linear read-outs (Tactile-JEPA, frozen)");
   nlohmann::json info;  // config, data sizes, timings, pre-training losses
+};
+
+// A row of the protocol (or a group of rows that share one model): whether the config asks for it,
+// and what it does for one pre-training seed, from its own setup to its recorded scores.
+struct GraspEvalRow {
+  bool on = false;
+  std::function<void(std::uint64_t seed)> run;
 };
 
 // Runs the protocol: the main rows seed by seed, then the ablation seed by seed. progress(line)
@@ -270,19 +280,21 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
                         {"test", {{"object", te.object.size()}, {"force", te.force.size()}, {"pose_sequences", te.pose.size()}}}}},
               {"simulate_seconds", seconds(t0)},
               {"pretraining", nlohmann::json::array()}};
-  res.main.title = "Simulated grasping hand: frozen encoders, baselines, end to end";
-  res.ablation.title = "Mask ablation (Tactile-JEPA, frozen)";
-  res.linear.title = "Linear read-outs of the frozen encoders (ridge on pad-mean embeddings, on token components)";
-  res.ablation_linear.title = "Mask ablation: linear read-outs (Tactile-JEPA, frozen)";
   const int axes = d.pretrain->axes();
   const TaxelGraph& graph = d.skin.graph;
   const GraspHeadConfig& hc = c.heads;
 
-  auto row = [](EvalTable& t, const std::string& name) -> EvalRow& {
-    for (EvalRow& r : t.rows)
-      if (r.name == name) return r;
-    t.rows.push_back(EvalRow{name, {}});
-    return t.rows.back();
+  // The run's config at pre-training seed s: every row starts from it.
+  auto seeded = [&](std::uint64_t s) {
+    TrainConfig cfg = c.train;
+    cfg.seed = s;
+    return cfg;
+  };
+  // A baseline's encoder given the graph positions make_jepa_model gives Tactile-JEPA's: every
+  // method starts from the same encoder.
+  auto same_start = [&](auto& model, const TrainConfig& cfg, std::uint64_t s) {
+    if (cfg.model.position_eigenvectors > 0)
+      model.set_positions(graph_positions(graph, cfg.model.dim, cfg.model.position_eigenvectors, cfg.model.position_scale, s));
   };
   auto seeds_of = [&](std::uint64_t s) {
     std::vector<std::uint64_t> h;
@@ -323,8 +335,7 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
   // Pre-trains a Tactile-JEPA model with collator masks (or reads its target encoder from the
   // cache); logs its loss curve's ends and time.
   auto pretrain_jepa = [&](const std::string& name, std::uint64_t s, const MaskVariant* v) {
-    TrainConfig cfg = c.train;
-    cfg.seed = s;
+    TrainConfig cfg = seeded(s);
     if (v) cfg.masks = v->masks;
     auto model = make_jepa_model<float>(cfg, graph, axes, s);
     const nlohmann::json key = cache.key(name, s, {{"train", cfg.to_json()}});
@@ -369,30 +380,33 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
                {{"row", name}, {"seed", s}, {"first_loss", log.front().loss}, {"last_loss", log.back().loss},
                 {"seconds", seconds(t)}});
   };
+  auto no_detail = [](const auto&) { return std::string(); };
 
   {  // the baselines without an encoder
     const auto t = clock::now();
-    row(res.main, "constant").runs.assign(c.seeds.size(), {score_constant(tr, te)});
+    const GraspScores k = score_constant(tr, te);
+    res.main.row("constant").runs.assign(c.seeds.size(), {std::vector<double>(k.begin(), k.end())});
     say("constant: done");
     if (c.ridge) {
-      EvalRow& r = row(res.main, "ridge (pad sums + taxel means)");
+      ScoreRow& r = res.main.row("ridge (pad sums + taxel means)");
       for (std::uint64_t s : c.seeds)
-        r.runs.push_back({score_ridge(*d.train, tr, *d.test, te, d.skin.layout.group, d.skin.layout.num_groups(), s)});
+        r.add_sample(std::vector<GraspScores>{score_ridge(*d.train, tr, *d.test, te, d.skin.layout.group, d.skin.layout.num_groups(), s)});
       say("ridge: done (" + std::to_string(seconds(t)) + " s)");
+      if (c.linear_readout) res.linear.row(r.name) = r;
     }
   }
   // A frozen encoder's scores recorded: its heads in `heads` under name, its linear read-outs (if
   // any) in `linear` under "<linear_name>: pad means" and ": token components".
-  auto record = [&](const FrozenEncoderScores& f, EvalTable& heads, EvalTable& linear, const std::string& name,
+  auto record = [&](const FrozenEncoderScores& f, ScoreTable& heads, ScoreTable& linear, const std::string& name,
                     const std::string& linear_name) {
-    row(heads, name).runs.push_back(f.heads);
+    heads.row(name).add_sample(f.heads);
     if (f.linear) {
-      row(linear, linear_name + ": pad means").runs.push_back({f.linear->group_means});
-      row(linear, linear_name + ": token components").runs.push_back({f.linear->token_components});
+      linear.row(linear_name + ": pad means").add_sample(std::vector<GraspScores>{f.linear->group_means});
+      linear.row(linear_name + ": token components").add_sample(std::vector<GraspScores>{f.linear->token_components});
     }
   };
   // A frozen encoder scored (heads, and the linear read-outs with linear_readout) and recorded.
-  auto frozen_row = [&](EvalTable& heads, EvalTable& linear, const std::string& name, const std::string& linear_name,
+  auto frozen_row = [&](ScoreTable& heads, ScoreTable& linear, const std::string& name, const std::string& linear_name,
                         std::uint64_t s, const ParamSet<float>& params, const Tokenizer& tokenizer,
                         const Encoder& encoder) {
     std::optional<LinearReadoutConfig> readout;
@@ -403,73 +417,78 @@ inline GraspEvalResult run_grasp_eval(const GraspEvalConfig& c, const std::funct
     record(f, heads, linear, name, linear_name);
     return f;
   };
-  if (c.linear_readout && c.ridge) row(res.linear, "ridge (pad sums + taxel means)") = row(res.main, "ridge (pad sums + taxel means)");
+
+  // The rows with an encoder, in the table's order; each pre-training seed runs them all.
+  const std::vector<GraspEvalRow> rows = {
+      {c.random || c.end_to_end,  // the random initial encoder, frozen, and the same encoder trained end to end
+       [&](std::uint64_t s) {
+         const TrainConfig cfg = seeded(s);
+         auto model = make_jepa_model<float>(cfg, graph, axes, s);
+         if (c.random)
+           frozen_row(res.main, res.linear, "random init, frozen", "random init", s, model->target, model->tokenizer,
+                      model->encoder);
+         if (c.end_to_end)
+           res.main.row(end_to_end_name(hc))
+               .add_sample(score_end_to_end(model->context, model->tokenizer, model->encoder, *d.train, tr, *d.test, te,
+                                            hc, seeds_of(s), stage("end to end")));
+       }},
+      {c.mae,
+       [&](std::uint64_t s) {
+         const TrainConfig cfg = seeded(s);
+         MaeModel<float> mae(mae_config(cfg, graph.num_nodes(), axes, c.mae_mask_ratio), s);
+         same_start(mae, cfg, s);
+         const nlohmann::json key = cache.key("MAE", s, {{"train", cfg.to_json()}, {"mae_mask_ratio", c.mae_mask_ratio}});
+         pretrain_baseline("MAE", s, cfg.schedule.steps, key, mae.context,
+                           [&] { return MaeTrainer<float>(mae, *d.pretrain, cfg); }, no_detail);
+         frozen_row(res.main, res.linear, "MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
+       }},
+      {c.dino,  // the teacher encoder, as DINO evaluates (its register row left out of the features)
+       [&](std::uint64_t s) {
+         const TrainConfig cfg = seeded(s);
+         DinoModel<float> dino(dino_config(cfg, graph.num_nodes(), axes), s);
+         same_start(dino, cfg, s);
+         const nlohmann::json key = cache.key("DINO", s, {{"train", cfg.to_json()}});
+         pretrain_baseline("DINO", s, cfg.schedule.steps, key, dino.teacher,
+                           [&] { return DinoTrainer<float>(dino, *d.pretrain, cfg); },
+                           [](const DinoStepStats& st) {
+                             return " (dino " + std::to_string(st.dino) + ", ibot " + std::to_string(st.ibot) +
+                                    ", koleo " + std::to_string(st.koleo) + ")";
+                           });
+         frozen_row(res.main, res.linear, "DINO, frozen", "DINO", s, dino.teacher, dino.tokenizer, dino.encoder);
+       }},
+      {c.byol,  // the online encoder, as T-DEX evaluates; its features one token per cell of the pooled map
+       [&](std::uint64_t s) {
+         const TrainConfig cfg = seeded(s);
+         ByolConfig bc = byol_config(cfg, axes);
+         bc.encoder.image_size = bc.image.image_size = c.byol_image_size;
+         bc.encoder.widths = c.byol_widths;
+         bc.projection = c.byol_projection, bc.hidden = c.byol_hidden;
+         ByolModel<float> byol(bc, s);
+         const TaxelCanvas canvas = TaxelCanvas::from_layout(d.skin.layout);
+         const nlohmann::json key = cache.key("BYOL", s, {{"train", cfg.to_json()}, {"byol", byol.config.to_json()}});
+         pretrain_baseline("BYOL", s, cfg.schedule.steps, key, byol.online,
+                           [&] { return ByolTrainer<float>(byol, *d.pretrain, canvas, cfg); }, no_detail);
+         const int cells = byol.config.encoder.pooled * byol.config.encoder.pooled, C = byol.config.encoder.widths[4];
+         AlignedVector<float> etr = byol_embed(byol, byol.online, canvas, *d.train, tr.windows);
+         AlignedVector<float> ete = byol_embed(byol, byol.online, canvas, *d.test, te.windows);
+         GraspHeadConfig bh = hc;  // attention heads that split its C channels: at most the protocol's
+         while (C % bh.probe_heads != 0) --bh.probe_heads;
+         record(score_frozen_embeddings(std::move(etr), std::move(ete), cells, C, tr, te, bh, seeds_of(s),
+                                        stage("BYOL, frozen")),
+                res.main, res.linear, "BYOL, frozen (random-init AlexNet)", "BYOL");
+       }},
+      {c.jepa,  // the target encoder; also the ablation's default row
+       [&](std::uint64_t s) {
+         auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);
+         const FrozenEncoderScores f = frozen_row(res.main, res.linear, "Tactile-JEPA, frozen", "Tactile-JEPA", s,
+                                                  model->target, model->tokenizer, model->encoder);
+         if (c.ablation) record(f, res.ablation, res.ablation_linear, "2L+2G (default)", "2L+2G (default)");
+       }},
+  };
   for (std::uint64_t s : c.seeds) {
     say("pre-training seed " + std::to_string(s));
-    if (c.random || c.end_to_end) {
-      TrainConfig cfg = c.train;
-      cfg.seed = s;
-      auto model = make_jepa_model<float>(cfg, graph, axes, s);
-      if (c.random)
-        frozen_row(res.main, res.linear, "random init, frozen", "random init", s, model->target, model->tokenizer,
-                   model->encoder);
-      if (c.end_to_end)
-        row(res.main, end_to_end_name(hc))
-            .runs.push_back(score_end_to_end(model->context, model->tokenizer, model->encoder, *d.train, tr, *d.test, te,
-                                             hc, seeds_of(s), stage("end to end")));
-    }
-    if (c.mae) {
-      TrainConfig cfg = c.train;
-      cfg.seed = s;
-      MaeModel<float> mae(mae_config(cfg, graph.num_nodes(), axes, c.mae_mask_ratio), s);
-      if (cfg.model.position_eigenvectors > 0)  // as make_jepa_model: both start from the same encoder
-        mae.set_positions(graph_positions(graph, cfg.model.dim, cfg.model.position_eigenvectors, cfg.model.position_scale, s));
-      const nlohmann::json key = cache.key("MAE", s, {{"train", cfg.to_json()}, {"mae_mask_ratio", c.mae_mask_ratio}});
-      pretrain_baseline("MAE", s, cfg.schedule.steps, key, mae.context, [&] { return MaeTrainer<float>(mae, *d.pretrain, cfg); },
-                        [](const MaeStepStats&) { return std::string(); });
-      frozen_row(res.main, res.linear, "MAE, frozen", "MAE", s, mae.context, mae.tokenizer, mae.encoder);
-    }
-    if (c.dino) {  // the teacher encoder, as DINO evaluates (its register row left out of the features)
-      TrainConfig cfg = c.train;
-      cfg.seed = s;
-      DinoModel<float> dino(dino_config(cfg, graph.num_nodes(), axes), s);
-      if (cfg.model.position_eigenvectors > 0)  // as make_jepa_model: every method starts from the same encoder
-        dino.set_positions(graph_positions(graph, cfg.model.dim, cfg.model.position_eigenvectors, cfg.model.position_scale, s));
-      const nlohmann::json key = cache.key("DINO", s, {{"train", cfg.to_json()}});
-      pretrain_baseline("DINO", s, cfg.schedule.steps, key, dino.teacher, [&] { return DinoTrainer<float>(dino, *d.pretrain, cfg); },
-                        [](const DinoStepStats& st) {
-                          return " (dino " + std::to_string(st.dino) + ", ibot " + std::to_string(st.ibot) + ", koleo " +
-                                 std::to_string(st.koleo) + ")";
-                        });
-      frozen_row(res.main, res.linear, "DINO, frozen", "DINO", s, dino.teacher, dino.tokenizer, dino.encoder);
-    }
-    if (c.byol) {  // the online encoder, as T-DEX evaluates; its features one token per cell of the pooled map
-      TrainConfig cfg = c.train;
-      cfg.seed = s;
-      ByolConfig bc = byol_config(cfg, axes);
-      bc.encoder.image_size = bc.image.image_size = c.byol_image_size;
-      bc.encoder.widths = c.byol_widths;
-      bc.projection = c.byol_projection, bc.hidden = c.byol_hidden;
-      ByolModel<float> byol(bc, s);
-      const TaxelCanvas canvas = TaxelCanvas::from_layout(d.skin.layout);
-      const nlohmann::json key = cache.key("BYOL", s, {{"train", cfg.to_json()}, {"byol", byol.config.to_json()}});
-      pretrain_baseline("BYOL", s, cfg.schedule.steps, key, byol.online,
-                        [&] { return ByolTrainer<float>(byol, *d.pretrain, canvas, cfg); },
-                        [](const ByolStepStats&) { return std::string(); });
-      const int cells = byol.config.encoder.pooled * byol.config.encoder.pooled, C = byol.config.encoder.widths[4];
-      AlignedVector<float> etr = byol_embed(byol, byol.online, canvas, *d.train, tr.windows);
-      AlignedVector<float> ete = byol_embed(byol, byol.online, canvas, *d.test, te.windows);
-      GraspHeadConfig bh = hc;  // attention heads that split its C channels: at most the protocol's
-      while (C % bh.probe_heads != 0) --bh.probe_heads;
-      record(score_frozen_embeddings(std::move(etr), std::move(ete), cells, C, tr, te, bh, seeds_of(s), stage("BYOL, frozen")),
-             res.main, res.linear, "BYOL, frozen (random-init AlexNet)", "BYOL");
-    }
-    if (c.jepa) {
-      auto model = pretrain_jepa("Tactile-JEPA", s, nullptr);
-      const FrozenEncoderScores f = frozen_row(res.main, res.linear, "Tactile-JEPA, frozen", "Tactile-JEPA", s,
-                                               model->target, model->tokenizer, model->encoder);
-      if (c.ablation) record(f, res.ablation, res.ablation_linear, "2L+2G (default)", "2L+2G (default)");
-    }
+    for (const GraspEvalRow& r : rows)
+      if (r.on) r.run(s);
     res.info["total_seconds"] = seconds(t0);
     if (after_seed) after_seed(res);
   }

@@ -35,6 +35,7 @@
 #include "tjepa/downstream/probe_head.hpp"
 #include "tjepa/downstream/probe_labels.hpp"
 #include "tjepa/downstream/ridge.hpp"
+#include "tjepa/downstream/score_table.hpp"
 #include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/sim/grasp_objects.hpp"
 #include "tjepa/sim/grasping_hand.hpp"
@@ -193,6 +194,15 @@ enum GraspMetricIndex : int {
   kPoseX, kPoseY, kPoseTheta, kPoseWithin2cm, kPoseWithin5deg
 };
 using GraspScores = std::array<double, grasp_metrics.size()>;
+
+// A table of the protocol (downstream/score_table.hpp): the grasp metrics as its columns, a row's
+// runs [pre-training seed][head seed].
+inline ScoreTable grasp_score_table(std::string title) {
+  ScoreTable t;
+  t.title = std::move(title);
+  for (const GraspMetric& g : grasp_metrics) t.metrics.push_back({g.key, g.name, g.unit, g.higher_is_better, g.primary});
+  return t;
+}
 
 // Scores from predictions: object classes [S], force [S, 3], pose [Q, L, 3] against te.
 inline void score_object(GraspScores& s, std::span<const int> predicted, const GraspTasks& te) {
