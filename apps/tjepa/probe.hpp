@@ -99,7 +99,8 @@ inline ScoreTable probe_score_table(const std::vector<ProbeRow>& rows) {
     for (double lr : r.lr) {
       char buf[16];
       std::snprintf(buf, sizeof buf, "%.0e", lr);
-      lrs += (lrs.empty() ? "" : ",") + std::string(buf);
+      if (!lrs.empty()) lrs += ',';
+      lrs += buf;
     }
     row.cells = {lrs.empty() ? "-" : lrs};
     row.note = r.flag;
