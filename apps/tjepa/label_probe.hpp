@@ -31,6 +31,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <ostream>
 #include <set>
 #include <span>
@@ -228,6 +229,8 @@ struct LabelProbeRow {
   std::string flag;                 // why the row says little ("" = nothing to say)
   double seconds = 0;
   std::vector<double> outputs;      // [S, R + C] of the first repeat: values and class scores (predictions)
+  std::shared_ptr<const ProbeHead<float>> head;  // probes: the first repeat's head (what --save writes)
+  std::vector<float> center_shift;  // probes with centred tokens: the shift added to the embeddings
 };
 
 inline double constant_validation_loss(const HeadTargets& t, const HeadTrainConfig& cfg) {
@@ -491,9 +494,10 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
                              [&](std::int64_t k, std::int64_t) { bar.update(k, k, ""); });
     auto ete = embed_windows(params, model.tokenizer, model.encoder, test_src, test.window, 32,
                              [&](std::int64_t k, std::int64_t) { bar.update(tr.size() + k, tr.size() + k, ""); });
+    std::vector<float> shift;
     if (set.center_tokens) {
       const std::span<float> test_span(ete);
-      center_token_embeddings<float>(etr, std::span<const std::span<float>>(&test_span, 1), N, d);
+      shift = center_token_embeddings<float>(etr, std::span<const std::span<float>>(&test_span, 1), N, d);
     }
     const double embed_seconds = since(t0);
     // linear read-out of the group means
@@ -517,8 +521,8 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
       HeadTrainConfig c = cfg;
       c.lr = lr, c.seed = seed;
       const PoolingConfig pc{.kind = kind, .tokens = N};
-      ProbeHead<float> head(d, m.config.model.heads, R, C, seed, 0, pc);
-      const HeadTrainResult r = train_head(head, ftr, tr, c);
+      auto head = std::make_shared<ProbeHead<float>>(d, m.config.model.heads, R, C, seed, 0, pc);
+      const HeadTrainResult r = train_head(*head, ftr, tr, c);
       LabelProbeRow row;
       row.name = probe_name(kind);
       row.pooling = to_string(kind);
@@ -526,8 +530,10 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
       row.best_epoch = r.best_epoch;
       row.epochs = r.epochs();
       row.lr = lr;
-      const std::vector<float> yf = predict_head(head, fte, te.size());
+      const std::vector<float> yf = predict_head(*head, fte, te.size());
       score_row(row, std::vector<double>(yf.begin(), yf.end()), test);
+      row.head = std::move(head);
+      row.center_shift = shift;
       return row;
     };
     const std::vector<double> grid = set.lr_grid.empty() ? std::vector<double>{cfg.lr} : set.lr_grid;

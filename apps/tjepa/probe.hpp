@@ -24,6 +24,7 @@
 #include <nlohmann/json.hpp>
 
 #include <tjepa/downstream/embed.hpp>
+#include <tjepa/downstream/head_file.hpp>
 #include <tjepa/downstream/probe_labels.hpp>
 #include <tjepa/eval.hpp>
 
@@ -215,6 +216,7 @@ struct ProbeOptions {
   std::vector<PoolingKind> poolings{PoolingKind::attentive, PoolingKind::taxel};
   std::string predictions;                 // --task: per-window and per-trial predictions CSV ("" = none)
   std::string out;                         // results JSON ("" = none)
+  std::string save;                        // --task: the checkpoint encoder's probe head as a file ("" = none)
   bool force = false;
   bool quiet = false;
 };
@@ -520,6 +522,21 @@ inline int run_label_probe(const ProbeOptions& o, std::ostream& out) {
       for (std::size_t r = 0; r < test_recs.size(); ++r) names.push_back(std::to_string(r));
     write_file_atomic(files.add(o.predictions), label_predictions_csv(rows, test_src, test, class_names, names));
   }
+  if (!o.save.empty()) {
+    // The checkpoint encoder's probe (the last row): the pooling and rate chosen, its first repeat.
+    const LabelProbeRow& probe = rows.back();
+    require<DataError>(probe.head != nullptr, "--save: ", probe.name, " has no head to save (", probe.flag, ")");
+    HeadInfo info;
+    info.task = o.task;
+    info.class_names = task == LabelTask::classification ? class_names : std::vector<std::string>{};
+    info.tau = tau;
+    info.stride = train_src.spec().step();
+    info.encoder = encoder_fingerprint(m, o.encoder == "target" ? model.target : model.context);
+    info.encoder_file = o.checkpoint;
+    info.center_shift = probe.center_shift;
+    save_head(files.add(o.save), *probe.head, info);
+    out << "wrote " << o.save << ": " << probe.name << ", encoder " << info.encoder << "\n";
+  }
   files.commit();
   return 0;
 }
@@ -529,10 +546,11 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   require<ConfigError>(o.encoder == "target" || o.encoder == "context", "--encoder '", o.encoder,
                        "', expected target or context");
   if (!o.out.empty()) OutputFiles::check_new(o.out, o.force);
+  if (!o.save.empty()) OutputFiles::check_new(o.save, o.force);
   if (!o.task.empty()) return run_label_probe(o, out);
   require<ConfigError>(o.trials.table.empty() && o.predictions.empty() && o.data.empty() && o.labels.empty() &&
-                           o.trial_column < 0 && o.poolings.size() == 2,
-                       "--trials, --predictions, --data, --labels, --trial-column and --probe-pooling are for your own labels: give --task regression ",
+                           o.trial_column < 0 && o.poolings.size() == 2 && o.save.empty(),
+                       "--trials, --predictions, --data, --labels, --trial-column, --save and --probe-pooling are for your own labels: give --task regression ",
                        "or classification");
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
@@ -660,6 +678,9 @@ inline CLI::App* add_probe_command(CLI::App& app, ProbeOptions& o) {
       ->check(CLI::IsMember({"auto", "attentive", "taxel"}));
   add_data_format(sub, o.format);
   sub->add_option("--out", o.out, "write the results as JSON here");
+  sub->add_option("--save", o.save,
+                  "--task: write the checkpoint encoder's probe head here (safetensors: the pooling and rate chosen, its "
+                  "first repeat, with task, class names, tau, stride and the encoder's fingerprint)");
   sub->add_flag("--force", o.force, "overwrite --out");
   sub->add_flag("--quiet", o.quiet, "no progress line");
   sub->add_flag("--center-tokens", o.center_tokens,

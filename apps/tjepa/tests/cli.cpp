@@ -730,6 +730,11 @@ TEST_CASE("tjepa probe's command line: --probe-pooling auto tries both poolings 
   o.poolings = {PoolingKind::taxel};
   std::ostringstream out;
   CHECK_THROWS_WITH_AS(run_probe(o, out), doctest::Contains("--probe-pooling are for your own labels"), ConfigError);
+  // --save likewise: the force and indenter probe keeps no head file.
+  CHECK(parse({"tjepa", "probe", "--checkpoint", "c", "--save", "h.safetensors"})->save == "h.safetensors");
+  o.poolings = {PoolingKind::attentive, PoolingKind::taxel};
+  o.save = "h.safetensors";
+  CHECK_THROWS_WITH_AS(run_probe(o, out), doctest::Contains("--save and --probe-pooling are for your own labels"), ConfigError);
 }
 
 }  // TEST_SUITE

@@ -86,10 +86,26 @@ TEST_CASE("trials: FabricSlide slides pre-train on the training trials / the pro
   pb.quiet = true;
   pb.out = (t / "probe.json").string();
   pb.predictions = (t / "pred.csv").string();
+  pb.save = (t / "head.safetensors").string();
   std::ostringstream out;
   REQUIRE(run_probe(pb, out) == 0);
   const std::string text = out.str();
   CHECK(text.find("(12 / 6 trials)") != std::string::npos);
+  {  // The checkpoint encoder's probe as a file: its classes, its windows, the encoder it reads.
+    const TrainedModel m = load_trained_model(pb.checkpoint);
+    const auto head = load_probe_head<float>(pb.save, encoder_fingerprint(m, m.model->target));
+    CHECK(head.info.class_names == std::vector<std::string>{"BeigeCotton", "BrownCotton", "Canvas"});
+    CHECK(head.info.tau == 10);
+    CHECK(head.info.stride == 10);
+    CHECK(head.info.task == "classification");
+    CHECK(head.head.classes == 3);
+    CHECK(text.find("wrote " + pb.save + ": target encoder (frozen), probe (") != std::string::npos);
+    CHECK_THROWS_WITH_AS(load_probe_head<float>(pb.save, encoder_fingerprint(m, m.model->context), "the context encoder"),
+                         doctest::Contains("not on the context encoder"), ConfigError);
+    ProbeOptions again = pb;  // the head file exists: --force
+    again.out.clear(), again.predictions.clear();
+    CHECK_THROWS_WITH_AS(run_probe(again, out), doctest::Contains("head.safetensors"), FileError);
+  }
   CHECK(text.find("| top-1 (%) ↑ | trial top-1 (%) ↑ |") != std::string::npos);
   const auto j = nlohmann::json::parse(read_file(t / "probe.json"));
   REQUIRE(j["results"].size() == 6u);

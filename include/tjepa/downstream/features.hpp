@@ -174,8 +174,9 @@ std::size_t check_fit_and_apply(const char* who, std::span<T> train, std::span<c
 // offsets: on the simulated Allegro hand a random encoder whose position rows have RMS 1 (graph
 // positions) gave force RMSE 1.47 N against 0.97 N with the reference's RMS 0.02 rows, and a
 // pre-trained encoder whose rows had grown stayed at the training mean.
+// Returns the shift [tokens·dim] it added (what a saved head adds to new windows' embeddings).
 template <class T>
-void center_token_embeddings(std::span<T> train, std::span<const std::span<T>> others, int tokens, int dim) {
+std::vector<T> center_token_embeddings(std::span<T> train, std::span<const std::span<T>> others, int tokens, int dim) {
   require<ShapeError>(tokens > 0 && dim > 0, "center_token_embeddings: tokens = ", tokens, ", dim = ", dim,
                       ", expected > 0");
   const std::size_t per = static_cast<std::size_t>(tokens) * dim;
@@ -196,6 +197,7 @@ void center_token_embeddings(std::span<T> train, std::span<const std::span<T>> o
   };
   for (const auto& o : others) apply(o);
   apply(train);
+  return shift;
 }
 
 // Frozen features standardized per channel before a head (in the spirit of MAE's linear probe, a

@@ -116,25 +116,26 @@ struct ProbeHead {
   ColumnScaler scaler;
   int regression = 0, classes = 0;
 
+  // From a whole probe config (c.out_dim = R + C): parameters "probe.*" allocated, left for the
+  // caller to fill (load_probe_head) or initialize.
+  ProbeHead(const ProbeConfig& c, int regression_, int classes_) : regression(regression_), classes(classes_) {
+    require<ConfigError>(regression_ >= 0 && (classes_ == 0 || classes_ > 1) && regression_ + classes_ > 0,
+                         "ProbeHead: regression = ", regression_, ", classes = ", classes_,
+                         ", expected R >= 0, C = 0 or C >= 2, and R + C > 0");
+    require<ConfigError>(c.out_dim == outputs(), "ProbeHead: out_dim = ", c.out_dim, ", expected R + C = ", outputs());
+    probe = AttentiveProbe(params, c);
+    params.allocate();
+    scaler.mean.assign(static_cast<std::size_t>(regression), 0.0);
+    scaler.std.assign(static_cast<std::size_t>(regression), 1.0);
+  }
   // head_hidden 0: dim. Parameters "probe.*" initialized from seed. pooling: the probe's pooling
   // (attentive: the paper's).
   ProbeHead(int dim, int heads, int regression_, int classes_, std::uint64_t seed, int head_hidden = 0,
             const PoolingConfig& pooling = {})
-      : regression(regression_), classes(classes_) {
-    require<ConfigError>(regression_ >= 0 && (classes_ == 0 || classes_ > 1) && regression_ + classes_ > 0,
-                         "ProbeHead: regression = ", regression_, ", classes = ", classes_,
-                         ", expected R >= 0, C = 0 or C >= 2, and R + C > 0");
-    ProbeConfig c;
-    c.dim = dim;
-    c.heads = heads;
-    c.head_hidden = head_hidden > 0 ? head_hidden : dim;
-    c.out_dim = outputs();
-    c.pooling = pooling;
-    probe = AttentiveProbe(params, c);
-    params.allocate();
+      : ProbeHead(ProbeConfig{.dim = dim, .heads = heads, .head_hidden = head_hidden > 0 ? head_hidden : dim,
+                              .out_dim = regression_ + classes_, .pooling = pooling},
+                  regression_, classes_) {
     init_params(params, seed);
-    scaler.mean.assign(static_cast<std::size_t>(regression), 0.0);
-    scaler.std.assign(static_cast<std::size_t>(regression), 1.0);
   }
   int outputs() const { return regression + classes; }
 };
