@@ -5,16 +5,18 @@
 // false positive in a system header that -Werror would otherwise turn into an error.
 #undef _OPENMP
 
-// Streaming inference: the frozen encoder (and a force/indenter probe on top) called at
-// control-loop rate over a ring buffer of the last τ frames of the 368-taxel Allegro hand.
+// Streaming inference: the library's Pipeline (downstream/pipeline.hpp) called at control-loop
+// rate on the frames of the 368-taxel Allegro hand, the frozen encoder and a head on top: a trained
+// one (--head, from `tjepa probe --task ... --save`, refused if it was trained on another encoder)
+// or an untrained force (3) and indenter probe of the same cost.
 //
-// Each tick: one new frame arrives [N, m] → drift removed (DriftTracker::step) → preprocessed in place → written into the ring
-// [τ, N, m] → the window is copied out as tokenizer rows [N, m·τ] (oldest frame first) → tokenizer →
-// encoder (all N tokens) → probe → force (3) and indenter logits. Every buffer is made before the
-// loop and the modules' workspaces stop growing after the first tick, so the steady state
-// allocates nothing: every malloc of the process is counted and the example checks it.
+// Each tick: one new frame [N, m] → Pipeline::push: drift removed → preprocessed → into the ring of
+// the last τ frames → window [N, m·τ] → tokenizer → encoder (all N tokens) → head. Every buffer is
+// made before the loop and the workspaces stop growing after the first window, so the steady
+// state allocates nothing: every malloc of the process is counted (apps/common/allocation_counter)
+// and the example checks it.
 //
-//   streaming [--checkpoint runs/demo/checkpoint.safetensors] [--ticks 2000] [--rate 100] [--spin]
+//   streaming [--checkpoint runs/demo/checkpoint.safetensors | --reference-size] [--head head.safetensors] [--ticks 2000] [--rate 100] [--spin]
 //             [--realtime] [--stages] [--controls] [--memory-kib 1024 4096] [--repack] [--precision bf16]
 // Prints latency p50 / p99 / max per tick and the allocations after warm-up. --stages times each
 // stage of every tick (StageClock) and says where the slowest ticks lose their time. --controls
@@ -45,14 +47,12 @@
 #include <thread>
 #include <vector>
 
+#include <allocation_counter.hpp>
+#include <tjepa/downstream/pipeline.hpp>
 #include <tjepa/downstream/probe_labels.hpp>
 #include <tjepa/sim.hpp>
 
-// Every heap allocation of the process, counted at the C level (operator new, std::vector and
-// xsimd's aligned allocator all end in one of these): glibc lets the program interpose them.
 namespace {
-std::atomic<long long> g_allocations{0};
-
 using Clock = std::chrono::steady_clock;
 
 // Latency of each timed tick, and whether the thread was preempted during it (an involuntary
@@ -205,53 +205,21 @@ int calibrate(Control& control, double us) {
 
 }  // namespace
 
-extern "C" {
-void* __libc_malloc(std::size_t);
-void* __libc_calloc(std::size_t, std::size_t);
-void* __libc_realloc(void*, std::size_t);
-void* __libc_memalign(std::size_t, std::size_t);
-
-void* malloc(std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return __libc_malloc(n);
-}
-void* calloc(std::size_t k, std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return __libc_calloc(k, n);
-}
-void* realloc(void* p, std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return __libc_realloc(p, n);
-}
-void* aligned_alloc(std::size_t a, std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return __libc_memalign(a, n);
-}
-void* memalign(std::size_t a, std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return __libc_memalign(a, n);
-}
-int posix_memalign(void** out, std::size_t a, std::size_t n) {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  void* p = __libc_memalign(a, n);
-  if (!p) return ENOMEM;
-  *out = p;
-  return 0;
-}
-}
-
 int main(int argc, char** argv) {
   using namespace tjepa;
   CLI::App app{"Streaming inference of a frozen Tactile-JEPA encoder over a ring buffer of frames"};
-  std::string checkpoint;
+  std::string checkpoint, head_file;
   int ticks = 2000, warmup = 20;
   double rate = 0;
-  bool spin = false, stages = false, controls = false, repack = false, realtime = false;
+  bool spin = false, stages = false, controls = false, repack = false, realtime = false, reference_size = false;
   std::vector<int> memory_kib{1024, 4096};
   app.add_option("--checkpoint", checkpoint, "checkpoint of `tjepa pretrain`/`tjepa demo` (default: random weights, demo size)");
+  app.add_option("--head", head_file, "head of `tjepa probe --task ... --save` (default: an untrained force and indenter probe)");
   app.add_option("--ticks", ticks, "control-loop ticks to time")->capture_default_str();
   app.add_option("--warmup", warmup, "ticks before timing and allocation counting")->capture_default_str();
   app.add_option("--rate", rate, "control-loop rate in Hz (0: back to back)")->capture_default_str();
+  app.add_flag("--reference-size", reference_size,
+               "random weights of the reference's size (d 192, 12 blocks) instead of the demo's (d 96, 4 blocks)");
   app.add_flag("--spin", spin, "busy-wait between ticks instead of sleeping (with --rate)");
   app.add_flag("--realtime", realtime,
                "run under SCHED_FIFO (priority 10), as a control loop would: other threads no longer preempt it");
@@ -288,96 +256,82 @@ int main(int argc, char** argv) {
     const int N = skin.size(), m = sim.axes();
     const Recording baseline = sim.record_baseline(300);
     const SimRecording stream = sim.record(std::max(ticks + warmup, 1000));
-    std::unique_ptr<JepaModel<float>> model;
-    Preprocessor pre;
-    std::optional<DriftTracker> drift;  // the rest readings follow idle taxels, one step per frame
-    int tau = 10;
+    // The model: a checkpoint with its data statistics, or random weights of the demo size with
+    // statistics fitted here (Xela counts: drop-outs, the rest readings subtracted, per-axis scales).
+    TrainedModel tm;
     if (!checkpoint.empty()) {
-      TrainedModel lm = load_trained_model(checkpoint);
-      model = std::move(lm.model);
-      pre = std::move(lm.pre);
-      drift = std::move(lm.drift);
-      tau = lm.config.data.tau;
+      tm = load_trained_model(checkpoint);
     } else {
-      model = std::make_unique<JepaModel<float>>(TrainConfig{}.model_config(N, m), 0);
-      // Xela counts: drop-outs, the rest readings subtracted, per-axis scales of this stream.
+      if (reference_size) tm.config = TrainConfig::reference(1);
+      tm.model = std::make_unique<JepaModel<float>>(tm.config.model_config(N, m), 0);
       Preprocessor p(PreprocessConfig::xela_counts());
       p.fit_baseline(baseline);
       p.fit(std::span<const Recording>(&stream.recording, 1));
-      pre = std::move(p);
-      drift = DriftTracker(DriftTrackerConfig::magnetic());
-      drift->fit(baseline);
+      tm.pre = std::move(p);
+      tm.drift = DriftTracker(DriftTrackerConfig::magnetic());
+      tm.drift->fit(baseline);
     }
-    if (drift) drift->reset();  // this sensor's session starts at its fitted rest readings
-    require<ShapeError>(model->num_tokens() == N && model->config.in_dim == tau * m, "the checkpoint expects ",
-                        model->num_tokens(), " taxels of ", model->config.in_dim, " values, the hand has ", N,
-                        " taxels of ", tau * m);
-    const int d = model->dim();
-    ProbeHead<float> probe(d, model->config.encoder.heads, force_axes, num_indenter_shapes, 1);
-
-    // Everything the loop touches, made once.
-    std::vector<float> ring(static_cast<std::size_t>(tau) * N * m, 0.0f);  // [τ, N, m]
-    std::vector<float> window(ring.size());                                // [N, m·τ] tokenizer rows
-    std::vector<float> tokens(static_cast<std::size_t>(N) * d), emb(tokens.size());
-    std::vector<float> y(static_cast<std::size_t>(probe.outputs()));
-    Workspace<float> ws;
-    ws.frozen_weights = !repack;  // the encoder's weights are packed for the GEMM once, on the first tick
-    ws.precision = precision == "bf16" ? Precision::bf16 : Precision::fp32;
+    const int d = tm.model->dim(), tau = tm.config.data.tau;
+    // The head: a trained one (`tjepa probe --task ... --save`, checked against the encoder), or
+    // an untrained force (3) and indenter probe of the same cost.
+    std::optional<LoadedProbeHead<float>> head;
+    if (!head_file.empty()) {
+      head = load_probe_head<float>(head_file);
+    } else {
+      HeadInfo info;
+      info.task = "force and indenter (untrained)";
+      for (int c = 0; c < num_indenter_shapes; ++c) info.class_names.push_back("indenter " + std::to_string(c));
+      info.tau = tau;
+      info.stride = 1;
+      head = LoadedProbeHead<float>{ProbeHead<float>(d, tm.model->config.encoder.heads, force_axes, num_indenter_shapes, 1),
+                                    std::move(info)};
+    }
     StageClock clock;
+    // Every buffer is made here; the pipeline's workspaces stop growing on the first window.
+    Pipeline pipe(std::move(tm), std::move(head),
+                  PipelineConfig{.column = {},
+                                 .stride = 1,
+                                 .target_encoder = true,
+                                 .precision = precision == "bf16" ? Precision::bf16 : Precision::fp32,
+                                 .frozen_weights = !repack,
+                                 .clock = stages ? &clock : nullptr});
+    require<ShapeError>(pipe.taxels() == N && pipe.axes() == m, "the checkpoint expects ", pipe.taxels(),
+                        " taxels of ", pipe.axes(), " axes, the hand has ", N, " of ", m);
     std::vector<std::vector<std::pair<const char*, double>>> stage_us;  // [tick] (stage, µs), made before the loop
     if (stages) {
-      ws.clock = &clock;
       stage_us.resize(static_cast<std::size_t>(ticks));
       for (auto& v : stage_us) {  // touched now: no page faults while timing
         v.resize(StageClock::capacity);
         v.clear();
       }
     }
-    long long allocations_before = 0;
     rusage usage_before{};  // page faults and preemptions: jitter the allocation count does not show
     double checksum = 0;
-    int head = 0;  // ring slot of the next frame
+    const std::size_t per = static_cast<std::size_t>(N) * m;
     auto tick = [&](int k) {
       clock.start();
-      float* slot = ring.data() + static_cast<std::size_t>(head) * N * m;
-      std::copy_n(stream.recording.frame(k % stream.recording.frames()), static_cast<std::size_t>(N) * m, slot);
-      if (drift) drift->step(slot);
-      pre.apply(slot, 1, N, 1, m);
-      head = (head + 1) % tau;
-      // window[n, a·τ + j] = ring[(head + j) mod τ, n, a]: oldest frame first, each taxel's
-      // window axis-major as the tokenizer reads it (data/window_source.hpp's windows_to_tokens).
-      for (int j = 0; j < tau; ++j) {
-        const float* f = ring.data() + static_cast<std::size_t>((head + j) % tau) * N * m;
-        for (int n = 0; n < N; ++n)
-          for (int a = 0; a < m; ++a)
-            window[(static_cast<std::size_t>(n) * m + a) * tau + j] = f[static_cast<std::size_t>(n) * m + a];
-      }
-      ws.mark("window");
-      model->tokenizer.forward(model->target, window.data(), 1, tokens.data(), ws);
-      ws.mark("tokenizer");
-      model->encoder.forward(model->target, {tokens.data(), 1}, emb.data(), ws);
-      probe.probe.forward(probe.params, {emb.data(), 1, N}, y.data(), ws);
-      ws.mark("probe");
-      checksum += y[0];
+      const PipelineOutput* y = pipe.push({stream.recording.frame(k % stream.recording.frames()), per});
+      if (y) checksum += y->outputs[0];
       if (stages && k >= warmup) {
         auto& v = stage_us[static_cast<std::size_t>(k - warmup)];
         for (int i = 0; i < clock.count(); ++i) v.emplace_back(clock.name(i), 1e-3 * double(clock.elapsed_ns(i)));
       }
     };
     const Timings timings = timed_loop(warmup, ticks, rate, spin, tick, [&] {
-      allocations_before = g_allocations.load();
+      alloc::start();
       getrusage(RUSAGE_SELF, &usage_before);
     });
-    const long long steady_allocations = g_allocations.load() - allocations_before;
+    const long long steady_allocations = alloc::stop();
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
     std::vector<double> sorted = timings.us;
     std::sort(sorted.begin(), sorted.end());
     auto pct = [&](double p) { return quantile(sorted, p); };
+    const JepaConfig& mc = pipe.model().model->config;
     std::printf("streaming: %d taxels x %d axes, window of %d frames, encoder d=%d, %d blocks, %d heads%s, %s products%s\n",
-                N, m, tau, d, model->config.encoder.depth, model->config.encoder.heads,
-                checkpoint.empty() ? " (random weights)" : "", precision_name(ws.precision),
-                ws.precision == Precision::bf16 && !has_native_bf16() ? " (no AVX512-BF16: computed in fp32)" : "");
+                N, m, tau, d, mc.encoder.depth, mc.encoder.heads, checkpoint.empty() ? " (random weights)" : "",
+ precision.c_str(), precision == "bf16" && !has_native_bf16() ? " (no AVX512-BF16: computed in fp32)" : "");
+    std::printf("head: %s\n", pipe.head()->info.task.c_str());
     std::printf("%d ticks after %d warm-up ticks, 1 thread%s%s\n", ticks, warmup,
                 rate > 0 ? (spin ? ", busy-waiting between ticks" : ", sleeping between ticks") : ", back to back",
                 realtime ? ", SCHED_FIFO" : "");

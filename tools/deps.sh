@@ -21,7 +21,7 @@ tjepa_ensure_packages() {
 
 # Packages every build of tjepa's own targets needs.
 TJEPA_BUILD_PACKAGES=(cmake ninja-build g++ ccache libeigen3-dev libxsimd-dev nlohmann-json3-dev
-  doctest-dev libbenchmark-dev libcli11-dev)
+  doctest-dev libbenchmark-dev libcli11-dev libboost-dev)
 
 # What the test suite needs beyond a build: Open MPI for the data-parallel tests (label dist).
 TJEPA_TEST_PACKAGES=("${TJEPA_BUILD_PACKAGES[@]}" libopenmpi-dev openmpi-bin)

@@ -132,6 +132,18 @@ inline int run_convert_from_reference(const ConvertOptions& o, const Safetensors
     const auto rc = json_parse<FileError>(it->second, o.in + ": metadata 'reference.config'");
     if (rc.contains("num_heads") && rc["num_heads"].is_number_integer()) opt.heads = rc["num_heads"].get<int>();
   }
+  // The run config's explicit padding wins over the default of a file without the version marker,
+  // as in the reference (an explicit --padding wins over both).
+  std::string padding_from;
+  if (const auto it = f.metadata.find("reference.config"); it != f.metadata.end() && opt.temporal_padding < 0) {
+    const auto rc = json_parse<FileError>(it->second, o.in + ": metadata 'reference.config'");
+    if (rc.contains("temporal_patch_padding")) {
+      require<FileError>(rc["temporal_patch_padding"].is_number_integer(), o.in,
+                         ": metadata 'reference.config': temporal_patch_padding is not an integer");
+      opt.temporal_padding = rc["temporal_patch_padding"].get<int>();
+      padding_from = " (the run config's temporal_patch_padding)";
+    }
+  }
   const Tensor& pos = detail::reference_tensor(f, "context_encoder.pos_embed");
   const int tokens = pos.shape.size() == 3 ? static_cast<int>(pos.shape[1]) : 0;
   SkinSpec spec;
@@ -185,7 +197,7 @@ inline int run_convert_from_reference(const ConvertOptions& o, const Safetensors
   out << "wrote " << o.out << ": " << c.encoder.num_tokens << " taxels (layout " << spec.layout
       << (spec.order.empty() ? "" : ", order " + spec.order) << "), windows of " << tc.data.tau << " frames x " << c.axes
       << " axes, d " << c.encoder.dim << ", depth " << c.encoder.depth << ", heads " << c.encoder.heads
-      << ", predictor depth " << c.predictor.depth << ", temporal padding " << c.temporal_padding
+      << ", predictor depth " << c.predictor.depth << ", temporal padding " << c.temporal_padding << padding_from
       << (c.encoder.token_types > 0 ? ", taxel types " + std::to_string(c.encoder.token_types) : std::string())
       << (facts.mean.empty() ? std::string(", no in-model normalization") : ", its normalization as preprocessing")
       << "\n"

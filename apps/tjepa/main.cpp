@@ -1,4 +1,4 @@
-// The `tjepa` command: layout / pretrain / probe / embed / convert / demo / eval. `tjepa demo` is the
+// The `tjepa` command: layout / pretrain / probe / embed / convert / demo / eval / run. `tjepa demo` is the
 // README's main job. Each subcommand is one file here that registers its options and runs; this
 // file only parses the command line and dispatches.
 // Any error is one line on stderr ("tjepa: error: ...") and a non-zero exit.
@@ -19,6 +19,7 @@
 #include "layout.hpp"
 #include "pretrain.hpp"
 #include "probe.hpp"
+#include "run.hpp"
 
 #ifdef TJEPA_WITH_MPI
 #include <tjepa/dist/mpi.hpp>
@@ -51,6 +52,8 @@ int main(int argc, char** argv) {
   CLI::App* demo = add_demo_command(app, dm);
   EvalCommand ev;
   CLI::App* eval = add_eval_command(app, ev);
+  RunOptions ro;
+  CLI::App* run = add_run_command(app, ro);
 
   try {
     app.parse(argc, argv);
@@ -82,6 +85,7 @@ int main(int argc, char** argv) {
     if (*convert) return run_convert(co, std::cout);
     if (*eval) return run_eval(ev.resolve(argc, argv, &std::cout), std::cout);
     if (*demo) return run_demo(dm, std::cout);
+    if (*run) return run_live(ro, std::cout);
     return 0;
   };
 #ifdef TJEPA_WITH_MPI

@@ -184,6 +184,19 @@ inline double offset_to_signal_ratio(std::span<const Recording> recs) {
 }
 }  // namespace data_stats
 
+// A model converted from the reference code expects baseline-subtracted readings (the reference's
+// dataset subtracts each taxel's no-contact mean before its model); raw Xela counts would reach it
+// unchanged. Says so, one line, when at least 90 % of the readings lie in Xela's raw range.
+inline void raw_counts_warning(const TrainedModel& m, std::span<const Recording> recs, std::ostream& out) {
+  if (m.converted_from.empty() || m.pre.config().subtract_baseline || recs.empty()) return;
+  const auto [share, lo, hi] = data_stats::xela_range_share(recs);
+  if (share < 0.9) return;
+  out << "warning: " << static_cast<int>(100 * share) << " % of the readings (range " << lo << " .. " << hi
+      << ") are raw Xela counts, but the model converted from " << m.converted_from
+      << " expects baseline-subtracted readings (the reference's dataset subtracts each taxel's no-contact mean "
+         "before its model): subtract the baselines first, or its embeddings are of data it never saw\n";
+}
+
 // The mode `asked` resolves to (auto picks from the data), and why.
 inline PreprocessChoice choose_preprocessing(const std::string& asked, std::span<const Recording> train) {
   require<ConfigError>(!train.empty(), "preprocessing: no training recording");

@@ -113,6 +113,7 @@
 #include "tjepa/downstream/early_stopping.hpp"
 #include "tjepa/downstream/probe_head.hpp"
 #include "tjepa/downstream/head_file.hpp"
+#include "tjepa/downstream/pipeline.hpp"
 #include "tjepa/downstream/probe_labels.hpp"
 #include "tjepa/downstream/sequence_head.hpp"
 #include "tjepa/downstream/ridge.hpp"

@@ -1,9 +1,5 @@
 // nn suite, modules: gradient checks of every module and of a 2-block encoder and predictor end
 // to end, accumulation, and the allocation-free inference path.
-#if defined(__GNUC__) && !defined(__clang__)
-// The replaced operator delete calls free on what the replaced operator new got from malloc.
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
 #include <doctest/doctest.h>
 
 #include <algorithm>
@@ -19,117 +15,12 @@
 #include <tjepa/tjepa.hpp>
 #include <tjepa/model/stage_clock.hpp>  // tested directly below (StageClock)
 
+#include <allocation_counter.hpp>
+
 #include "../support/gradcheck.hpp"
 
-// Counting allocator for the allocation-free inference test. Global operator new is replaced for
-// the whole test binary (it only forwards to malloc). Eigen and xsimd allocate with malloc, not
-// operator new, so without a sanitizer (which owns malloc) malloc itself is interposed too.
-namespace {
-std::atomic<long> g_allocations{0};
-std::atomic<bool> g_counting{false};
-void note_allocation() {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-}
-void* checked(void* p) {
-  if (!p) throw std::bad_alloc();
-  return p;
-}
-}  // namespace
-
-void* operator new(std::size_t n) {
-  note_allocation();
-  return checked(std::malloc(n ? n : 1));
-}
-void* operator new[](std::size_t n) {
-  note_allocation();
-  return checked(std::malloc(n ? n : 1));
-}
-void* operator new(std::size_t n, std::align_val_t a) {
-  note_allocation();
-  const auto al = static_cast<std::size_t>(a);
-  return checked(std::aligned_alloc(al, (n + al - 1) / al * al));
-}
-void* operator new[](std::size_t n, std::align_val_t a) { return operator new(n, a); }
-// The nothrow forms too: the standard library (e.g. std::stable_sort's temporary buffer) uses
-// them, and a replaced delete must never free what a non-replaced new allocated.
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  note_allocation();
-  return std::malloc(n ? n : 1);
-}
-void* operator new[](std::size_t n, const std::nothrow_t& t) noexcept { return operator new(n, t); }
-void* operator new(std::size_t n, std::align_val_t a, const std::nothrow_t&) noexcept {
-  note_allocation();
-  const auto al = static_cast<std::size_t>(a);
-  return std::aligned_alloc(al, (n + al - 1) / al * al);
-}
-void* operator new[](std::size_t n, std::align_val_t a, const std::nothrow_t& t) noexcept {
-  return operator new(n, a, t);
-}
-void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define TJEPA_TEST_ASAN 1
-#endif
-#endif
-#if defined(__SANITIZE_ADDRESS__)
-#define TJEPA_TEST_ASAN 1
-#endif
-#if defined(__GLIBC__) && !defined(TJEPA_TEST_ASAN)
-#define TJEPA_TEST_COUNTS_MALLOC 1
-extern "C" {
-void* __libc_malloc(std::size_t);
-void* __libc_calloc(std::size_t, std::size_t);
-void* __libc_realloc(void*, std::size_t);
-void* __libc_memalign(std::size_t, std::size_t);
-void* malloc(std::size_t n) noexcept {
-  note_allocation();
-  return __libc_malloc(n);
-}
-void* calloc(std::size_t n, std::size_t size) noexcept {
-  note_allocation();
-  return __libc_calloc(n, size);
-}
-void* realloc(void* p, std::size_t n) noexcept {
-  note_allocation();
-  return __libc_realloc(p, n);
-}
-void* aligned_alloc(std::size_t al, std::size_t n) noexcept {
-  note_allocation();
-  return __libc_memalign(al, n);
-}
-int posix_memalign(void** p, std::size_t al, std::size_t n) noexcept {
-  note_allocation();
-  *p = __libc_memalign(al, n);
-  return *p ? 0 : ENOMEM;
-}
-}
-#endif
-
-namespace {
-// Heap allocations made while f runs (all threads).
-template <class F>
-long count_allocations(F&& f) {
-  g_allocations = 0;
-  g_counting = true;
-  f();
-  g_counting = false;
-  return g_allocations.load();
-}
-}  // namespace
-
 using namespace tjepa;
+using tjepa::alloc::count_allocations;
 using test::gradient_error;
 using test::grad_tolerance;
 
@@ -992,7 +883,7 @@ TEST_SUITE("model") {
     run();
     const std::vector<float> first = out;
     const long n = count_allocations(run);
-#ifdef TJEPA_TEST_COUNTS_MALLOC
+#ifdef TJEPA_COUNTS_MALLOC
     MESSAGE("counted operator new and malloc");
 #else
     MESSAGE("counted operator new only (malloc belongs to the sanitizer)");

@@ -15,7 +15,12 @@ import os
 import pickle
 import sys
 
-import torch
+try:
+    import torch
+except ModuleNotFoundError:
+    sys.exit(f"torch_checkpoint.py: this python ({sys.executable}) has no module 'torch'. It needs PyTorch: "
+             "install Debian's python3-torch (apt-get install python3-torch) and run the script with "
+             "/usr/bin/python3 tools/reference/torch_checkpoint.py ...")
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from safetensors_io import read_safetensors, write_safetensors  # noqa: E402

@@ -62,18 +62,58 @@ TEST_SUITE("cli") {
     eo.out = (t / "emb.npy").string();
     eo.quiet = true;
     REQUIRE(cli::run_embed(eo, out) == 0);
-    const NpyArray emb = read_npy(t / "emb.npy");
-    REQUIRE(emb.shape == std::vector<std::int64_t>{3, 12, 8});
-    // Token j of tjepa is the reference's token column[j].
+    CHECK(out.str().find("taxel rows in the recordings' column order") != std::string::npos);
     const auto h = rf::fixture_values(fx, "step0.h");
-    std::vector<double> expected(h.size());
-    for (int w = 0; w < 3; ++w)
-      for (int j = 0; j < 12; ++j)
-        for (int c = 0; c < 8; ++c)
-          expected[(std::size_t(w) * 12 + j) * 8 + c] = h[(std::size_t(w) * 12 + column[std::size_t(j)]) * 8 + c];
-    const double err = rf::fixture_error<float>(std::span<const float>(emb.data(), emb.numel()), expected);
-    MESSAGE("tjepa embed on the converted fixture model against its target encoder: relative error ", err);
-    CHECK(err < 1e-5);
+    {  // Row c is the recording's column c: the reference's token c, its target encoder's output.
+      const NpyArray emb = read_npy(t / "emb.npy");
+      REQUIRE(emb.shape == std::vector<std::int64_t>{3, 12, 8});
+      const double err = rf::fixture_error<float>(std::span<const float>(emb.data(), emb.numel()),
+                                                  std::vector<double>(h.begin(), h.end()));
+      MESSAGE("tjepa embed on the converted fixture model against its target encoder: relative error ", err);
+      CHECK(err < 1e-5);
+    }
+    {  // --rows layout: token j of tjepa's layout is the reference's token column[j].
+      eo.rows = "layout";
+      eo.force = true;
+      REQUIRE(cli::run_embed(eo, out) == 0);
+      const NpyArray emb = read_npy(t / "emb.npy");
+      std::vector<double> expected(h.size());
+      for (int w = 0; w < 3; ++w)
+        for (int j = 0; j < 12; ++j)
+          for (int c = 0; c < 8; ++c)
+            expected[(std::size_t(w) * 12 + j) * 8 + c] = h[(std::size_t(w) * 12 + column[std::size_t(j)]) * 8 + c];
+      CHECK(rf::fixture_error<float>(std::span<const float>(emb.data(), emb.numel()), expected) < 1e-5);
+      eo.rows = "taxels";
+      CHECK_THROWS_WITH_AS(cli::run_embed(eo, out), doctest::Contains("--rows 'taxels', expected recording or layout"),
+                           ConfigError);
+      eo.rows = "recording";
+    }
+    {  // Raw Xela counts into a converted model: said, once.
+      std::vector<float> raw(rec.size());
+      for (std::size_t k = 0; k < raw.size(); ++k) raw[k] = 30000.0f + 50.0f * rec[k];
+      write_npy(t / "raw.npy", std::span<const float>(raw), std::span<const std::int64_t>(shape));
+      cli::EmbedOptions ro = eo;
+      ro.data = {(t / "raw.npy").string()};
+      ro.out = (t / "raw_emb.npy").string();
+      std::ostringstream warned;
+      REQUIRE(cli::run_embed(ro, warned) == 0);
+      CHECK(warned.str().find("are raw Xela counts, but the model converted from " + (t / "ref.safetensors").string() +
+                              " expects baseline-subtracted readings") != std::string::npos);
+      CHECK(out.str().find("raw Xela counts") == std::string::npos);
+    }
+    {  // The run config's explicit temporal_patch_padding: 0 wins over the default for a file without the marker.
+      SafetensorsFile zero = ref;
+      zero.metadata["reference.config"] =
+          R"({"num_heads": 2, "sequence_length": 6, "time_chunk_size": 6, "temporal_patch_padding": 0})";
+      save_safetensors(t / "zero.safetensors", zero);
+      cli::ConvertOptions zo = co;
+      zo.in = (t / "zero.safetensors").string();
+      zo.out = (t / "zero_tjepa.safetensors").string();
+      std::ostringstream zout;
+      REQUIRE(cli::run_convert(zo, zout) == 0);
+      CHECK(zout.str().find("temporal padding 0 (the run config's temporal_patch_padding)") != std::string::npos);
+      CHECK(load_trained_model(zo.out).model->config.temporal_padding == 0);
+    }
 
     // Back to the reference: the same tensors, bit for bit.
     cli::ConvertOptions back;

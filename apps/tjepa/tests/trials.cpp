@@ -8,6 +8,8 @@
 #include "../pretrain.hpp"
 #include "../embed.hpp"
 #include "../probe.hpp"
+#include "../run.hpp"
+#include "xserver_peer.hpp"
 
 #include "../../../tests/support/files.hpp"
 
@@ -179,6 +181,70 @@ TEST_CASE("trials: FabricSlide slides pre-train on the training trials / the pro
   }
   CHECK(windows == 6 * j["test_windows"].get<int>());
   for (const auto& [row, n] : trial_rows) CHECK(n == 6);
+
+  // tjepa run: the saved head on a held-out trial, replayed from its file and streamed by the
+  // xServer test peer, predicts what probe predicted on the same windows.
+  {
+    const std::string trial = "Canvas_F120_V150mmps_2.csv";
+    std::map<int, std::string> probe_says;  // the window's last frame → the class predicted
+    std::ifstream again(t / "pred.csv");
+    std::getline(again, line);
+    while (std::getline(again, line)) {
+      const auto f = fields(line);
+      if (f[0].starts_with("target encoder (frozen), probe") && f[1] == "window" && f[2] == trial)
+        probe_says[std::stoi(f[4]) + std::stoi(f[5]) - 1] = f[7];
+    }
+    REQUIRE(probe_says.size() >= 10u);
+    auto run_says = [&](const fs::path& csv) {
+      std::map<int, std::string> says;
+      std::ifstream in(csv);
+      std::string row;
+      std::getline(in, row);
+      CHECK(row == "window,frame,time,gap,prediction,p_BeigeCotton,p_BrownCotton,p_Canvas");
+      while (std::getline(in, row)) {
+        const auto f = fields(row);
+        REQUIRE(f.size() == 8u);
+        says[std::stoi(f[1])] = f[4];
+      }
+      return says;
+    };
+    RunOptions ro;
+    ro.model = pb.checkpoint;
+    ro.head = pb.save;
+    ro.source = "replay:" + (set / trial).string();
+    ro.format = fabric_format();
+    ro.rate = 0;
+    ro.out = (t / "run_replay.csv").string();
+    std::ostringstream rout;
+    REQUIRE(run_live(ro, rout) == 0);
+    CHECK(run_says(ro.out) == probe_says);
+    CHECK(rout.str().find("problems: none") != std::string::npos);
+    CHECK(rout.str().find("allocations after the first window: pipeline 0,") != std::string::npos);
+    CHECK(rout.str().find("latency of a window") != std::string::npos);
+
+    const Recording rec = read_recording(set / trial, fabric_format());
+    std::vector<std::string> messages{tjepa_test::xserver_welcome()};
+    for (int f = 0; f < rec.frames(); ++f)
+      messages.push_back(tjepa_test::xserver_frame(0.01 * f, std::vector<float>(rec.frame(f), rec.frame(f) + rec.taxels()), 1));
+    tjepa_test::XServerPeer peer({messages});
+    RunOptions xo = ro;
+    xo.source = "ws://127.0.0.1:" + std::to_string(peer.port());
+    xo.format = DataFormat{};
+    xo.reconnects = 0;
+    xo.out = (t / "run_xserver.csv").string();
+    std::ostringstream xout;
+    REQUIRE(run_live(xo, xout) == 0);
+    CHECK(run_says(xo.out) == probe_says);
+    CHECK(xout.str().find("problems: connection dropped 1;") != std::string::npos);  // the peer's close at the end
+    xo.out.clear();
+    xo.format.columns = "3:19";
+    CHECK_THROWS_WITH_AS(run_live(xo, xout), doctest::Contains("--columns and --lines-per-frame are for replay:FILE"),
+                         ConfigError);
+    RunOptions no_head = ro;
+    no_head.head.clear();
+    CHECK_THROWS_WITH_AS(run_live(no_head, xout), doctest::Contains("--out writes the head's predictions: give --head"),
+                         ConfigError);
+  }
 
   // embed over the table's trials: one row per window, and a CSV saying which is which.
   EmbedOptions eo;

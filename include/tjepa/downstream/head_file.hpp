@@ -65,11 +65,14 @@ std::string encoder_fingerprint(const ParamSet<T>& params, std::span<const Named
 }
 
 // The fingerprint of a trained model's encoder (its target or its context parameters) with the
-// data statistics the model makes its windows with.
+// data statistics the model makes its windows with: the preprocessor's, and the drift tracker's
+// fitted state (not its running rest readings, "drift.rest", which follow whatever it tracked
+// last; every recording and stream starts from the fitted ones).
 inline std::string encoder_fingerprint(const TrainedModel& m, const ParamSet<float>& encoder) {
   std::vector<NamedTensor> statistics = m.pre.state();
   if (m.drift)
-    for (NamedTensor& t : m.drift->state()) statistics.push_back(std::move(t));
+    for (NamedTensor& t : m.drift->state())
+      if (t.name != "drift.rest") statistics.push_back(std::move(t));
   return encoder_fingerprint(encoder, statistics);
 }
 

@@ -71,6 +71,10 @@ struct TrainedModel {
   Preprocessor pre;                   // not ready() when the run stored no statistics
   std::optional<DriftTracker> drift;  // when the run tracked drift: apply it to new recordings first
   std::int64_t step = 0;
+  // Converted from the reference code's checkpoint (`tjepa convert`; its "reference.source"):
+  // such a model expects recordings whose baselines are already subtracted, as the reference's
+  // dataset does before its model. Empty for a tjepa run.
+  std::string converted_from;
 
   // The run's drift tracking over a new recording (from the fitted rest readings); no-op without.
   void track(Recording& rec) {
@@ -133,6 +137,7 @@ inline TrainedModel load_trained_model(const std::filesystem::path& path) {
     fail<FileError>(path.string(), ": data statistics: ", e.what());
   }
   m.step = st.step;
+  if (const auto src = file.metadata.find("reference.source"); src != file.metadata.end()) m.converted_from = src->second;
   return m;
 }
 
