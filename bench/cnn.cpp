@@ -18,7 +18,7 @@
 #include <omp.h>
 #endif
 
-#include <tjepa/tjepa.hpp>
+#include <tjepa/baselines.hpp>
 
 namespace {
 
