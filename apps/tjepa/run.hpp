@@ -164,6 +164,11 @@ inline int run_live(const RunOptions& o, std::ostream& out) {
         const long a0 = alloc::allocations.load();
         if (!source->next(frame, fi)) break;
         const long a1 = alloc::allocations.load();
+        if (frames == 0) {  // raw counts into a model that expects them baseline-subtracted: said once
+          Recording first(1, N, axes);
+          std::copy(frame.begin(), frame.end(), first.mutable_data());
+          raw_counts_warning(pipe.model(), std::span<const Recording>(&first, 1), out);
+        }
         if (fi.gap) {
           pipe.restart();
           ++restarts;

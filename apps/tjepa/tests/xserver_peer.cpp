@@ -24,6 +24,7 @@ struct XServerPeer::Impl {
   tcp::acceptor acceptor{ioc};
   std::vector<std::vector<std::string>> connections;
   double rate = 0;
+  unsigned short port = 0;  // read before the thread starts: the acceptor closes after the last connection
   std::thread thread;
 
   void serve() {
@@ -64,6 +65,7 @@ XServerPeer::XServerPeer(std::vector<std::vector<std::string>> connections, doub
   impl_->acceptor.set_option(net::socket_base::reuse_address(true));
   impl_->acceptor.bind(at);
   impl_->acceptor.listen();
+  impl_->port = impl_->acceptor.local_endpoint().port();
   impl_->thread = std::thread([this] { impl_->serve(); });
 }
 
@@ -75,7 +77,7 @@ XServerPeer::~XServerPeer() {
   }
 }
 
-unsigned short XServerPeer::port() const { return impl_->acceptor.local_endpoint().port(); }
+unsigned short XServerPeer::port() const { return impl_->port; }
 
 void XServerPeer::join() {
   if (impl_->thread.joinable()) impl_->thread.join();
