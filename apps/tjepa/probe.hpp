@@ -53,6 +53,8 @@ struct ProbeRow {
   std::vector<double> lr;          // each run's learning rate (none for the constant)
   double seconds = 0;
   std::string flag;                // why the row says little ("" = nothing to say)
+  std::shared_ptr<const ProbeHead<float>> head;  // a frozen probe's first head (what --save writes)
+  std::vector<float> center_shift;               // with --center-tokens: the shift added to the embeddings
 };
 
 // Repeated probes as one row: other probe seeds, and for a random encoder other initializations.
@@ -61,7 +63,7 @@ struct ProbeRow {
 // all did.
 inline ProbeRow average_rows(std::string name, const std::vector<ProbeRow>& repeats) {
   require<ConfigError>(!repeats.empty(), "average_rows: no probes");
-  ProbeRow row{std::move(name), {}, {}, 0, {}};
+  ProbeRow row{std::move(name), {}, {}, 0, {}, repeats.front().head, repeats.front().center_shift};
   std::vector<const ProbeRow*> kept;
   for (const ProbeRow& r : repeats)
     if (r.flag.find("diverged") == std::string::npos) kept.push_back(&r);
@@ -124,7 +126,7 @@ inline ProbeRow constant_baseline(const ProbeLabels& train, const ProbeLabels& t
                                  test.indenter.data(), test.size(), classes);
   m.majority_accuracy = majority_accuracy(test.indenter.data(), test.size(), classes);
   m.windows = test.size();
-  return ProbeRow{"constant (train mean / majority)", {m}, {}, 0, {}};
+  return ProbeRow{"constant (train mean / majority)", {m}, {}, 0, {}, nullptr, {}};
 }
 
 // A probe head (3 force outputs + the indenter logits) trained early-stopped on the frozen
@@ -146,9 +148,11 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
     embed_progress.update(train.size() + d, train.size() + d, "");
   });
   const double embed_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::vector<float> shift;
   if (center_tokens) {
     const std::span<float> test_span(emb_test);
-    center_token_embeddings<float>(emb_train, std::span<const std::span<float>>(&test_span, 1), enc.num_tokens(), enc.dim());
+    shift = center_token_embeddings<float>(emb_train, std::span<const std::span<float>>(&test_span, 1), enc.num_tokens(),
+                                           enc.dim());
   }
   FrozenFeatures<float> ftrain(std::move(emb_train), enc.num_tokens(), enc.dim());
   FrozenFeatures<float> ftest(std::move(emb_test), enc.num_tokens(), enc.dim());
@@ -166,7 +170,7 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
       std::cerr << "  probe " << label << ": best epoch " << fit.best_epoch + 1 << " of " << fit.epochs()
                 << " (validation loss " << fit.best_validation << ")\n";
     const HeadMetrics hm = evaluate_head(head, ftest, test_targets);
-    ProbeRow row{label, {ProbeMetrics{}}, {c.lr}, 0, {}};
+    ProbeRow row{label, {ProbeMetrics{}}, {c.lr}, 0, {}, nullptr, {}};
     if (!std::isfinite(fit.best_validation)) row.flag = "diverged (validation loss not finite)";
     ProbeMetrics& m = row.runs.front();
     std::copy_n(hm.rmse.begin(), force_axes, m.force_rmse.begin());
@@ -175,6 +179,10 @@ inline ProbeRow frozen_probe(const std::string& name, const ParamSet<float>& par
     m.windows = hm.samples;
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count() +
                   (r == 0 ? embed_seconds : 0.0);
+    if (r == 0) {
+      row.head = std::make_shared<const ProbeHead<float>>(std::move(head));
+      row.center_shift = shift;
+    }
     runs.push_back(std::move(row));
   }
   if (repeats == 1) return runs.front();
@@ -549,8 +557,8 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
   if (!o.save.empty()) OutputFiles::check_new(o.save, o.force);
   if (!o.task.empty()) return run_label_probe(o, out);
   require<ConfigError>(o.trials.table.empty() && o.predictions.empty() && o.data.empty() && o.labels.empty() &&
-                           o.trial_column < 0 && o.poolings.size() == 2 && o.save.empty(),
-                       "--trials, --predictions, --data, --labels, --trial-column, --save and --probe-pooling are for your own labels: give --task regression ",
+                           o.trial_column < 0 && o.poolings.size() == 2,
+                       "--trials, --predictions, --data, --labels, --trial-column and --probe-pooling are for your own labels: give --task regression ",
                        "or classification");
   TrainedModel m = load_trained_model(o.checkpoint);
   JepaModel<float>& model = *m.model;
@@ -608,14 +616,30 @@ inline int run_probe(const ProbeOptions& o, std::ostream& out) {
         r.flag += std::string(r.flag.empty() ? "" : "; ") + "the " + which + " windows hold one indenter class";
   const ScoreTable table = probe_score_table(rows);
   out << table.markdown();
+  OutputFiles files;
   if (!o.out.empty()) {
-    OutputFiles files;
     const nlohmann::json scores = table.to_json();
     write_file_atomic(files.add(o.out), nlohmann::json{{"checkpoint", o.checkpoint}, {"metrics", scores["metrics"]},
                                                        {"results", scores["rows"]}, {"comparisons", scores["comparisons"]}}
                                             .dump(2));
-    files.commit();
   }
+  if (!o.save.empty()) {
+    // The checkpoint encoder's probe (force u, v, normal in N, then the indenter's logits), its first repeat.
+    const ProbeRow& probe = rows.back();
+    require<DataError>(probe.head != nullptr, "--save: ", probe.name, " has no head to save");
+    HeadInfo info;
+    info.task = "force and indenter";
+    info.output_names = {"force_u", "force_v", "force_normal"};
+    for (int c = 0; c < num_indenter_shapes; ++c) info.class_names.push_back(indenter_name(c));
+    info.tau = m.config.data.tau;
+    info.stride = train_src.spec().step();
+    info.encoder = encoder_fingerprint(m, ps);
+    info.encoder_file = o.checkpoint;
+    info.center_shift = probe.center_shift;
+    save_head(files.add(o.save), *probe.head, info);
+    out << "wrote " << o.save << ": " << probe.name << ", encoder " << info.encoder << "\n";
+  }
+  files.commit();
   return 0;
 }
 
@@ -679,8 +703,8 @@ inline CLI::App* add_probe_command(CLI::App& app, ProbeOptions& o) {
   add_data_format(sub, o.format);
   sub->add_option("--out", o.out, "write the results as JSON here");
   sub->add_option("--save", o.save,
-                  "--task: write the checkpoint encoder's probe head here (safetensors: the pooling and rate chosen, its "
-                  "first repeat, with task, class names, tau, stride and the encoder's fingerprint)");
+                  "write the checkpoint encoder's probe head here (safetensors: its first repeat; --task: the pooling and "
+                  "rate chosen), with task, class or output names, tau, stride and the encoder's fingerprint, for tjepa run");
   sub->add_flag("--force", o.force, "overwrite --out");
   sub->add_flag("--quiet", o.quiet, "no progress line");
   sub->add_flag("--center-tokens", o.center_tokens,

@@ -225,6 +225,19 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
     }
     CHECK(pout.str().find("| encoder | RMSE u (N) ↓ | RMSE v (N) ↓ | RMSE n (N) ↓ | RMSE avg (N) ↓ | indenter top-1 (%) ↑ | probe lr |") !=
           std::string::npos);
+    // --save: the force and indenter head as a file, for the encoder it was trained on.
+    pb.save = (t.path / "force_head.safetensors").string();
+    pb.out.clear();
+    REQUIRE(run_probe(pb, pout) == 0);
+    const TrainedModel m2 = load_trained_model(ck);
+    const auto head = load_probe_head<float>(pb.save, encoder_fingerprint(m2, m2.model->target));
+    CHECK(head.head.regression == 3);
+    CHECK(head.head.classes == num_indenter_shapes);
+    CHECK(head.info.output_names == std::vector<std::string>{"force_u", "force_v", "force_normal"});
+    CHECK(head.info.class_names.front() == "sphere");
+    CHECK(head.info.task == "force and indenter");
+    CHECK(head.info.tau == m2.config.data.tau);
+    CHECK(pout.str().find("wrote " + pb.save + ": target encoder (frozen), encoder ") != std::string::npos);
   }
 
   SUBCASE("probe on labelled files") {
@@ -546,7 +559,7 @@ TEST_CASE("probe rows: repeats as samples of one row / mean ± sd in the score t
     m.force_rmse = {u[i], 2 * u[i], 0.5};
     m.indenter_accuracy = acc[i];
     m.windows = 10;
-    runs[static_cast<std::size_t>(i)] = ProbeRow{"#" + std::to_string(i), {m}, {1e-3 * (i + 1)}, 1.5, {}};
+    runs[static_cast<std::size_t>(i)] = ProbeRow{"#" + std::to_string(i), {m}, {1e-3 * (i + 1)}, 1.5, {}, nullptr, {}};
   }
   const ProbeRow r = average_rows("avg", runs);
   CHECK(r.runs.size() == 3);
@@ -730,11 +743,7 @@ TEST_CASE("tjepa probe's command line: --probe-pooling auto tries both poolings 
   o.poolings = {PoolingKind::taxel};
   std::ostringstream out;
   CHECK_THROWS_WITH_AS(run_probe(o, out), doctest::Contains("--probe-pooling are for your own labels"), ConfigError);
-  // --save likewise: the force and indenter probe keeps no head file.
   CHECK(parse({"tjepa", "probe", "--checkpoint", "c", "--save", "h.safetensors"})->save == "h.safetensors");
-  o.poolings = {PoolingKind::attentive, PoolingKind::taxel};
-  o.save = "h.safetensors";
-  CHECK_THROWS_WITH_AS(run_probe(o, out), doctest::Contains("--save and --probe-pooling are for your own labels"), ConfigError);
 }
 
 }  // TEST_SUITE
