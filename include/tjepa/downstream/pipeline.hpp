@@ -117,12 +117,11 @@ class Pipeline {
     }
     if (cfg_.stride == 0) cfg_.stride = 1;
     const std::size_t frame = static_cast<std::size_t>(N_) * axes_;
-    in_.assign(frame, 0.0f);
     ring_.assign(static_cast<std::size_t>(tau_) * frame, 0.0f);
     window_.assign(ring_.size(), 0.0f);
     tokens_.assign(static_cast<std::size_t>(N_) * d_, 0.0f);
     emb_.assign(tokens_.size(), 0.0f);
-    out_emb_.assign(tokens_.size(), 0.0f);
+    if (!cfg_.column.empty()) out_emb_.assign(tokens_.size(), 0.0f);
     ws_.frozen_weights = cfg_.frozen_weights;
     ws_.precision = cfg_.precision;
     ws_.clock = cfg_.clock;
@@ -165,17 +164,19 @@ class Pipeline {
       if (!std::isfinite(frame[k]) && !(nan_ok && std::isnan(frame[k])))
         fail<DataError>("Pipeline::push: frame ", frames_, ": column ", k / static_cast<std::size_t>(axes_), " axis ",
                         k % static_cast<std::size_t>(axes_), " reads ", frame[k], ", expected a finite value");
-    // Into the layout's order: the layout's taxel i reads the recording's column column[i].
+    // Straight into the ring slot, in the layout's order (the layout's taxel i reads the
+    // recording's column column[i]), then drift tracking and preprocessing in place: the frame
+    // was checked above, so nothing below throws and a refused frame leaves the ring as it was.
+    float* slot = ring_.data() + static_cast<std::size_t>(head_slot_) * per;
     if (cfg_.column.empty()) {
-      std::copy(frame.begin(), frame.end(), in_.begin());
+      std::copy(frame.begin(), frame.end(), slot);
     } else {
       for (int i = 0; i < N_; ++i)
         std::copy_n(frame.data() + static_cast<std::size_t>(cfg_.column[static_cast<std::size_t>(i)]) * axes_, axes_,
-                    in_.data() + static_cast<std::size_t>(i) * axes_);
+                    slot + static_cast<std::size_t>(i) * axes_);
     }
-    if (m_.drift) m_.drift->step(in_.data());
-    if (m_.pre.ready()) m_.pre.apply(in_.data(), 1, N_, 1, axes_);
-    std::copy(in_.begin(), in_.end(), ring_.begin() + static_cast<std::ptrdiff_t>(static_cast<std::size_t>(head_slot_) * per));
+    if (m_.drift) m_.drift->step(slot);
+    if (m_.pre.ready()) m_.pre.apply(slot, 1, N_, 1, axes_);
     head_slot_ = (head_slot_ + 1) % tau_;
     ++frames_;
     filled_ = std::min(filled_ + 1, tau_);
@@ -204,16 +205,17 @@ class Pipeline {
     jm.tokenizer.forward(ps, window_.data(), 1, tokens_.data(), ws_);
     ws_.mark("tokenizer");
     jm.encoder.forward(ps, {tokens_.data(), 1}, emb_.data(), ws_, EncoderOptions{.register_rows = false});
-    // Out in the recording's order: the recording's column column[i] is layout taxel i.
+    // Out in the recording's order: the recording's column column[i] is layout taxel i (without
+    // a column map the two orders are one, and the encoder's output is handed out as it is).
+    out_.frame = frames_ - 1;
     if (cfg_.column.empty()) {
-      std::copy(emb_.begin(), emb_.end(), out_emb_.begin());
+      out_.embedding = std::span<const float>(emb_.data(), emb_.size());
     } else {
       for (int i = 0; i < N_; ++i)
         std::copy_n(emb_.data() + static_cast<std::size_t>(i) * d_, d_,
                     out_emb_.data() + static_cast<std::size_t>(cfg_.column[static_cast<std::size_t>(i)]) * d_);
+      out_.embedding = std::span<const float>(out_emb_.data(), out_emb_.size());
     }
-    out_.frame = frames_ - 1;
-    out_.embedding = std::span<const float>(out_emb_.data(), out_emb_.size());
     out_.label = -1;
     if (head_) run_head();
   }
@@ -250,11 +252,10 @@ class Pipeline {
   PipelineConfig cfg_;
   int N_ = 0, d_ = 0, tau_ = 0, axes_ = 0;
   // Buffers, all sized in the constructor.
-  std::vector<float> in_;                  // [N, m] the frame in layout order, preprocessed
-  std::vector<float> ring_;                // [τ, N, m] the last τ frames
+  std::vector<float> ring_;                // [τ, N, m] the last τ frames, layout order, preprocessed
   AlignedVector<float> window_;            // [N, m·τ] tokenizer rows
   AlignedVector<float> tokens_, emb_;      // [N, d]
-  std::vector<float> out_emb_;             // [N, d] in the recording's order
+  std::vector<float> out_emb_;             // [N, d] in the recording's order (with a column map)
   std::vector<float> shifted_;             // [N, d] embeddings + centring shift
   std::vector<float> outputs_;             // [R + C]
   Workspace<float> ws_, head_ws_;
