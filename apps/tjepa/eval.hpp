@@ -1,6 +1,7 @@
 #pragma once
 // tjepa eval and tjepa demo: the downstream protocol on the simulated grasping hand
-// (eval/grasp_eval.hpp), printed and written as results.md, results.json, results.svg.
+// (eval/grasp_eval.hpp) or, with --trials, on the user's labelled trials (trial_eval.hpp), printed
+// and written as results.md, results.json, results.svg.
 #include <CLI/CLI.hpp>
 
 #include <chrono>
@@ -16,6 +17,7 @@
 #include "options.hpp"
 #include "output.hpp"
 #include "setup.hpp"
+#include "trial_eval.hpp"
 
 namespace tjepa::cli {
 
@@ -25,6 +27,9 @@ struct EvalOptions {
   std::string command = "tjepa eval";  // the command line, written into results.md
   bool force = false;
   bool quiet = false;
+  // --trials: the protocol on labelled trials (trial_eval.hpp), pre-training with eval.train.
+  bool on_trials = false;
+  TrialEvalOptions trial;
 };
 
 // The demo: one pre-training seed, one head per task, rows constant / ridge / random / end to
@@ -50,7 +55,37 @@ inline EvalOptions demo_eval_options(std::uint64_t seed) {
   return o;
 }
 
+// tjepa eval --trials: the tables of every label share, rewritten after each pre-training seed.
+inline int run_trial_eval_command(const EvalOptions& o, std::ostream& out) {
+  const std::filesystem::path dir = o.out;
+  out << "tjepa " << version_string << " " << o.command << ": " << o.trial.seeds.size() << " pre-training seed(s) x "
+      << o.trial.head_seeds << " head(s) per row and label share; " << max_threads() << " thread(s)\n" << std::flush;
+  OutputFiles::check_new(dir / "results.json", o.force);
+  std::filesystem::create_directories(dir);
+  auto write = [&](const TrialEvalResult& r) {
+    std::string md = "# " + o.command + "\n";
+    nlohmann::json j = r.info;
+    j["command"] = o.command;
+    j["tables"] = nlohmann::json::array();
+    for (const ScoreTable& t : r.tables) {
+      md += "\n" + t.markdown();
+      j["tables"].push_back(t.to_json());
+    }
+    write_file_atomic(dir / "results.md", md);
+    write_file_atomic(dir / "results.json", j.dump(2));
+    write_file_atomic(dir / "results.svg", r.tables.front().svg());
+    return md;
+  };
+  NullStream null;
+  const TrialEvalResult r = run_trial_eval(o.trial, o.eval.train, o.quiet ? null : out, write);
+  out << "\n" << write(r);
+  out << "total " << format_duration(r.info["total_seconds"].get<double>()) << "; wrote " << dir.string()
+      << "/{results.md, results.json, results.svg}\n";
+  return 0;
+}
+
 inline int run_eval(const EvalOptions& o, std::ostream& out) {
+  if (o.on_trials) return run_trial_eval_command(o, out);
   o.eval.validate();
   const std::filesystem::path dir = o.out;
   out << "tjepa " << version_string << " " << o.command << ": " << o.eval.seeds.size() << " pre-training seed(s) x "
@@ -102,12 +137,38 @@ struct EvalCommand {
   EvalOptions options;
   std::string config;
   nlohmann::json overrides = nlohmann::json::object();
+  bool pooling_given = false;
+  // The flags of one protocol only (set by add_eval_command): given with the other, an error.
+  std::vector<CLI::Option*> grasp_only, trials_only;
+
+  void check_flags(bool on_trials) const {
+    for (const CLI::Option* f : on_trials ? grasp_only : trials_only)
+      require<ConfigError>(f->count() == 0, "tjepa eval: ", f->get_name(), on_trials
+                               ? " is for the simulated grasping hand's protocol, not --trials"
+                               : " is for the protocol on labelled trials: give --trials TABLE");
+    static const char* layout_keys[] = {"layout", "layout_edges", "layout_columns", "bridges", "taxel_order", "tau"};
+    for (const char* k : layout_keys)
+      require<ConfigError>(on_trials || !overrides.contains(k), "tjepa eval: the ", k,
+                           " override is for --trials (the simulated protocol's hand is the Allegro's)");
+    require<ConfigError>(!overrides.contains("seed"), "tjepa eval: --seed does not apply; it pre-trains with each of --seeds");
+  }
 
   // The options to run: config file, then flags, applied to the pre-training config; the command
   // line recorded for results.md.
   // notes: where the note of a shortened warm-up goes (nullptr: nowhere).
   EvalOptions resolve(int argc, const char* const* argv, std::ostream* notes = nullptr) const {
     EvalOptions o = options;
+    o.on_trials = !o.trial.trials.table.empty();
+    check_flags(o.on_trials);
+    if (o.on_trials) {  // the shared flags, and tjepa pretrain's defaults rather than the grasp protocol's
+      TrialEvalOptions& t = o.trial;
+      const GraspEvalConfig& e = o.eval;
+      t.seeds = e.seeds, t.head_seeds = e.head_seeds, t.byol_image_size = e.byol_image_size;
+      t.mae = e.mae, t.dino = e.dino, t.byol = e.byol, t.end_to_end = e.end_to_end, t.random = e.random, t.jepa = e.jepa;
+      t.linear = e.linear_readout, t.ridge = e.ridge;
+      if (pooling_given) t.pooling = e.heads.probe_pooling.kind;
+      o.eval.train = TrainConfig{};
+    }
     if (!config.empty()) o.eval.train.update_from_file(config);
     o.eval.train.update(overrides, "command line");
     NullStream null;
@@ -142,13 +203,7 @@ inline CLI::App* add_eval_command(CLI::App& app, EvalCommand& ev) {
                    "end-to-end patience (epochs; at most the probes' and the sequence head's own)")
       ->capture_default_str();
   eval->add_option("--config", ev.config, "JSON pre-training configuration (TrainConfig keys); flags override it");
-  run_override<int>(eval, "--steps", "steps", ev.overrides, "pre-training steps");
-  run_override<int>(eval, "--warmup", "warmup_steps", ev.overrides, "pre-training warm-up steps");
-  run_override<int>(eval, "--batch", "batch", ev.overrides, "pre-training batch");
-  run_override<int>(eval, "--dim", "dim", ev.overrides, "encoder width d");
-  run_override<int>(eval, "--depth", "depth", ev.overrides, "encoder blocks");
-  run_override<std::string>(eval, "--precision", "precision", ev.overrides,
-                            "arithmetic of the pre-training products: fp32 or bf16 (AVX512-BF16)");
+  add_run_overrides(eval, ev.overrides);
   eval->add_flag("--no-mae", [&e](std::int64_t) { e.mae = false; }, "skip the MAE row");
   eval->add_flag("--no-dino", [&e](std::int64_t) { e.dino = false; }, "skip the DINO row");
   eval->add_flag("--no-byol", [&e](std::int64_t) { e.byol = false; }, "skip the BYOL row");
@@ -163,8 +218,13 @@ inline CLI::App* add_eval_command(CLI::App& app, EvalCommand& ev) {
   eval->add_flag("--standardize-features", e.heads.standardize_features,
                  "the frozen rows' heads read the embeddings standardized per channel (statistics of the training windows)");
   eval->add_option_function<std::string>(
-          "--probe-pooling", [&e](const std::string& v) { e.heads.probe_pooling.kind = tjepa::parse_pooling(v); },
-          "the object and force probes' pooling of a window: attentive (the paper's, default) or taxel (per-taxel read-out)")
+          "--probe-pooling",
+          [&e, &ev](const std::string& v) {
+            e.heads.probe_pooling.kind = tjepa::parse_pooling(v);
+            ev.pooling_given = true;
+          },
+          "the probes' pooling of a window: attentive (the paper's; the grasp protocol's default) or taxel (per-taxel "
+          "read-out; the default with --trials)")
       ->check(CLI::IsMember({"attentive", "taxel"}));
   eval->add_option_function<std::string>(
           "--sequence-pooling", [&e](const std::string& v) { e.heads.sequence_pooling.kind = tjepa::parse_pooling(v); },
@@ -181,6 +241,41 @@ inline CLI::App* add_eval_command(CLI::App& app, EvalCommand& ev) {
   eval->add_option("--pretrain-cache", e.pretrain_cache,
                    "directory of pre-trained encoders kept between runs: a row and seed found there (same config, "
                    "data, threads and tjepa version) is read instead of pre-trained; new ones are written");
+  for (const char* f : {"--data-seed", "--pretrain-frames", "--train-frames", "--test-frames", "--max-object-windows",
+                        "--max-force-windows", "--max-pose-sequences", "--head-epochs", "--head-patience",
+                        "--stop-on-error", "--sequence-epochs", "--sequence-patience", "--end-to-end-epochs",
+                        "--end-to-end-patience", "--no-ablation", "--standardize-features", "--sequence-pooling",
+                        "--pooling-components", "--pretrain-cache"})
+    ev.grasp_only.push_back(eval->get_option(f));
+  // The protocol on labelled trials (trial_eval.hpp).
+  TrialEvalOptions& t = ev.options.trial;
+  const std::size_t before = eval->get_options().size();
+  add_trial_options(eval, t.trials);
+  eval->add_option("--test-fraction", t.test_fraction, "--trials without a split column: the share of trials held out")
+      ->capture_default_str();
+  add_data_format(eval, t.format);
+  eval->add_option("--task", t.task, "--trials: classification (the labels are classes) or regression (numbers)")
+      ->check(CLI::IsMember({"classification", "regression"}))
+      ->capture_default_str();
+  eval->add_option("--preprocess", t.preprocess, "--trials: auto | baseline | standardize | none")->capture_default_str();
+  eval->add_option("--label-fractions", t.label_fractions,
+                   "--trials: shares of the training trials labelled for the heads (per class, at least 2 trials)")
+      ->capture_default_str();
+  eval->add_option("--max-windows", t.max_windows, "--trials: training windows the heads draw from (seeded; 0: all)")
+      ->capture_default_str();
+  eval->add_option("--max-test-windows", t.max_test_windows, "--trials: held-out windows scored (seeded; 0: all)")
+      ->capture_default_str();
+  eval->add_option("--head-steps", t.head_steps, "--trials: frozen heads' steps at most")->capture_default_str();
+  eval->add_option("--head-patience-steps", t.head_patience_steps, "--trials: frozen heads' early-stopping patience (steps)")
+      ->capture_default_str();
+  eval->add_option("--head-lr", t.head.lr, "--trials: heads' learning rate")->capture_default_str();
+  eval->add_option("--end-to-end-steps", t.end_to_end_steps, "--trials: end-to-end heads' steps at most")
+      ->capture_default_str();
+  eval->add_option("--end-to-end-patience-steps", t.end_to_end_patience_steps,
+                   "--trials: end-to-end early-stopping patience (steps)")
+      ->capture_default_str();
+  for (std::size_t k = before; k < eval->get_options().size(); ++k) ev.trials_only.push_back(eval->get_options()[k]);
+  std::erase_if(ev.trials_only, [&](const CLI::Option* f) { return f->get_name() == "--trials"; });
   return eval;
 }
 

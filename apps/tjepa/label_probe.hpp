@@ -407,6 +407,39 @@ inline LabelProbeRow mean_of_runs(std::vector<LabelProbeRow> runs) {
   return row;
 }
 
+// Ridge on features [S, p] of the training samples: outputs [S_test, R + C] for the test features
+// (regression values, then one-hot class scores), λ chosen on a validation split (by the targets'
+// groups when they have them, as the heads').
+struct RidgeOutputs {
+  std::vector<double> y;
+  double lambda = std::numeric_limits<double>::quiet_NaN();
+};
+inline RidgeOutputs ridge_outputs(const Eigen::MatrixXd& Xtr, const HeadTargets& tr, const Eigen::MatrixXd& Xte,
+                                  const HeadTrainConfig& cfg) {
+  const int R = tr.regression, C = tr.classes, out = R + C;
+  const auto S = static_cast<int>(Xte.rows());
+  RidgeOutputs o;
+  o.y.assign(static_cast<std::size_t>(S) * out, 0.0);
+  if (R > 0) {
+    Eigen::MatrixXd Y(tr.size(), R);
+    for (int s = 0; s < tr.size(); ++s)
+      for (int a = 0; a < R; ++a) Y(s, a) = tr.value[static_cast<std::size_t>(s) * R + a];
+    const RidgeModel rm = fit_ridge(Xtr, Y, ridge_lambdas, cfg.validation_fraction, cfg.seed, tr.groups);
+    const Eigen::MatrixXd P = predict(rm, Xte);
+    for (int s = 0; s < S; ++s)
+      for (int a = 0; a < R; ++a) o.y[static_cast<std::size_t>(s) * out + a] = P(s, a);
+    o.lambda = rm.lambda;
+  }
+  if (C > 0) {
+    const RidgeModel rm = fit_ridge_classifier(Xtr, tr.label, C, ridge_lambdas, cfg.validation_fraction, cfg.seed, tr.groups);
+    const Eigen::MatrixXd P = predict(rm, Xte);
+    for (int s = 0; s < S; ++s)
+      for (int c = 0; c < C; ++c) o.y[static_cast<std::size_t>(s) * out + R + c] = P(s, c);
+    o.lambda = rm.lambda;
+  }
+  return o;
+}
+
 // The settings of the heads beyond HeadTrainConfig: the learning rates to choose from on the
 // validation split (empty: cfg.lr alone), and centring the token embeddings first.
 struct LabelProbeSettings {
@@ -429,7 +462,7 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
   const TaxelLayout& layout = skin.layout;
   const HeadTargets& tr = train.targets;
   const HeadTargets& te = test.targets;
-  const int R = tr.regression, C = tr.classes, out = R + C;
+  const int R = tr.regression, C = tr.classes;
   std::vector<LabelProbeRow> rows;
   const std::string one_class =
       C > 0 && distinct_classes(tr.label) < 2 ? "the training windows hold one class" : "";
@@ -447,29 +480,13 @@ inline std::vector<LabelProbeRow> label_probe_rows(const TrainedModel& m, const 
     rows.push_back(row);
   }
   const double constant = rows.front().validation;
-  // A ridge row on features [S, p]: regression outputs and one-hot class scores, λ by validation.
+  // A ridge row on features [S, p] (ridge_outputs).
   auto ridge_row = [&](const std::string& name, const Eigen::MatrixXd& Xtr, const Eigen::MatrixXd& Xte) {
     LabelProbeRow row;
     row.name = name;
-    std::vector<double> y(static_cast<std::size_t>(te.size()) * out, 0.0);
-    if (R > 0) {
-      Eigen::MatrixXd Y(tr.size(), R);
-      for (int s = 0; s < tr.size(); ++s)
-        for (int a = 0; a < R; ++a) Y(s, a) = tr.value[static_cast<std::size_t>(s) * R + a];
-      const RidgeModel rm = fit_ridge(Xtr, Y, ridge_lambdas, cfg.validation_fraction, cfg.seed, tr.groups);
-      const Eigen::MatrixXd P = predict(rm, Xte);
-      for (int s = 0; s < te.size(); ++s)
-        for (int a = 0; a < R; ++a) y[static_cast<std::size_t>(s) * out + a] = P(s, a);
-      row.lambda = rm.lambda;
-    }
-    if (C > 0) {
-      const RidgeModel rm = fit_ridge_classifier(Xtr, tr.label, C, ridge_lambdas, cfg.validation_fraction, cfg.seed, tr.groups);
-      const Eigen::MatrixXd P = predict(rm, Xte);
-      for (int s = 0; s < te.size(); ++s)
-        for (int c = 0; c < C; ++c) y[static_cast<std::size_t>(s) * out + R + c] = P(s, c);
-      row.lambda = rm.lambda;
-    }
-    score_row(row, std::move(y), test);
+    RidgeOutputs r = ridge_outputs(Xtr, tr, Xte, cfg);
+    row.lambda = r.lambda;
+    score_row(row, std::move(r.y), test);
     row.flag = join(one_class, held_out_flag(row, rows.front()));
     return row;
   };

@@ -16,6 +16,7 @@
 #include <numeric>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -92,6 +93,10 @@ struct ScoreTable {
   std::string sample_name = "seeds";  // what a sample is (plural): the JSON key of the samples
   std::vector<std::string> columns;   // extra text columns after the metrics (ScoreRow::cells)
   bool note_column = false;           // a "note" column (otherwise notes follow the table)
+  // Named pairs to test beside the best two, (a, b): H1 "a is better than b" per primary metric
+  // (e.g. a pre-trained encoder against its random initialization). A pair naming a row the table
+  // does not have is left out.
+  std::vector<std::pair<std::string, std::string>> contrasts;
 
   int metric(const std::string& key) const {
     for (std::size_t m = 0; m < metrics.size(); ++m)
@@ -124,15 +129,38 @@ struct ScoreTable {
       std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
         return g.higher_is_better ? mean[a] > mean[b] : mean[a] < mean[b];
       });
-      ScoreComparison c;
-      c.metric = m;
-      c.best = order[0];
-      c.second = order[1];
-      const auto a = rows[static_cast<std::size_t>(c.best)].samples(m), b = rows[static_cast<std::size_t>(c.second)].samples(m);
-      c.tested = a.size() >= 2 && b.size() >= 2;
-      if (c.tested) c.test = welch_t_test(a, b, g.higher_is_better ? Alternative::greater : Alternative::less);
-      else c.test.p = 1.0;
-      out.push_back(c);
+      out.push_back(compare(m, order[0], order[1]));
+    }
+    return out;
+  }
+
+  // Welch's one-sided test of row a against row b on metric m (H1: a is better).
+  ScoreComparison compare(int m, int a, int b) const {
+    const ScoreMetric& g = metrics[static_cast<std::size_t>(m)];
+    ScoreComparison c;
+    c.metric = m;
+    c.best = a;
+    c.second = b;
+    const auto x = rows[static_cast<std::size_t>(a)].samples(m), y = rows[static_cast<std::size_t>(b)].samples(m);
+    c.tested = x.size() >= 2 && y.size() >= 2;
+    if (c.tested) c.test = welch_t_test(x, y, g.higher_is_better ? Alternative::greater : Alternative::less);
+    else c.test.p = 1.0;
+    return c;
+  }
+
+  // The named contrasts' tests, per primary metric (best: the pair's first row, second: its other).
+  std::vector<ScoreComparison> contrast_tests() const {
+    std::vector<ScoreComparison> out;
+    auto index = [&](const std::string& name) {
+      for (std::size_t r = 0; r < rows.size(); ++r)
+        if (rows[r].name == name && !rows[r].runs.empty()) return static_cast<int>(r);
+      return -1;
+    };
+    for (const auto& [a, b] : contrasts) {
+      const int ia = index(a), ib = index(b);
+      if (ia < 0 || ib < 0) continue;
+      for (int m = 0; m < static_cast<int>(metrics.size()); ++m)
+        if (metrics[static_cast<std::size_t>(m)].primary) out.push_back(compare(m, ia, ib));
     }
     return out;
   }
@@ -176,11 +204,14 @@ struct ScoreTable {
       for (const ScoreRow& r : rows)
         if (!r.note.empty()) o << "note: " << r.name << ": " << r.note << "\n";
     const auto cmp = comparisons();
-    if (!cmp.empty()) o << "\n";
-    for (const ScoreComparison& c : cmp) {
+    const auto named = contrast_tests();
+    if (!cmp.empty() || !named.empty()) o << "\n";
+    for (std::size_t k = 0; k < cmp.size() + named.size(); ++k) {
+      const bool best_two = k < cmp.size();
+      const ScoreComparison& c = best_two ? cmp[k] : named[k - cmp.size()];
       const ScoreMetric& g = metrics[static_cast<std::size_t>(c.metric)];
-      o << "- " << g.name << ": best " << rows[static_cast<std::size_t>(c.best)].name << ", second "
-        << rows[static_cast<std::size_t>(c.second)].name;
+      o << "- " << g.name << (best_two ? ": best " : ": ") << rows[static_cast<std::size_t>(c.best)].name
+        << (best_two ? ", second " : " against ") << rows[static_cast<std::size_t>(c.second)].name;
       if (c.tested) {
         std::snprintf(buf, sizeof buf, "%.3g", c.test.p);
         o << "; one-sided Welch t = " << c.test.t << ", df = " << c.test.df << ", p = " << buf;
@@ -232,6 +263,11 @@ struct ScoreTable {
                                   {"best", rows[static_cast<std::size_t>(c.best)].name},
                                   {"second", rows[static_cast<std::size_t>(c.second)].name},
                                   {"tested", c.tested}, {"t", c.test.t}, {"df", c.test.df}, {"p", c.test.p}});
+    for (const ScoreComparison& c : contrast_tests())
+      j["contrasts"].push_back({{"metric", metrics[static_cast<std::size_t>(c.metric)].key},
+                                {"row", rows[static_cast<std::size_t>(c.best)].name},
+                                {"against", rows[static_cast<std::size_t>(c.second)].name},
+                                {"tested", c.tested}, {"t", c.test.t}, {"df", c.test.df}, {"p", c.test.p}});
     return j;
   }
 
