@@ -61,8 +61,8 @@ inline int run_trial_eval_command(const EvalOptions& o, std::ostream& out) {
   out << "tjepa " << version_string << " " << o.command << ": " << o.trial.seeds.size() << " pre-training seed(s) x "
       << o.trial.head_seeds << " head(s) per row and label share; " << max_threads() << " thread(s)\n" << std::flush;
   OutputFiles::check_new(dir / "results.json", o.force);
-  std::filesystem::create_directories(dir);
-  auto write = [&](const TrialEvalResult& r) {
+  auto write = [&](const TrialEvalResult& r) {  // the folder made at the first write: a bad flag leaves none
+    std::filesystem::create_directories(dir);
     std::string md = "# " + o.command + "\n";
     nlohmann::json j = r.info;
     j["command"] = o.command;
