@@ -357,6 +357,7 @@ inline TrialEvalResult run_trial_eval(const TrialEvalOptions& o, const TrainConf
     const auto log = trainer.run();
     res.info["pretraining"].push_back({{"row", name}, {"seed", s}, {"first_loss", log.front().loss},
                                        {"last_loss", log.back().loss}, {"seconds", seconds(t)}});
+    return log;
   };
   auto no_detail = [](const auto&) { return std::string(); };
   auto embed = [&](const ParamSet<float>& p, const Tokenizer& tok, const Encoder& enc) {
@@ -433,20 +434,12 @@ inline TrialEvalResult run_trial_eval(const TrialEvalOptions& o, const TrainConf
     if (o.jepa) {
       auto model = make_jepa_model<float>(cfg, graph, axes, s);
       JepaTrainer<float> trainer(*model, src, graph, cfg);
-      JepaStepStats first, last;
-      const auto t = clock::now();
-      trainer.on_step = [&](const JepaStepStats& st) {
-        if (st.step == 0) first = st;
-        last = st;
-        if ((st.step + 1) % std::max<std::int64_t>(1, cfg.schedule.steps / 10) == 0)
-          say("  Tactile-JEPA seed " + std::to_string(s) + ": step " + std::to_string(st.step + 1) + "/" +
-              std::to_string(cfg.schedule.steps) + ", loss " + std::to_string(st.loss) + ", target std over samples " +
-              std::to_string(st.target_sample_std));
-      };
-      trainer.run();
-      res.info["pretraining"].push_back({{"row", "Tactile-JEPA"}, {"seed", s}, {"first_loss", first.loss},
-                                         {"last_loss", last.loss}, {"first_target_sample_std", first.target_sample_std},
-                                         {"last_target_sample_std", last.target_sample_std}, {"seconds", seconds(t)}});
+      const auto log = pretrain("Tactile-JEPA", s, trainer, cfg.schedule.steps, [](const JepaStepStats& st) {
+        return ", target std over samples " + std::to_string(st.target_sample_std);
+      });
+      nlohmann::json& entry = res.info["pretraining"].back();
+      entry["first_target_sample_std"] = log.front().target_sample_std;
+      entry["last_target_sample_std"] = log.back().target_sample_std;
       auto [etr, ete] = embed(model->target, model->tokenizer, model->encoder);
       frozen_rows("Tactile-JEPA", s, std::move(etr), std::move(ete), model->num_tokens(), model->dim(), cfg.model.heads,
                   true);
