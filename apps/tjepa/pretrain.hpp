@@ -117,8 +117,10 @@ inline std::string mask_size_note(const MaskCollator& c, const TrainConfig& run)
                   m.target_max, m.target_mean);
     s += std::string(buf) +
          (c.per_part() ? " (per-part targets on parts of a few taxels)" : "") +
-         ": the predictor mostly fills single taxels from their neighbours; raise masks.target_ratio in --config" +
-         (c.per_part() ? ", or masks.part_targets \"whole\" (targets across the parts)" : "") + "\n";
+         ": the predictor mostly fills single taxels from their neighbours" +
+         (c.per_part() ? "; masks.part_targets \"whole\" draws targets across the parts" : "") +
+         "; on skins this small, --config examples/configs/small_skin.json (graph positions, normalized targets) "
+         "kept more of each taxel's window on FabricSlide, where larger targets lost more (docs/real_data.md)\n";
   }
   return s;
 }

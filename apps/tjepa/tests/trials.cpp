@@ -288,6 +288,23 @@ TEST_CASE("trials: FabricSlide slides pre-train on the training trials / the pro
   CHECK_THROWS_WITH_AS(run_probe(both, sout), doctest::Contains("--task needs one of: --trials TABLE"), ConfigError);
 }
 
+TEST_CASE("trials: the small-skin config (examples/configs/small_skin.json) is a valid run config / the one-taxel-target warning names it") {
+  using namespace tjepa;
+  using namespace tjepa::cli;
+  TempDir t("trials_small_skin");
+  const fs::path set = data_dir / "fabricslide";
+  PretrainOptions po = trial_run(set, fabric_format(), t / "run", 10);
+  po.config = (fs::path(TJEPA_SOURCE_DIR) / "examples" / "configs" / "small_skin.json").string();
+  std::ostringstream log;
+  REQUIRE(run_pretrain(po, log) == 0);
+  CHECK(log.str().find("most of them one token") != std::string::npos);  // 16 taxels: targets of 1-2
+  CHECK(log.str().find("--config examples/configs/small_skin.json") != std::string::npos);
+  const TrainedModel m = load_trained_model((t / "run" / "checkpoint.safetensors").string());
+  CHECK(m.config.model.position_eigenvectors == 8);
+  CHECK(m.config.step.normalize_targets);
+  CHECK(m.config.model.dim == 16);  // the command line's keys still apply over the file's
+}
+
 TEST_CASE("trials: iCub grasps / a seeded split by trial stratified by object / the same split in pretrain and probe") {
   using namespace tjepa;
   using namespace tjepa::cli;
