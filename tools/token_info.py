@@ -80,13 +80,26 @@ def main():
         fail(f"--columns {a.columns}: {columns[1] - columns[0]} values is not a multiple of --axes {a.axes}")
     taxels = (columns[1] - columns[0]) // a.axes
 
-    index = a.embeddings[0][:-4] + ".windows.csv" if a.embeddings[0].endswith(".npy") else None
-    if index is None:
+    if not a.embeddings[0].endswith(".npy"):
         fail(f"{a.embeddings[0]}: expected a .npy")
-    rows = list(csv.DictReader(open(index)))
+    index = a.embeddings[0][:-4] + ".windows.csv"
+    try:
+        rows = list(csv.DictReader(open(index)))
+    except OSError as e:
+        fail(f"{index}: {e.strerror} (tjepa embed writes it beside the .npy)")
     for need in ("file", "first_frame", "frames", "label", "split"):
         if rows and need not in rows[0]:
             fail(f"{index}: no column '{need}' (written by tjepa embed --trials?)")
+    for path in a.embeddings[1:]:  # every encoder's rows must be the same windows, in the same order
+        if not path.endswith(".npy"):
+            fail(f"{path}: expected a .npy")
+        own = path[:-4] + ".windows.csv"
+        try:
+            other = [(r["file"], r["first_frame"]) for r in csv.DictReader(open(own))]
+        except (OSError, KeyError) as e:
+            fail(f"{own}: cannot read its windows ({e})")
+        if other != [(r["file"], r["first_frame"]) for r in rows]:
+            fail(f"{own}: not the windows of {index} (embed both with the same --trials and --stride)")
     recordings = collections.OrderedDict((r["file"], None) for r in rows)
     for f in recordings:
         recordings[f] = read_recording(f, columns, a.skip_rows, a.lines_per_frame)
