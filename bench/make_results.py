@@ -175,12 +175,13 @@ if jepa:
     print("One Tactile-JEPA pre-training step, batch 8, fp32: the target encoder (EMA copy, drop-path too) "
           "on all N tokens, the context encoder on the K context tokens, the 4-block predictor on each "
           "target (the targets of one size in one pass), MSE, backward, clipping at 10, AdamW, EMA; "
-          "ViT-Tiny d 192, 12 blocks, drop-path 0.3; the masks tjepa's MaskCollator draws (seed 3, "
+          "ViT-Tiny d 192, 12 blocks; the masks tjepa's MaskCollator draws (seed 3, "
           "batch 0; PyTorch gets fixed masks of the same sizes). N 368: the Allegro/Xela skin, m·τ = 30 "
           "per token (`BM_JepaTrainStep/<threads>`); N 528: DECO-50, 2124 taxels in groups of 4 and 5, "
           "τ = 3 (`BM_JepaTrainStepDeco/<threads>`). PyTorch (`jepa_step/<N>` in bench/compare_torch.py) "
-          "is written the way I-JEPA-style reference code runs the step, with timm-style drop-path "
-          "(every sample's branch computed, then masked); tjepa skips a dropped sample's branch. "
+          "is written the way I-JEPA-style reference code runs the step, with timm-style drop-path 0.3 "
+          "(every sample's branch computed, then masked); tjepa runs without drop-path (bench/train.cpp), "
+          "so both compute every branch (tjepa would skip a dropped sample's branch). "
           "The last columns time the reference's own DINOv2 NestedTensorBlock drop-path (at rates > 0.1 "
           "each branch runs on int(0.7·B) = 5 of the 8 samples), when measured. GFLOP: bench/train.cpp's "
           "convention (target encoder 1× forward, context encoder and predictor 3×), the same for both.\n")
@@ -407,12 +408,12 @@ print("|---|---|---|")
 for name, value, ok in goals22:
     print(f"| {name} | {value} | {ok} |")
 # The profile section is bench/profile.sh's (it needs perf), the data-parallel one bench/dist.sh's
-# (it needs mpirun), the AlexNet one and the notes on earlier runs are written by hand: all kept
-# from the current file, below.
+# (it needs mpirun), the latency one bench/latency.sh's, the threads one bench/scale.sh's, the
+# AlexNet one and the notes on earlier runs are written by hand: all kept from the current file, below.
 _previous = pathlib.Path(__file__).with_name("RESULTS.md")
 _previous_text = _previous.read_text() if _previous.exists() else ""
 _kept = [m.group(0) for m in (re.search(rf"<!-- {n}:begin -->.*?<!-- {n}:end -->", _previous_text, flags=re.S)
-                              for n in ("profile", "dist", "cnn", "notes")) if m]
+                              for n in ("profile", "dist", "latency", "scale", "cnn", "notes")) if m]
 if any("85%" in name and ok != "met" for name, _, ok in goals22) and "<!-- profile:begin -->" in _previous_text:
     print("\nWhere the fp32 goals of 85 % of the peak are not met, the section \"Where the fp32 time goes\" "
           "(bench/profile.sh) shows where the rest of the time is: the products against the packing, epilogues "

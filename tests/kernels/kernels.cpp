@@ -10,6 +10,10 @@
 #include <cstdint>
 #include <limits>
 
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
+
 #include <tjepa/kernels.hpp>
 #include <tjepa/tjepa.hpp>
 
@@ -185,7 +189,7 @@ TEST_SUITE("kernels") {
     // block, and products large enough to be split over threads; all three transpositions.
     using detail::sgemm::Order;
     Rng rng(24);
-    for (const GemmOperands& o : gemm_cases({{1, 1, 1}, {7, 3, 17}, {13, 67, 131}, {301, 300, 70}, {97, 513, 64}, {5, 19, 200}}, rng)) {
+    for (const GemmOperands& o : gemm_cases({{1, 1, 1}, {7, 3, 17}, {13, 67, 131}, {301, 300, 70}, {97, 513, 64}, {5, 19, 200}, {1100, 50, 70}}, rng)) {
       const int M = o.M, K = o.K, N = o.N;
       INFO("M ", M, ", K ", K, ", N ", N);
       const auto &x = o.x, &W = o.W, &b = o.b, &g = o.g, &c0 = o.r;
@@ -368,6 +372,51 @@ TEST_SUITE("kernels") {
       CHECK(fast == ref);
     }
 #endif
+  }
+
+  TEST_CASE("a long-depth product (the weight gradients) runs in fixed depth slabs: the same bits on 1 and 2 threads") {
+    // dW [N, K] += gᵀ·x over M rows: M ≥ 2·depth_slab splits the depth into slabs of depth_slab
+    // (the last one partial here), each slab's product a partial, summed in slab order. The slabs
+    // do not depend on the thread count, so neither do the bits; fc2's N < K path (the product
+    // transposed, then added) and bf16 likewise.
+    using detail::sgemm::Order;
+    namespace sg = detail::sgemm;
+    Rng rng(43);
+    const int M = 2 * sg::depth_slab + sg::depth_slab / 2 + 37;
+    for (const GemmOperands& o : gemm_cases({{M, 70, 131}, {M, 130, 40}}, rng)) {
+      const int K = o.K, N = o.N;
+      INFO("M ", M, ", K ", K, ", N ", N);
+      CHECK(sg::split_depth(N, K, M, {true}));
+      std::vector<double> dW(o.W.size(), 0.0);
+      for (int m = 0; m < M; ++m)
+        for (int n = 0; n < N; ++n)
+          for (int k = 0; k < K; ++k) dW[std::size_t(n) * K + k] += double(o.g[std::size_t(m) * N + n]) * o.x[std::size_t(m) * K + k];
+      for (const Precision p : {Precision::fp32, Precision::bf16}) {
+        INFO(precision_name(p));
+        std::vector<std::vector<float>> runs;
+        for (const int threads : {1, 2}) {
+#if defined(_OPENMP)
+          const int previous = omp_get_max_threads();
+          omp_set_num_threads(threads);
+#endif
+          std::vector<float> dW2(o.W.size(), -0.25f), db(std::size_t(N), 0.0f);
+          kernels::linear_backward(static_cast<float*>(nullptr), dW2.data(), db.data(), o.g.data(), o.x.data(), o.W.data(),
+                                   M, K, N, true, p);
+          runs.push_back(dW2);
+#if defined(_OPENMP)
+          omp_set_num_threads(previous);
+#endif
+        }
+        CHECK(runs[0] == runs[1]);
+        std::vector<float> want(dW.size());
+        for (std::size_t i = 0; i < dW.size(); ++i) want[i] = float(dW[i] - 0.25);
+        CHECK(max_scaled_diff(runs[0], want) < (effective_precision(p) == Precision::bf16 ? 2e-2 : 3e-5));
+      }
+    }
+    CHECK(sg::split_depth(64, 64, 4 * sg::depth_slab, {}));
+    CHECK_FALSE(sg::split_depth(64, 64, 2 * sg::depth_slab - 1, {true}));  // one slab and a bit: one pass
+    const std::vector<float> bias(64, 0.0f);
+    CHECK_FALSE(sg::split_depth(64, 64, 4 * sg::depth_slab, {false, bias.data()}));  // an epilogue: one pass
   }
 
   TEST_CASE("the bf16 GEMM and its epilogues match a reference on bf16-rounded operands (awkward sizes)") {

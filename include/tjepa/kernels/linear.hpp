@@ -304,7 +304,9 @@ void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, cons
   TJEPA_OMP(omp parallel num_threads(threads)) {
     TJEPA_OMP(omp for schedule(static))
     for (int task = 0; task < panels1 + panels2; ++task) pack_task(task);
-    TJEPA_OMP(omp for schedule(static))
+    // Tiles to whichever thread is free (sgemm::run_product's reason): each tile's values do not
+    // depend on the thread that computes it.
+    TJEPA_OMP(omp for schedule(dynamic, 1))
     for (int t = 0; t < tiles; ++t) run_tile(t, tile_base + std::size_t(detail::thread_id()) * tile_size);
   }
 }

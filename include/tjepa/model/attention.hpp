@@ -147,10 +147,11 @@ struct SelfAttention {
     T* dqkv = scratch.dqkv;
     detail::parallel_fill(scratch.datt, scratch.datt + Mq * d, T(0));
     proj.backward(ps, dy, saved.att, scratch.datt, int(Mq), ws.precision);  // y = att · Wprojᵀ + b
+    ws.mark("proj backward");
     detail::parallel_fill(dqkv, dqkv + std::size_t(B) * L * 3 * d, T(0));
     const kernels::AttentionShape s = head_shape(L, q_from);
     kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(s);
-    TJEPA_OMP(omp parallel for schedule(static) if (B * heads > 1))
+    TJEPA_OMP(omp parallel for schedule(dynamic) if (B * heads > 1))
     for (int bh = 0; bh < B * heads; ++bh) {
       const int b = bh / heads, h = bh % heads;
       const std::size_t ko = std::size_t(b) * L * 3 * d + d + std::size_t(h) * Dh;
@@ -161,7 +162,9 @@ struct SelfAttention {
                                   saved.lse + std::size_t(bh) * L, scratch.datt + oo, dqkv + qo, dqkv + ko,
                                   dqkv + ko + d, aws[detail::thread_id()], ws.precision);
     }
+    ws.mark("attention backward");
     qkv.backward(ps, dqkv, x, dx, B * L, ws.precision);  // qkv = x · Wqkvᵀ + b
+    ws.mark("qkv backward");
   }
 };
 

@@ -235,8 +235,10 @@ struct BlockStack {
         detail::parallel_fill(dln + q * d, dln + (q + rows) * d, T(0));
         blk.mlp.backward(ps, g2, c.ln2.data() + o + q * d, c.h_pre.data() + std::size_t(i) * M * hid + q * hid,
                          h + q * hid, dh + q * hid, dln + q * d, rows, ws.precision);
+        ws.mark("mlp backward");
         blk.norm2.backward(ps, dln + q * d, c.x_mid.data() + o + q * d, c.mean2.data() + r + q,
                            c.rstd2.data() + r + q, gq + q * d, rows);
+        ws.mark("norm2 backward");
       });
       // x_mid = x_in[query rows] + s1 · attn(ln1), ln1 = norm1(x_in)
       if (q_from > 0) {
@@ -262,6 +264,7 @@ struct BlockStack {
                           AttentionScratch<T>{.dqkv = dqkv + f * 3 * d, .datt = datt + q * d}, dln + f * d, ws);
         blk.norm1.backward(ps, dln + f * d, c.xs.data() + o + f * d, c.mean1.data() + r + f, c.rstd1.data() + r + f,
                            dx + f * d, n * L);
+        ws.mark("norm1 backward");
       });
     }
   }

@@ -1,12 +1,14 @@
 #pragma once
-// StageClock: timestamps of the stages of one inference call, to see where its time goes and
-// where its variance from call to call lives (examples/streaming.cpp --stages). Off by default:
+// StageClock: timestamps of the stages of one inference call or training step, to see where its
+// time goes and where its variance from call to call lives (examples/streaming.cpp --stages,
+// bench/scale.cpp). Off by default:
 // a Workspace's clock is nullptr, and a stage then costs one test of that pointer. On, a mark is
 // one steady_clock read into a fixed array, so a timed call still allocates nothing.
 //
 //   ws.clock = &clock;  clock.start();  encoder.forward(..., ws);
 //   clock.count() marks; stage i took clock.elapsed_ns(i) and ends with clock.name(i)
-// Per block of the inference path the marks are norm1, qkv, attention, proj, norm2, mlp.
+// Per block the forward's marks are norm1, qkv, attention, proj, norm2, mlp; the backward's mlp
+// backward, norm2 backward, proj backward, attention backward, qkv backward, norm1 backward.
 #include <array>
 #include <chrono>
 #include <cstdint>

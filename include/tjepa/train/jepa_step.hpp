@@ -96,6 +96,14 @@ struct JepaWorkspace {
   std::size_t num_groups = 0;   // groups[0, num_groups) belong to the last forward
   ColumnMoments token_moments;  // of the target embeddings as [B·N, d] (target_std)
   ColumnMoments sample_moments; // as [B, N·d] (target_sample_std)
+  // Times the phases of each step when set (bench/scale.cpp): zero_grad, target tokenizer, target
+  // encoder, target statistics, context tokenizer, context encoder, then per target group predictor
+  // forward and loss, then predictor backward (per group), context encoder backward, tokenizer
+  // backward, clip, AdamW, EMA. nullptr: off (a phase then costs one test of the pointer).
+  StageClock* clock = nullptr;
+  void mark(const char* phase) {
+    if (clock) clock->mark(phase);
+  }
 };
 
 // What the forward pass found.
@@ -142,6 +150,7 @@ class JepaStep {
   void zero_grad() {
     model_.context.zero_grad();
     model_.predictor_params.zero_grad();
+    w_.mark("zero_grad");
   }
 
   // The JEPA loss of batch x [B, N, W] (W = model.token_width()) with its masks; keeps what
@@ -166,7 +175,9 @@ class JepaStep {
     T* h = detail::grow(w_.h, BN * d);
     T* tokens = detail::grow(w_.tokens, BN * d);
     model.tokenizer.forward(model.target, x, B, tokens, w_.ws);
+    w_.mark("target tokenizer");
     model.encoder.forward(model.target, {tokens, B}, h, w_.ws, EncoderOptions{target_dp, nullptr});
+    w_.mark("target encoder");
     JepaLossResult& result = result_;
     w_.token_moments = column_moments(h, BN, d);
     result.target_std = w_.token_moments.mean_std();
@@ -178,11 +189,14 @@ class JepaStep {
       require<ConfigError>(B >= 2, "JepaStep: standardize_targets needs a batch of at least 2 samples, got ", B);
       standardize_columns(h, static_cast<std::size_t>(B), static_cast<std::size_t>(N) * d);
     }
+    w_.mark("target statistics");
 
     // Context encoder on the context tokens.
     T* z = detail::grow(w_.z, static_cast<std::size_t>(B) * K * d);
     model.tokenizer.forward(model.context, x, B, tokens, w_.tokenizer_cache, w_.ws);
+    w_.mark("context tokenizer");
     model.encoder.forward(model.context, {tokens, B, masks.context}, z, w_.context_cache, w_.ws, EncoderOptions{context_dp, nullptr});
+    w_.mark("context encoder");
 
     const int num_targets = masks.num_targets();
     result.target_losses.assign(static_cast<std::size_t>(num_targets), 0.0);
@@ -211,6 +225,7 @@ class JepaStep {
       T* dpred = detail::grow(g.dpred, R * rows * d);
       // Row r·B + b of the tiled batch predicts target r of sample b from context b.
       model.predictor.forward(model.predictor_params, {z, B, K, position_rows(), N, idx, R * B, t}, pred, g.cache, w_.ws);
+      w_.mark("predictor forward");
       for (int r = 0; r < R; ++r)
         kernels::gather_rows(y + r * rows * d, h, static_cast<std::size_t>(N) * d, idx + r * rows, B, t, d);
       for (int r = 0; r < R; ++r) {
@@ -222,6 +237,7 @@ class JepaStep {
         for (std::size_t i = 0; i < n; ++i) dpred[off + i] *= scale;
         result.target_losses[static_cast<std::size_t>(g.targets[static_cast<std::size_t>(r)])] = l;
       }
+      w_.mark("loss");
     }
     double sum = 0;
     for (double l : result.target_losses) sum += l;
@@ -240,13 +256,17 @@ class JepaStep {
     T* dz = detail::grow(w_.dz, BKd);
     std::fill(dz, dz + BKd, T(0));
     T* dpos = cfg_.predictor_pos_from_context ? model.context.grad(model.encoder.pos_embed()) : nullptr;
-    for (std::size_t k = 0; k < w_.num_groups; ++k)
+    for (std::size_t k = 0; k < w_.num_groups; ++k) {
       model.predictor.backward(model.predictor_params, w_.groups[k].dpred.data(), dz, dpos, w_.groups[k].cache, w_.ws);
+      w_.mark("predictor backward");
+    }
     // The context tokens' gradient reuses their buffer: the forward values are no longer needed.
     T* dtokens = w_.tokens.data();
     std::fill(dtokens, dtokens + BN * d, T(0));
     model.encoder.backward(model.context, dz, dtokens, w_.context_cache, w_.ws);
+    w_.mark("context encoder backward");
     model.tokenizer.backward(model.context, dtokens, w_.tokenizer_cache, w_.ws);
+    w_.mark("tokenizer backward");
     backward_ready_ = false;  // the token buffer now holds gradients
   }
 
@@ -294,12 +314,13 @@ class JepaStep {
   JepaStepStats update(AdamW<T>& opt, const TrainingSchedule& schedule, std::int64_t s) {
     const JepaLossResult& r = result_;
     JepaStepStats st;
-    clipped_adamw_step<T>(st, model_.trainable(), opt, schedule, s, r.loss, cfg_.clip_grad_norm, "JEPA");
+    clipped_adamw_step<T>(st, model_.trainable(), opt, schedule, s, r.loss, cfg_.clip_grad_norm, "JEPA", w_.clock);
     st.momentum = schedule.momentum_at(s);
     st.target_std = r.target_std;
     st.target_sample_std = r.target_sample_std;
     st.target_losses = r.target_losses;
     ema_update(model_.target, model_.context, st.momentum);
+    w_.mark("EMA");
     return st;
   }
 

@@ -39,6 +39,7 @@
 #include "tjepa/core/prefixed_params.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/data/window_source.hpp"
+#include "tjepa/model/stage_clock.hpp"
 #include "tjepa/optim/adamw.hpp"
 #include "tjepa/optim/clip.hpp"
 #include "tjepa/optim/schedule.hpp"
@@ -118,16 +119,20 @@ double clip_or_stop(std::span<const PrefixedParams<T>> parts, double max_norm, d
 
 // The update every objective's step starts with: the NaN stop and clipping (clip_or_stop), then
 // AdamW at the schedule's rate and weight decay for step s. Fills st's step, loss, grad_norm, lr
-// and weight_decay; what follows (an EMA, say) is the objective's.
+// and weight_decay; what follows (an EMA, say) is the objective's. A clock, when given, gets the
+// marks "clip" and "AdamW".
 template <class T>
 void clipped_adamw_step(StepStats& st, std::span<const PrefixedParams<T>> parts, AdamW<T>& opt,
-                        const TrainingSchedule& schedule, std::int64_t s, double loss, double max_norm, const char* who) {
+                        const TrainingSchedule& schedule, std::int64_t s, double loss, double max_norm, const char* who,
+                        StageClock* clock = nullptr) {
   st.step = s;
   st.loss = loss;
   st.grad_norm = clip_or_stop<T>(parts, max_norm, loss, s, who);
+  if (clock) clock->mark("clip");
   st.lr = schedule.lr_at(s);
   st.weight_decay = schedule.wd_at(s);
   opt.step(st.lr, st.weight_decay);
+  if (clock) clock->mark("AdamW");
 }
 
 // Data parallel, for an objective whose loss is a mean over the samples: this rank's gradients

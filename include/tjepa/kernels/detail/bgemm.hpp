@@ -317,9 +317,31 @@ void gemm(int rows, int cols, int depth, const float* A, std::ptrdiff_t lda, Ord
     if (rows <= 0 || cols <= 0) return;
     if (depth <= 0) return sgemm::empty_product(rows, cols, C, ldc, e);
     thread_local AlignedVector<std::uint32_t> pack_buffer;
+    const int panels = (cols + NR - 1) / NR;
+    if (sgemm::split_depth(rows, cols, depth, e)) {
+      // sgemm's split over depth slabs (an even depth_slab: pairs never straddle two slabs).
+      static_assert(sgemm::depth_slab % 2 == 0 && sgemm::depth_slab <= KC);
+      const std::size_t slab_size = packed_size(cols, sgemm::depth_slab);
+      const int slabs = (depth + sgemm::depth_slab - 1) / sgemm::depth_slab;
+      std::uint32_t* packed = grow(pack_buffer, std::size_t(slabs) * slab_size);
+      const auto kd = [&](int slab) { return std::min(sgemm::depth_slab, depth - slab * sgemm::depth_slab); };
+      const std::ptrdiff_t a_step = a_order == Order::row_major ? 1 : lda, b_step = b_order == Order::row_major ? ldb : 1;
+      sgemm::run_split_depth(
+          rows, cols, depth, panels,
+          [&](int slab, int p) {
+            pack_panel(packed + std::size_t(slab) * slab_size, B + slab * sgemm::depth_slab * b_step, ldb, b_order,
+                       kd(slab), cols, p, 0, depth_pairs(kd(slab)));
+          },
+          [&](int slab, int r0, int r1, float* P) {
+            compute_rows(r0, r1, cols, kd(slab), A + slab * sgemm::depth_slab * a_step, lda, a_order,
+                         packed + std::size_t(slab) * slab_size, P, cols, {});
+          },
+          C, ldc, e.accumulate);
+      return;
+    }
     std::uint32_t* packed = grow(pack_buffer, packed_size(cols, depth));
     // Packing tasks of one panel × one block of depth pairs.
-    const int pairs = depth_pairs(depth), kblocks = (pairs + KC / 2 - 1) / (KC / 2), panels = (cols + NR - 1) / NR;
+    const int pairs = depth_pairs(depth), kblocks = (pairs + KC / 2 - 1) / (KC / 2);
     sgemm::run_product(
         rows, cols, depth, panels * kblocks,
         [&](int task) {

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# The JEPA step on 1, 2, ... threads (every count up to the cores present), phase by phase: where
+# its time goes, the time each phase spends on one thread only, the serial fraction f the
+# speed-ups imply and the speed-ups that f predicts at 4, 8, 16 and 64 threads, with PyTorch's step
+# at the same thread counts beside it (issue 61). Both skins of bench/jepa_setup.hpp (N 368, and
+# DECO-50's 528 grouped tokens), fp32 and, where the build has AVX512-BF16, bf16. Writes the section
+# between the "scale" markers of bench/RESULTS.md (bench/make_results.py keeps it).
+#   bench/scale.sh [REPS]     (default 9 repetitions per thread count; about 10 minutes on 2 cores)
+# Run it on a quiet machine.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+reps=${1:-9}
+source tools/deps.sh
+tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" python3-torch libopenblas0-pthread
+cmake --preset release -DTJEPA_BUILD_BENCHMARKS=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=ON >/dev/null
+cmake --build --preset release --target tjepa_bench tjepa_scale -j "$(nproc)"
+out=build/scale
+rm -rf "$out"
+mkdir -p "$out"
+cores=$(nproc)
+threads=$(seq -s, 1 "$cores")
+OMP_NUM_THREADS=1 taskset -c 0 build/release/bench/tjepa_bench --benchmark_filter='^BM_FmaPeak$' \
+  --benchmark_repetitions=3 --benchmark_report_aggregates_only=true --benchmark_format=json |
+  /usr/bin/python3 -c 'import json,sys; b=[x for x in json.load(sys.stdin)["benchmarks"] if x.get("aggregate_name")=="median"][0]; print("%.1f" % (b["GFLOP/s"] if "GFLOP/s" in b else b["FLOPS"]/1e9))' \
+  >"$out/peak.txt"
+for skin in allegro deco; do
+  for precision in fp32 bf16; do
+    echo "tjepa_scale --skin $skin --precision $precision --threads $threads" >&2
+    if ! OMP_PROC_BIND=false build/release/bench/tjepa_scale --skin "$skin" --precision "$precision" \
+      --threads "$threads" --reps "$reps" >"$out/tjepa_${skin}_$precision.jsonl" 2>"$out/tjepa_${skin}_$precision.err"; then
+      cat "$out/tjepa_${skin}_$precision.err" >&2  # bf16 on a build without AVX512-BF16: skipped
+      rm -f "$out/tjepa_${skin}_$precision.jsonl"
+      [ "$precision" = bf16 ] || exit 1
+    fi
+  done
+done
+for t in $(seq 1 "$cores"); do
+  echo "PyTorch, $t thread(s)" >&2
+  OMP_NUM_THREADS=$t OPENBLAS_NUM_THREADS=$t MKL_NUM_THREADS=$t OMP_WAIT_POLICY=PASSIVE \
+    /usr/bin/python3 bench/compare_torch.py --only jepa --threads "$t" >"$out/torch_t$t.jsonl"
+done
+/usr/bin/python3 bench/scale_report.py "$out" >"$out/section.md"
+/usr/bin/python3 bench/put_section.py scale "$out/section.md"
+echo "wrote the scale section of bench/RESULTS.md" >&2
