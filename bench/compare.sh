@@ -17,6 +17,8 @@ cmake --build --preset release --target tjepa_bench tjepa_streaming -j "$(nproc)
 
 out=build/compare
 mkdir -p "$out"
+source bench/torch_env.sh
+torch_openblas_core "$out/openblas_core.txt"
 kernels='BM_FmaPeak|BM_EncoderForward/|BM_EncoderForwardFrozen/|BM_EncoderForwardBf16/|BM_EncoderForwardBackward/.*/0/|BM_AttentionForward/|BM_AttentionForwardBackward/'
 for t in 1 2; do
   # The whole JEPA step (bench/train.cpp: BM_JepaTrainStep, BM_JepaTrainStepDeco and their Bf16

@@ -144,7 +144,8 @@ print(f"- tjepa: git {sh('git rev-parse --short HEAD')}{dirty}, {sh('c++ --versi
 print(f"- PyTorch: {torch_version} "
       "(Debian python3-torch), plain nn modules with manual attention (bench/compare_torch.py), "
       "torch.set_num_threads(threads), OMP_WAIT_POLICY=PASSIVE, OPENBLAS_NUM_THREADS=threads; "
-      f"BLAS that ran: {blas_name}")
+      f"BLAS that ran: {blas_name}; OpenBLAS kernels: "
+      f"{(d / 'openblas_core.txt').read_text().strip() if (d / 'openblas_core.txt').exists() else '?'} (bench/torch_env.sh)")
 print("- command: `bench/compare.sh` (medians of 3 repetitions for tjepa; median of >= 2 s of runs for PyTorch)")
 print(f"- FLOPs: matmul FLOPs only; encoder forward 12·(24·L·d² + 4·L²·d); training step = 3× forward; "
       f"attention forward 4·L²·d, forward+backward 3.5× that. Peak: {PEAK_PER_CORE:.1f} GFLOP/s per core, "

@@ -34,6 +34,8 @@ for skin in allegro deco; do
     fi
   done
 done
+source bench/torch_env.sh
+torch_openblas_core "$out/openblas_core.txt"
 for t in $(seq 1 "$cores"); do
   echo "PyTorch, $t thread(s)" >&2
   OMP_NUM_THREADS=$t OPENBLAS_NUM_THREADS=$t MKL_NUM_THREADS=$t OMP_WAIT_POLICY=PASSIVE \

@@ -56,6 +56,8 @@ family = sh("grep -m1 'cpu family' /proc/cpuinfo | cut -d: -f2 | tr -d ' '")
 model = sh("grep -m1 '^model\\s' /proc/cpuinfo | cut -d: -f2 | tr -d ' '")
 amx = "AMX" if "amx_tile" in sh("grep -m1 flags /proc/cpuinfo") else "no AMX"
 reps = next(iter(runs.values()))[-1].get("reps", "?") if runs else "?"
+core_file = d / "openblas_core.txt"
+openblas = core_file.read_text().strip() if core_file.exists() else "?"
 
 print("<!-- scale:begin -->")
 print("## Threads and the serial part of the JEPA step (issue 61)\n")
@@ -64,7 +66,8 @@ print(f"`bench/scale.sh`, {datetime.date.today().isoformat()}, commit {sh('git r
       f"{peak:.0f} GFLOP/s on one core. `build/release/bench/tjepa_scale --skin <skin> --precision <p> "
       f"--threads 1,...,{sh('nproc')} --reps {reps}`: one JEPA step (bench/jepa_setup.hpp: ViT-Tiny, batch 8, "
       "no drop-path) timed phase by phase by its own StageClock marks, the thread counts taking turns "
-      "repetition by repetition; medians. PyTorch: `bench/compare_torch.py --only jepa --threads t` "
+      f"repetition by repetition; medians. PyTorch (OpenBLAS kernels: {openblas}, bench/torch_env.sh): "
+      "`bench/compare_torch.py --only jepa --threads t` "
       "(timm-style drop-path 0.3, every branch computed: the same work), and its DINOv2 drop-path "
       "variant (branches on 5 of 8 samples: less work) in the last column.\n")
 print("Serial fraction f from the measured speed-up S_t at t threads: f = (t/S_t − 1)/(t − 1) (Amdahl); "

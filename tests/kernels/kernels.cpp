@@ -153,6 +153,35 @@ TEST_SUITE("kernels") {
     }
   }
 
+  TEST_CASE("the GELU's float erf (Eigen's rational fit) is within 4e-7 of erf and the GELU passes NaN and infinity on") {
+    constexpr std::size_t W = detail::simd_width<float>;
+    double worst = 0;
+    for (int i = -2000000; i < 2000000; i += int(W)) {
+      alignas(64) float x[W], y[W];
+      for (std::size_t j = 0; j < W; ++j) x[j] = float(i + int(j)) * 5e-6f;  // [-10, 10)
+      detail::erf<float>(xsimd::load_aligned(x)).store_aligned(y);
+      for (std::size_t j = 0; j < W; ++j) worst = std::max(worst, std::abs(double(y[j]) - std::erf(double(x[j]))));
+    }
+    MESSAGE("largest |erf error| on [-10, 10): ", worst);
+    CHECK(worst < 4e-7);
+    const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+    alignas(64) float x[W], g[W], dg[W];
+    for (std::size_t j = 0; j < W; ++j) x[j] = j % 3 == 0 ? nan : j % 3 == 1 ? inf : 1.0f;
+    detail::gelu<float>(xsimd::load_aligned(x)).store_aligned(g);
+    detail::gelu_grad<float>(xsimd::load_aligned(x)).store_aligned(dg);
+    for (std::size_t j = 0; j < W; ++j) {
+      INFO("x = ", x[j]);
+      if (j % 3 == 0) {
+        CHECK(std::isnan(g[j]));
+        CHECK(std::isnan(dg[j]));
+      } else if (j % 3 == 1) {
+        CHECK(g[j] == inf);
+      } else {
+        CHECK(std::abs(g[j] - 0.8413447f) < 1e-6f);
+      }
+    }
+  }
+
   TEST_CASE("transpose16 (the packing's 16 x 16 block transpose in registers) equals the scalar transpose") {
     // Rows at any offset and stride, a destination stride that is not 16; every element distinct.
     std::vector<float> src(16 * 37 + 5), dst(16 * 21, -1.0f);
