@@ -275,7 +275,8 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
 // parallel_min_flops, else over the threads (the packing shared among them first) in chunks of
 // whole MR-row blocks, up to 8 per thread, each taken by the next free thread. An even static
 // split leaves every thread waiting for the slowest: on a 2-core VM twelve MLPs' worth of these
-// products ran 1.75x faster on 2 threads than on 1 split in halves, 2.0x in chunks (bench/scale.sh).
+// products ran 1.75x faster on 2 threads than on 1 split in halves, 2.0x in chunks (an in-process
+// A/B; bench/RESULTS.md's notes).
 // Serves the float and the bf16 GEMM.
 template <class Pack, class Compute>
 void run_product(int rows, int cols, int depth, int tasks, Pack&& pack, Compute&& compute) {
