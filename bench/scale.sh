@@ -19,6 +19,9 @@ rm -rf "$out"
 mkdir -p "$out"
 cores=$(nproc)
 threads=$(seq -s, 1 "$cores")
+# What was measured, for the report: the commit (and whether the tree differed from it) and the day.
+echo "$(git rev-parse --short HEAD)$(git status --porcelain --untracked-files=no include bench | grep -q . && echo ' with uncommitted changes')" >"$out/commit.txt"
+date -u +%Y-%m-%d >"$out/date.txt"
 OMP_NUM_THREADS=1 taskset -c 0 build/release/bench/tjepa_bench --benchmark_filter='^BM_FmaPeak$' \
   --benchmark_repetitions=3 --benchmark_report_aggregates_only=true --benchmark_format=json |
   /usr/bin/python3 -c 'import json,sys; b=[x for x in json.load(sys.stdin)["benchmarks"] if x.get("aggregate_name")=="median"][0]; print("%.1f" % (b["GFLOP/s"] if "GFLOP/s" in b else b["FLOPS"]/1e9))' \

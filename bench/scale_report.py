@@ -39,7 +39,7 @@ def predicted(f, n):
 
 peak = float((d / "peak.txt").read_text().strip())
 runs = {}  # (skin, precision) -> rows
-for path in sorted(d.glob("tjepa_*.jsonl")):
+for path in sorted(d.glob("tjepa_*.jsonl"), key=lambda p: (p.name.split("_")[1], "bf16" in p.name)):  # fp32 first
     rows = load_jsonl(path)
     if rows:
         runs[(rows[0]["skin"], rows[0]["precision"])] = rows
@@ -61,7 +61,9 @@ openblas = core_file.read_text().strip() if core_file.exists() else "?"
 
 print("<!-- scale:begin -->")
 print("## Threads and the serial part of the JEPA step (issue 61)\n")
-print(f"`bench/scale.sh`, {datetime.date.today().isoformat()}, commit {sh('git rev-parse --short HEAD')}, "
+measured = (d / "commit.txt").read_text().strip() if (d / "commit.txt").exists() else sh("git rev-parse --short HEAD")
+day = (d / "date.txt").read_text().strip() if (d / "date.txt").exists() else datetime.date.today().isoformat()
+print(f"`bench/scale.sh`, {day}, commit {measured}, "
       f"{cpu} (family {family}, model {model}, {amx}), {sh('nproc')} cores; `BM_FmaPeak` in the same run: "
       f"{peak:.0f} GFLOP/s on one core. `build/release/bench/tjepa_scale --skin <skin> --precision <p> "
       f"--threads 1,...,{sh('nproc')} --reps {reps}`: one JEPA step (bench/jepa_setup.hpp: ViT-Tiny, batch 8, "
