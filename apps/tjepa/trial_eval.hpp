@@ -364,6 +364,7 @@ inline TrialEvalResult run_trial_eval(const TrialEvalOptions& o, const TrainConf
     return std::pair{embed_windows(p, tok, enc, src, pool.window), embed_windows(p, tok, enc, test_src, test.window)};
   };
 
+  std::vector<std::uint64_t> dino_collapsed_seeds;
   for (std::uint64_t s : o.seeds) {
     say("pre-training seed " + std::to_string(s));
     const TrainConfig cfg = seeded(s);
@@ -410,13 +411,35 @@ inline TrialEvalResult run_trial_eval(const TrialEvalOptions& o, const TrainConf
       DinoModel<float> dino(dino_config(cfg, graph.num_nodes(), axes), s);
       same_start(dino, cfg, s);
       DinoTrainer<float> trainer(dino, src, cfg);
-      pretrain("DINO", s, trainer, cfg.schedule.steps, [](const DinoStepStats& st) {
+      const auto log = pretrain("DINO", s, trainer, cfg.schedule.steps, [](const DinoStepStats& st) {
         return " (dino " + std::to_string(st.dino) + ", ibot " + std::to_string(st.ibot) + ", koleo " +
                std::to_string(st.koleo) + ")";
       });
+      // Collapse: the class-token loss over the run's last tenth at ln P (a uniform student).
+      const std::size_t tail = std::max<std::size_t>(1, log.size() / 10);
+      double last = 0;
+      for (std::size_t i = log.size() - tail; i < log.size(); ++i) last += log[i].dino / static_cast<double>(tail);
+      const int P = dino.config.head.prototypes;
+      const bool collapsed = dino_collapsed(last, P);
+      nlohmann::json& entry = res.info["pretraining"].back();
+      entry["last_dino"] = last, entry["uniform_dino"] = std::log(double(P)), entry["collapsed"] = collapsed;
+      if (collapsed) {
+        dino_collapsed_seeds.push_back(s);
+        say("  DINO seed " + std::to_string(s) + ": collapsed (class-token loss " + std::to_string(last) +
+            " = ln " + std::to_string(P) + ", the uniform prediction): its rows read an encoder it did not train");
+      }
       auto [etr, ete] = embed(dino.teacher, dino.tokenizer, dino.encoder);
       frozen_rows("DINO", s, std::move(etr), std::move(ete), dino.encoder.num_tokens(), dino.encoder.dim(),
                   cfg.model.heads, true);
+      if (!dino_collapsed_seeds.empty()) {
+        std::string seeds;
+        for (std::uint64_t c : dino_collapsed_seeds) seeds += (seeds.empty() ? "" : " ") + std::to_string(c);
+        for (ScoreTable& table : res.tables)
+          for (ScoreRow& r : table.rows)
+            if (r.name.starts_with("DINO"))
+              r.note = "collapsed in seed(s) " + seeds +
+                       ": the class-token loss ended at ln P, a uniform student (pretraining in results.json)";
+      }
     }
     if (o.byol) {
       ByolConfig bc = byol_config(cfg, axes);

@@ -249,6 +249,25 @@ TEST_SUITE("baselines") {
     CHECK(dino_teacher_temp(c, 99, 100) == doctest::Approx(0.07));
   }
 
+  TEST_CASE("dino_collapsed: a uniform student scores ln P against any teacher; one that follows the teacher does not") {
+    const int M = 6, P = 50;
+    Rng rng(11);
+    const auto t = test::normal_vector(std::size_t(M) * P, rng);
+    std::vector<double> teacher(t.size()), center(P, 0.0);
+    dino_teacher_probs(teacher.data(), t.data(), center.data(), M, P, 0.04);
+    const std::vector<double> uniform(std::size_t(M) * P, 0.37);  // the same logit for every prototype
+    const double flat = dino_cross_entropy(uniform.data(), teacher.data(), M, P, 0.1, static_cast<double*>(nullptr), 1.0) / M;
+    CHECK(flat == doctest::Approx(std::log(double(P))).epsilon(1e-12));
+    CHECK(dino_collapsed(flat, P));
+    // A student with the teacher's logits (sharper at τₛ 0.1 than uniform by far).
+    const double follows = dino_cross_entropy(t.data(), teacher.data(), M, P, 0.1, static_cast<double*>(nullptr), 1.0) / M;
+    CHECK(follows < 0.9 * std::log(double(P)));
+    CHECK(!dino_collapsed(follows, P));
+    CHECK(!dino_collapsed(0.99 * std::log(double(P)), P));
+    CHECK(dino_collapsed(0.9995 * std::log(double(P)), P));
+    CHECK_THROWS_WITH_AS(dino_collapsed(1.0, 1), doctest::Contains("expected > 1"), ConfigError);
+  }
+
   TEST_CASE("DINO config and shape errors throw with a clear message") {
     DinoConfig c = tiny_dino_config();
     c.encoder.register_tokens = 0;

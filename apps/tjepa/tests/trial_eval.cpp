@@ -8,6 +8,7 @@
 
 #include "../../../tests/support/files.hpp"
 
+#include <cmath>
 #include <filesystem>
 #include <map>
 #include <set>
@@ -138,6 +139,12 @@ TEST_CASE("tjepa eval --trials: every row per seed and label share / Welch contr
   // The three fabrics are apart in the raw readings of one window (a real-data check of the path).
   for (const auto& v : j["tables"][0]["rows"][1]["seeds"]["top1"]) CHECK(v.get<double>() >= 0.9);
   CHECK(j["pretraining"].size() == 8u);  // MAE, DINO, BYOL, Tactile-JEPA at 2 seeds
+  for (const auto& p : j["pretraining"])
+    if (p["row"] == "DINO") {  // whether its student ended uniform, against ln P of its prototypes
+      CHECK(p["collapsed"].is_boolean());
+      CHECK(p["uniform_dino"].get<double>() == doctest::Approx(std::log(16.0 * 16)));  // 16d prototypes at d 16
+      CHECK(p["last_dino"].get<double>() > 0);
+    }
   const std::string md = read_file(t / "a" / "results.md");
   CHECK(md.find("- top-1: Tactile-JEPA, frozen against random init, frozen; one-sided Welch t = ") != std::string::npos);
 }

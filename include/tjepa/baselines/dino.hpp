@@ -265,6 +265,15 @@ struct DinoStepStats : StepStats {
   }
 };
 
+// The DINO collapse that the loss alone shows: a student whose predictions are the uniform
+// distribution scores ℓ = ln P against any teacher, and its gradient no longer tells the samples
+// apart, so the EMA teacher follows it. True when the class-token loss (DinoStepStats::dino,
+// averaged over a run's last steps) is within share of ln P: the run learned nothing from its views.
+inline bool dino_collapsed(double dino_loss, int prototypes, double share = 1e-3) {
+  require<ConfigError>(prototypes > 1, "dino_collapsed: ", prototypes, " prototypes, expected > 1");
+  return dino_loss >= (1.0 - share) * std::log(static_cast<double>(prototypes));
+}
+
 // Caller-owned buffers of one step.
 template <class T>
 struct DinoWorkspace {
