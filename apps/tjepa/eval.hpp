@@ -269,6 +269,17 @@ inline CLI::App* add_eval_command(CLI::App& app, EvalCommand& ev) {
   eval->add_option("--head-patience-steps", t.head_patience_steps, "--trials: frozen heads' early-stopping patience (steps)")
       ->capture_default_str();
   eval->add_option("--head-lr", t.head.lr, "--trials: heads' learning rate")->capture_default_str();
+  eval->add_option("--head-folds", t.head_folds,
+                   "--trials: on shares of fewer labelled trials than --head-folds-below, heads pick their epochs by "
+                   "cross-validation over this many folds of trials (1: one validation split)")
+      ->check(CLI::Range(1, 20))
+      ->capture_default_str();
+  eval->add_option("--head-folds-below", t.head_folds_below, "--trials: see --head-folds")->capture_default_str();
+  eval->add_option_function<std::string>(
+          "--head-stop", [&t](const std::string& v) { t.head.stop_on_error = v == "error"; },
+          "--trials: classification heads keep the epoch of the lowest validation top-1 error (the loss breaking "
+          "ties; default) or of the lowest loss")
+      ->check(CLI::IsMember({"error", "loss"}));
   eval->add_option("--end-to-end-steps", t.end_to_end_steps, "--trials: end-to-end heads' steps at most")
       ->capture_default_str();
   eval->add_option("--end-to-end-patience-steps", t.end_to_end_patience_steps,

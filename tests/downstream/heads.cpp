@@ -614,6 +614,146 @@ TEST_CASE("split_by_groups: whole groups - stratified - seeded / validation_spli
   CHECK_THROWS_AS(validation_split(S + 1, HeadTrainConfig{}, g), ShapeError);
 }
 
+TEST_CASE("validation_folds: every group validates once - dealt per stratum - seeded / errors") {
+  // 3 strata of 5, 4 and 1 groups of 2-4 samples each.
+  SampleGroups g;
+  const int groups_of[3] = {5, 4, 1};
+  std::int64_t id = 10;
+  for (int st = 0; st < 3; ++st)
+    for (int k = 0; k < groups_of[st]; ++k, ++id)
+      for (int n = 0; n < 2 + (k + st) % 3; ++n) g.group.push_back(id), g.stratum.push_back(st);
+  const int S = static_cast<int>(g.group.size());
+  HeadTrainConfig cfg;
+  cfg.folds = 3;
+  cfg.seed = 5;
+  const std::vector<ValidationSplit> f = validation_folds(S, cfg, g);
+  REQUIRE(f.size() == 3u);
+  std::vector<int> times(static_cast<std::size_t>(S), 0);
+  std::map<std::int64_t, std::set<int>> folds_of_group;
+  for (int k = 0; k < 3; ++k) {
+    const ValidationSplit& s = f[static_cast<std::size_t>(k)];
+    CHECK(s.fit.size() + s.validation.size() == static_cast<std::size_t>(S));
+    CHECK(std::is_sorted(s.fit.begin(), s.fit.end()));
+    for (auto i : s.validation) ++times[static_cast<std::size_t>(i)], folds_of_group[g.group[static_cast<std::size_t>(i)]].insert(k);
+  }
+  for (int t : times) CHECK(t == 1);                          // every sample validates exactly once
+  for (const auto& [grp, ks] : folds_of_group) CHECK(ks.size() == 1u);  // a group whole in one fold
+  // Dealt in turn across strata: 10 groups give folds of 4, 3, 3 groups, and stratum 0's 5 groups
+  // are 2, 2, 1 over the folds.
+  std::map<int, int> groups_in_fold, stratum0_in_fold;
+  for (const auto& [grp, ks] : folds_of_group) {
+    ++groups_in_fold[*ks.begin()];
+    if (grp < 15) ++stratum0_in_fold[*ks.begin()];
+  }
+  std::vector<int> sizes, s0;
+  for (auto [k, n] : groups_in_fold) sizes.push_back(n);
+  for (auto [k, n] : stratum0_in_fold) s0.push_back(n);
+  std::sort(sizes.begin(), sizes.end());
+  std::sort(s0.begin(), s0.end());
+  CHECK(sizes == std::vector<int>{3, 3, 4});
+  CHECK(s0 == std::vector<int>{1, 2, 2});
+  CHECK(validation_folds(S, cfg, g)[1].validation == f[1].validation);  // seeded
+  cfg.seed = 6;
+  bool differs = false;
+  for (int k = 0; k < 3; ++k) differs |= validation_folds(S, cfg, g)[static_cast<std::size_t>(k)].validation != f[static_cast<std::size_t>(k)].validation;
+  CHECK(differs);
+  // No groups: samples dealt, 10 samples in folds of 4, 3, 3.
+  const std::vector<ValidationSplit> plain = validation_folds(10, cfg, SampleGroups{});
+  std::vector<std::size_t> n;
+  for (const auto& s : plain) n.push_back(s.validation.size());
+  std::sort(n.begin(), n.end());
+  CHECK(n == std::vector<std::size_t>{3, 3, 4});
+  cfg.folds = 11;
+  CHECK_THROWS_WITH_AS(validation_folds(S, cfg, g), doctest::Contains("10 group(s) for 11 folds"), DataError);
+  CHECK_THROWS_WITH_AS(validation_folds(10, cfg, SampleGroups{}), doctest::Contains("10 samples for 11 folds"), DataError);
+  cfg.folds = 2;
+  cfg.validation_blocks = 2;
+  CHECK_THROWS_WITH_AS(cfg.validate(), doctest::Contains("not blocks"), ConfigError);
+}
+
+namespace {
+// train_head's last run after its folds, by hand: best_epoch + 1 epochs on every sample.
+template <class Features>
+void final_run(ProbeHead<float>& head, Features& f, const HeadTargets& targets, HeadTrainConfig cfg, int best_epoch) {
+  cfg.max_epochs = best_epoch + 1;
+  ValidationSplit every;
+  for (int i = 0; i < targets.size(); ++i) every.fit.push_back(i);
+  detail::train_head_split(head, f, targets, cfg, every, nullptr, 0);
+}
+}  // namespace
+
+TEST_CASE("train_head with folds: the epochs of the lowest mean fold curve, then every sample for that many") {
+  const int S = 160, L = 2, d = 12;
+  auto [x, targets] = encoded_samples(S, L, d, 4);
+  for (int i = 0; i < S; ++i) targets.groups.group.push_back(i / 4), targets.groups.stratum.push_back(0);  // 40 groups of 4
+  FrozenFeatures<float> f(x, L, d);
+  HeadTrainConfig cfg = train_config(60, 8, 16, 1e-2);
+  cfg.folds = 3;
+  const ProbeHead<float> start(d, 3, 2, 4, 0);
+  ProbeHead<float> head = start;
+  const HeadTrainResult r = train_head(head, f, targets, cfg);
+  // The folds by hand: each from the same start, validating on its fold.
+  std::vector<HeadTrainResult> folds;
+  for (const ValidationSplit& split : validation_folds(S, cfg, targets.groups)) {
+    ProbeHead<float> h = start;
+    folds.push_back(detail::train_head_split(h, f, targets, cfg, split, nullptr, 0));
+  }
+  const HeadTrainResult mean = mean_validation_curve(folds);
+  CHECK(r.validation_loss == mean.validation_loss);
+  CHECK(r.best_epoch == mean.best_epoch);
+  const auto best = std::min_element(r.validation_loss.begin(), r.validation_loss.end());
+  CHECK(r.best_epoch == best - r.validation_loss.begin());
+  for (const auto& fr : folds) CHECK(r.validation_loss.size() <= fr.validation_loss.size());
+  CHECK(r.validation_loss[0] == doctest::Approx((folds[0].validation_loss[0] + folds[1].validation_loss[0] +
+                                                 folds[2].validation_loss[0]) / 3));
+  // Then best_epoch + 1 epochs on all 160 samples from the start again: the same parameters.
+  CHECK(r.train_loss.size() == static_cast<std::size_t>(r.best_epoch + 1));
+  ProbeHead<float> all = start;
+  final_run(all, f, targets, cfg, r.best_epoch);
+  CHECK(std::equal(head.params.values().begin(), head.params.values().end(), all.params.values().begin()));
+  CHECK(r.best_validation < 0.3 * r.validation_loss.front());
+  CHECK(evaluate_head(head, f, targets).accuracy > 0.9);
+  // Validation trials given in the targets (a table's val split): one split, no folds.
+  targets.groups.held = {0, 1, 2, 3, 4, 5, 6, 7};
+  ProbeHead<float> held = start;
+  const HeadTrainResult rh = train_head(held, f, targets, cfg);
+  CHECK(rh.train_loss.size() == rh.validation_loss.size());
+}
+
+TEST_CASE("train_head end to end with folds: the encoder starts each fold and the final run where it began") {
+  ParamSet<float> ps;
+  const int N = 4, W = 3, S = 48;
+  const Tokenizer tok = Tokenizer::per_taxel(ps, N, 1, W, 8);
+  const Encoder enc(ps, EncoderConfig{.num_tokens = N, .dim = 8, .depth = 1, .heads = 2});
+  ps.allocate();
+  init_params(ps, 2);
+  Rng rng(9);
+  AlignedVector<float> values(static_cast<std::size_t>(S) * W * N);
+  for (auto& v : values) v = static_cast<float>(rng.normal());
+  Recording rec(S * W, N, 1, std::move(values));
+  const WindowSource src(rec, WindowSpec{W});
+  std::vector<std::int64_t> windows;
+  HeadTargets targets{1, 0, {}, {}, {}};
+  for (int w = 0; w < S; ++w) {
+    windows.push_back(w);
+    targets.value.push_back(static_cast<float>(rng.normal()));
+  }
+  const ParamSet<float> encoder_start = ps;
+  EncoderFeatures<float> feats(ps, tok, enc, src, windows);
+  HeadTrainConfig cfg = train_config(3, 5, 8, 1e-3);
+  cfg.folds = 2;
+  const ProbeHead<float> start(8, 2, 1, 0, 0);
+  ProbeHead<float> head = start;
+  const HeadTrainResult r = train_head(head, feats, targets, cfg);
+  // The same final run by hand, from the encoder's start.
+  ParamSet<float> ps2 = encoder_start;
+  EncoderFeatures<float> feats2(ps2, tok, enc, src, windows);
+  ProbeHead<float> again = start;
+  final_run(again, feats2, targets, cfg, r.best_epoch);
+  CHECK(std::equal(ps.values().begin(), ps.values().end(), ps2.values().begin()));
+  CHECK(std::equal(head.params.values().begin(), head.params.values().end(), again.params.values().begin()));
+}
+
 TEST_CASE("train_head: stops after patience epochs without improvement on unlearnable targets") {
   const int S = 60, L = 1, d = 12;
   const auto [x, targets] = encoded_samples(S, L, d, 8, true);

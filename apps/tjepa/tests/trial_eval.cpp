@@ -145,6 +145,14 @@ TEST_CASE("tjepa eval --trials: every row per seed and label share / Welch contr
       CHECK(p["uniform_dino"].get<double>() == doctest::Approx(std::log(16.0 * 16)));  // 16d prototypes at d 16
       CHECK(p["last_dino"].get<double>() > 0);
     }
+  // Every head's training: 2 seeds x 2 shares x (random, MAE, DINO, BYOL, Tactile-JEPA frozen and end to end).
+  REQUIRE(j["head_training"].size() == 24u);
+  for (const auto& h : j["head_training"]) {
+    CHECK(h["epochs"].get<int>() >= 1);
+    CHECK((h["best_epoch"].get<int>() >= 0 && h["best_epoch"].get<int>() < h["epochs"].get<int>()));
+    CHECK(h["trials"].get<int>() >= 6);
+    CHECK(h["folds"] == 3);  // 12 and 6 labelled slides, fewer than 200: 3-fold cross-validation
+  }
   const std::string md = read_file(t / "a" / "results.md");
   CHECK(md.find("- top-1: Tactile-JEPA, frozen against random init, frozen; one-sided Welch t = ") != std::string::npos);
 }
@@ -181,11 +189,22 @@ TEST_CASE("tjepa eval: the flags of one protocol are refused with the other") {
   CHECK_THROWS_WITH_AS(parse_eval({"--seed", "2"}), doctest::Contains("--seed does not apply"), ConfigError);
   // The shared flags reach the trial protocol.
   const EvalOptions o = parse_eval({"--trials", table, "--no-mae", "--no-byol", "--probe-pooling", "attentive",
-                                    "--head-seeds", "2"});
+                                    "--head-seeds", "2", "--head-stop", "loss"});
   CHECK_FALSE(o.trial.mae);
   CHECK_FALSE(o.trial.byol);
   CHECK(o.trial.dino);
   CHECK(o.trial.pooling == PoolingKind::attentive);
   CHECK(o.trial.head_seeds == 2);
+  CHECK_FALSE(o.trial.head.stop_on_error);
+  CHECK(parse_eval({"--trials", table}).trial.head.stop_on_error);  // the default: the validation error
+  CHECK_THROWS(parse_eval({"--trials", table, "--head-stop", "accuracy"}));
+  CHECK_THROWS_WITH_AS(parse_eval({"--trials", table, "--stop-on-error"}),
+                       doctest::Contains("--stop-on-error is for the simulated grasping hand's protocol"), ConfigError);
+  CHECK(parse_eval({"--trials", table}).trial.head_folds == 3);
+  CHECK(parse_eval({"--trials", table, "--head-folds", "1", "--head-folds-below", "50"}).trial.head_folds == 1);
+  CHECK(parse_eval({"--trials", table, "--head-folds-below", "50"}).trial.head_folds_below == 50);
+  CHECK_THROWS(parse_eval({"--trials", table, "--head-folds", "0"}));
+  CHECK_THROWS_WITH_AS(parse_eval({"--head-folds", "2"}), doctest::Contains("--head-folds is for the protocol on labelled trials"),
+                       ConfigError);
 }
 }

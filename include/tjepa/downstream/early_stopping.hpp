@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <map>
 #include <span>
 #include <vector>
 
@@ -50,6 +51,11 @@ struct HeadTrainConfig {
   // validation loss. The cross-entropy of a few held-out episodes can rise while their accuracy
   // still improves (confident mistakes on an atypical episode). Regression heads ignore it.
   bool stop_on_error = false;
+  // folds > 1: the epoch count is chosen by k-fold cross-validation (validation_folds: every
+  // sample, or group, validates once), the folds' validation curves averaged; the head then trains
+  // on every sample for that many epochs (train_head). One small validation split can be
+  // unrepresentative and stop a head at its first epochs; the mean of k rarely is.
+  int folds = 1;
   std::uint64_t seed = 0;            // head init, split and data order
 
   void validate() const {
@@ -66,6 +72,10 @@ struct HeadTrainConfig {
     require<ConfigError>(weight_decay >= 0, "HeadTrainConfig: weight_decay = ", weight_decay, ", expected >= 0");
     require<ConfigError>(class_weight >= 0, "HeadTrainConfig: class_weight = ", class_weight, ", expected >= 0");
     require<ConfigError>(clip_grad_norm > 0, "HeadTrainConfig: clip_grad_norm = ", clip_grad_norm, ", expected > 0");
+    require<ConfigError>(folds >= 1, "HeadTrainConfig: folds = ", folds, ", expected >= 1");
+    require<ConfigError>(folds == 1 || validation_blocks == 0, "HeadTrainConfig: folds = ", folds,
+                         " with validation_blocks = ", validation_blocks, "; cross-validation folds are groups or "
+                         "random samples, not blocks");
   }
 };
 
@@ -205,6 +215,69 @@ inline ValidationSplit validation_split(int S, const HeadTrainConfig& cfg, const
     return split_by_groups(groups, cfg.validation_fraction, cfg.seed);
   }
   return split_for_validation(S, cfg.validation_fraction, cfg.seed, cfg.validation_blocks, cfg.validation_gap);
+}
+
+// k folds for cross-validation: by the targets' groups when there are some and
+// cfg.validation_groups (each stratum's groups shuffled with the seed and dealt in turn to the
+// folds, the deal running on across strata, so that the folds are balanced per stratum), else the
+// samples shuffled and dealt. Every sample validates in exactly one fold; each fold has a
+// validation sample and 2 fitting ones.
+inline std::vector<ValidationSplit> validation_folds(int S, const HeadTrainConfig& cfg, const SampleGroups& groups) {
+  const int k = cfg.folds;
+  require<ConfigError>(k >= 2, "validation_folds: folds = ", k, ", expected >= 2");
+  std::vector<int> fold_of(static_cast<std::size_t>(S));
+  Rng rng(cfg.seed, detail::validation_salt);
+  if (cfg.validation_groups && !groups.empty()) {
+    groups.validate("validation_folds", S);
+    std::map<int, std::vector<std::int64_t>> by_stratum;  // distinct groups per stratum, first-seen order
+    std::map<std::int64_t, int> fold_of_group;
+    for (int i = 0; i < S; ++i) {
+      const std::int64_t g = groups.group[static_cast<std::size_t>(i)];
+      const int st = groups.stratum.empty() ? 0 : groups.stratum[static_cast<std::size_t>(i)];
+      if (fold_of_group.emplace(g, -1).second) by_stratum[st].push_back(g);
+    }
+    require<DataError>(static_cast<int>(fold_of_group.size()) >= k, "validation_folds: ", fold_of_group.size(),
+                       " group(s) for ", k, " folds, expected at least one group a fold");
+    int next = 0;
+    for (auto& [st, ids] : by_stratum) {
+      rng.shuffle(std::span<std::int64_t>(ids));
+      for (const std::int64_t g : ids) fold_of_group[g] = next++ % k;
+    }
+    for (int i = 0; i < S; ++i) fold_of[static_cast<std::size_t>(i)] = fold_of_group[groups.group[static_cast<std::size_t>(i)]];
+  } else {
+    require<DataError>(S >= k, "validation_folds: ", S, " samples for ", k, " folds");
+    std::vector<std::int64_t> order(static_cast<std::size_t>(S));
+    for (int i = 0; i < S; ++i) order[static_cast<std::size_t>(i)] = i;
+    rng.shuffle(std::span<std::int64_t>(order));
+    for (int j = 0; j < S; ++j) fold_of[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])] = j % k;
+  }
+  std::vector<ValidationSplit> out(static_cast<std::size_t>(k));
+  for (int i = 0; i < S; ++i)
+    for (int f = 0; f < k; ++f) (fold_of[static_cast<std::size_t>(i)] == f ? out[static_cast<std::size_t>(f)].validation
+                                                                            : out[static_cast<std::size_t>(f)].fit)
+                                    .push_back(i);
+  for (int f = 0; f < k; ++f)
+    require<DataError>(out[static_cast<std::size_t>(f)].fit.size() >= 2 && !out[static_cast<std::size_t>(f)].validation.empty(),
+                       "validation_folds: fold ", f, " has ", out[static_cast<std::size_t>(f)].fit.size(), " fitting and ",
+                       out[static_cast<std::size_t>(f)].validation.size(), " validation samples, expected at least 2 and 1");
+  return out;
+}
+
+// The epoch whose mean over the folds' validation curves is lowest, over the epochs every fold
+// ran (an early-stopped fold ran fewer); the record of the choice: the mean curve, that epoch, its value.
+inline EarlyStoppingRecord mean_validation_curve(const std::vector<EarlyStoppingRecord>& folds) {
+  require<DataError>(!folds.empty(), "mean_validation_curve: no folds");
+  std::size_t L = folds.front().validation_loss.size();
+  for (const auto& r : folds) L = std::min(L, r.validation_loss.size());
+  require<DataError>(L > 0, "mean_validation_curve: a fold ran no epoch");
+  EarlyStoppingRecord m;
+  m.validation_loss.assign(L, 0.0);
+  for (const auto& r : folds)
+    for (std::size_t e = 0; e < L; ++e) m.validation_loss[e] += r.validation_loss[e] / static_cast<double>(folds.size());
+  for (std::size_t e = 0; e < L; ++e)
+    if (m.validation_loss[e] < m.best_validation) m.best_validation = m.validation_loss[e], m.best_epoch = static_cast<int>(e);
+  require<DataError>(m.best_epoch >= 0, "mean_validation_curve: no finite validation loss");
+  return m;
 }
 
 // A head's training as an early-stopped Objective: `forward(ids)` runs the head (and a trainable

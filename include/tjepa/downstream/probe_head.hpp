@@ -16,6 +16,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -203,22 +204,14 @@ double head_validation(const ProbeHead<T>& head, Features& features, const HeadT
   return wrong / n + (std::isfinite(o) ? o / (1.0 + o) : 1.0) / (n + 1.0);
 }
 
-// Trains head (and the features' encoder, if trainable) on samples 0..S−1 of targets with early
-// stopping (a Trainer over a HeadObjective): the scaler is fitted on the fitting split, the
-// validation split is held out of training; at return the parameters are those of the best
-// validation epoch. log: the Trainer's log line every log_every steps.
+namespace detail {
+// One early-stopped training of head on split (split.validation empty: no validation, every
+// epoch counts as the best so far, so the last one is kept and the run goes to max_epochs).
 template <class T, class Features>
-HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTargets& targets,
-                           const HeadTrainConfig& cfg, std::ostream* log = nullptr, std::int64_t log_every = 0) {
-  cfg.validate();
-  targets.validate("train_head");
-  const int S = targets.size(), R = head.regression, C = head.classes, out = head.outputs();
-  require<ShapeError>(targets.regression == R && targets.classes == C, "train_head: targets of R = ", targets.regression,
-                      ", C = ", targets.classes, ", the head has R = ", R, ", C = ", C);
-  require<ShapeError>(features.size() == S, "train_head: ", features.size(), " feature rows for ", S, " targets");
-  require<ShapeError>(features.dim() == head.probe.config.dim, "train_head: features of width ", features.dim(),
-                      ", the head expects ", head.probe.config.dim);
-  const ValidationSplit split = validation_split(S, cfg, targets.groups);
+HeadTrainResult train_head_split(ProbeHead<T>& head, Features& features, const HeadTargets& targets,
+                                 const HeadTrainConfig& cfg, const ValidationSplit& split, std::ostream* log,
+                                 std::int64_t log_every) {
+  const int R = head.regression, C = head.classes, out = head.outputs();
   if (R > 0) head.scaler = ColumnScaler::fit(targets.value, R, split.fit);
 
   std::vector<PrefixedParams<T>> parts{{"probe.", &head.params}};
@@ -256,7 +249,11 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
     head.probe.backward(head.params, dy.data(), dxp, cache, ws);
     if (dxp) features.backward(dxp);
   };
-  auto validate = [&] { return head_validation(head, features, targets, split.validation, cfg); };
+  double epochs_done = 0;
+  auto validate = [&] {
+    if (split.validation.empty()) return -(epochs_done += 1);  // no validation: the latest epoch is the best
+    return head_validation(head, features, targets, split.validation, cfg);
+  };
   Trainer<HeadObjective<T>> trainer(std::move(parts), split.fit, cfg, forward, backward, validate,
                                     nlohmann::json{{"kind", "probe"}, {"regression", R}, {"classes", C}});
   if (log) {
@@ -265,6 +262,55 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
   }
   trainer.run();
   return trainer.record();
+}
+}  // namespace detail
+
+// Trains head (and the features' encoder, if trainable) on samples 0..S−1 of targets with early
+// stopping (a Trainer over a HeadObjective): the scaler is fitted on the fitting split, the
+// validation split is held out of training; at return the parameters are those of the best
+// validation epoch. log: the Trainer's log line every log_every steps.
+// cfg.folds = k > 1 (and no validation groups given in targets.groups.held): k early-stopped
+// trainings from the same start, fold f validating on validation_folds' fold f; the epoch e with
+// the lowest mean validation loss over the folds (mean_validation_curve); then, from the same
+// start again, e + 1 epochs on every sample. The record: that final run's training losses, the
+// mean validation curve, e and its mean loss.
+template <class T, class Features>
+HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTargets& targets,
+                           const HeadTrainConfig& cfg, std::ostream* log = nullptr, std::int64_t log_every = 0) {
+  cfg.validate();
+  targets.validate("train_head");
+  const int S = targets.size();
+  require<ShapeError>(targets.regression == head.regression && targets.classes == head.classes,
+                      "train_head: targets of R = ", targets.regression, ", C = ", targets.classes,
+                      ", the head has R = ", head.regression, ", C = ", head.classes);
+  require<ShapeError>(features.size() == S, "train_head: ", features.size(), " feature rows for ", S, " targets");
+  require<ShapeError>(features.dim() == head.probe.config.dim, "train_head: features of width ", features.dim(),
+                      ", the head expects ", head.probe.config.dim);
+  if (cfg.folds <= 1 || !targets.groups.held.empty())
+    return detail::train_head_split(head, features, targets, cfg, validation_split(S, cfg, targets.groups), log,
+                                    log_every);
+  const ProbeHead<T> start = head;
+  ParamSet<T>* encoder = features.trainable();
+  std::optional<ParamSet<T>> encoder_start;
+  if (encoder) encoder_start = *encoder;
+  auto restart = [&] {
+    head = start;
+    if (encoder) *encoder = *encoder_start;
+  };
+  std::vector<HeadTrainResult> folds;
+  for (const ValidationSplit& split : validation_folds(S, cfg, targets.groups)) {
+    restart();
+    folds.push_back(detail::train_head_split(head, features, targets, cfg, split, log, log_every));
+  }
+  HeadTrainResult chosen = mean_validation_curve(folds);
+  restart();
+  HeadTrainConfig all = cfg;
+  all.max_epochs = chosen.best_epoch + 1;
+  all.patience = all.max_epochs + 1;
+  ValidationSplit every;
+  for (int i = 0; i < S; ++i) every.fit.push_back(i);
+  chosen.train_loss = detail::train_head_split(head, features, targets, all, every, log, log_every).train_loss;
+  return chosen;
 }
 
 // Predictions [S, R + C] for samples 0..S−1: regression in the targets' units, then the logits.
