@@ -249,7 +249,7 @@ TEST_SUITE("baselines") {
     CHECK(dino_teacher_temp(c, 99, 100) == doctest::Approx(0.07));
   }
 
-  TEST_CASE("dino_collapsed: a uniform student scores ln P against any teacher; one that follows the teacher does not") {
+  TEST_CASE("dino_collapsed: a uniform student scores ln P against any teacher / one that follows the teacher does not") {
     const int M = 6, P = 50;
     Rng rng(11);
     const auto t = test::normal_vector(std::size_t(M) * P, rng);

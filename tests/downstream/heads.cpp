@@ -682,7 +682,7 @@ void final_run(ProbeHead<float>& head, Features& f, const HeadTargets& targets, 
 }
 }  // namespace
 
-TEST_CASE("train_head with folds: the epochs of the lowest mean fold curve, then every sample for that many") {
+TEST_CASE("train_head with folds: the epochs of the lowest mean fold curve / then every sample for that many") {
   const int S = 160, L = 2, d = 12;
   auto [x, targets] = encoded_samples(S, L, d, 4);
   for (int i = 0; i < S; ++i) targets.groups.group.push_back(i / 4), targets.groups.stratum.push_back(0);  // 40 groups of 4
