@@ -80,7 +80,7 @@ struct TrialEvalOptions {
   // Shares of fewer labelled trials than head_folds_below: every head (frozen and end to end)
   // picks its epochs by cross-validation over head_folds folds of trials (1: one validation split).
   // A fifth of a few dozen trials is too few to stop on: on FabricSlide at 10 % (73 slides, about
-  // 2 of each fabric held out) the single split's heads read 77, 69 and 25 % on the error (3 seeds),
+  // 2 of each fabric held out) the single split's heads read 85, 77 and 25 % on the error (3 seeds),
   // the 3-fold ones 77, 69 and 80 %.
   int head_folds = 3, head_folds_below = 200;
   PoolingKind pooling = PoolingKind::taxel;
@@ -278,10 +278,13 @@ inline TrialEvalResult run_trial_eval(const TrialEvalOptions& o, const TrainConf
     s.windows = s.labels.window;
     return s;
   };
+  auto trials_of = [](const Share& sh) {
+    return static_cast<int>(std::set<int>(sh.labels.trial.begin(), sh.labels.trial.end()).size());
+  };
+  auto folds_of = [&](const Share& sh) { return trials_of(sh) < o.head_folds_below ? o.head_folds : 1; };
   auto head_config = [&](const Share& sh, std::size_t windows, std::uint64_t h, int steps, int patience) {
     HeadTrainConfig c = o.head;
-    const std::set<int> trials(sh.labels.trial.begin(), sh.labels.trial.end());
-    c.folds = static_cast<int>(trials.size()) < o.head_folds_below ? o.head_folds : 1;
+    c.folds = folds_of(sh);
     const double fit = (1.0 - c.validation_fraction) * static_cast<double>(windows);
     const int per_epoch = std::max(1, static_cast<int>(fit / c.batch));
     c.max_epochs = std::max(1, (steps + per_epoch - 1) / per_epoch);
@@ -291,7 +294,7 @@ inline TrialEvalResult run_trial_eval(const TrialEvalOptions& o, const TrainConf
   };
   for (std::size_t k = 0; k < o.label_fractions.size(); ++k) {
     const Share s = share_of(o.label_fractions[k], 0);
-    const int trials = static_cast<int>(std::set<int>(s.labels.trial.begin(), s.labels.trial.end()).size());
+    const int trials = trials_of(s);
     res.tables.push_back(
         trial_eval_table(test, o.label_fractions[k], trials, d.train_trials, static_cast<int>(s.rows.size())));
     if (o.end_to_end)
@@ -319,9 +322,8 @@ inline TrialEvalResult run_trial_eval(const TrialEvalOptions& o, const TrainConf
   // validation loss, so that a head kept at its first epochs is seen.
   auto record_head = [&](const std::string& row, std::uint64_t s, const Share& sh, std::uint64_t h,
                          const HeadTrainResult& r) {
-    const std::set<int> trials(sh.labels.trial.begin(), sh.labels.trial.end());
-    res.info["head_training"].push_back({{"row", row}, {"seed", s}, {"head_seed", h}, {"trials", trials.size()},
-                                 {"folds", static_cast<int>(trials.size()) < o.head_folds_below ? o.head_folds : 1},
+    res.info["head_training"].push_back({{"row", row}, {"seed", s}, {"head_seed", h}, {"trials", trials_of(sh)},
+                                 {"folds", folds_of(sh)},
                                  {"epochs", r.epochs()}, {"best_epoch", r.best_epoch},
                                  {"best_validation", r.best_epoch >= 0 ? r.best_validation : 0.0},
                                  {"first_validation", r.validation_loss.empty() ? 0.0 : r.validation_loss.front()}});

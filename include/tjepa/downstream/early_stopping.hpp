@@ -154,6 +154,31 @@ struct SampleGroups {
   }
 };
 
+namespace detail {
+// The distinct groups of g in order of first appearance, and each stratum's (in ascending order)
+// groups in that order; a group with samples of two strata is an error.
+struct GroupStrata {
+  std::vector<std::int64_t> ids;
+  std::map<int, std::vector<std::int64_t>> by_stratum;
+};
+inline GroupStrata group_strata(const SampleGroups& g, const char* who) {
+  GroupStrata out;
+  std::map<std::int64_t, int> stratum_of;
+  for (std::size_t i = 0; i < g.group.size(); ++i) {
+    const int st = g.stratum.empty() ? 0 : g.stratum[i];
+    const auto [at, added] = stratum_of.emplace(g.group[i], st);
+    if (added) {
+      out.ids.push_back(g.group[i]);
+      out.by_stratum[st].push_back(g.group[i]);
+    } else {
+      require<DataError>(at->second == st, who, ": group ", g.group[i], " has samples of strata ", at->second, " and ",
+                         st, ", expected one stratum per group");
+    }
+  }
+  return out;
+}
+}  // namespace detail
+
 // Validation by groups: each stratum's groups (in order of first appearance) are shuffled with the
 // seed and round(fraction·n) of its n groups are held out, at least one where n >= 2 and never
 // all; if that holds out nothing (every stratum has one group), one seeded group of all; groups
@@ -163,31 +188,13 @@ inline ValidationSplit split_by_groups(const SampleGroups& g, double fraction, s
   require<ConfigError>(fraction > 0 && fraction < 1, "split_by_groups: fraction = ", fraction, ", expected in (0, 1)");
   require<DataError>(!g.empty(), "split_by_groups: no groups");
   g.validate("split_by_groups", static_cast<int>(g.group.size()));
-  std::vector<std::int64_t> ids;  // distinct groups, in order of first appearance
-  std::vector<int> strata;        // their strata
-  for (std::size_t i = 0; i < g.group.size(); ++i) {
-    const int st = g.stratum.empty() ? 0 : g.stratum[i];
-    const auto at = std::find(ids.begin(), ids.end(), g.group[i]);
-    if (at == ids.end()) {
-      ids.push_back(g.group[i]);
-      strata.push_back(st);
-    } else {
-      require<DataError>(strata[static_cast<std::size_t>(at - ids.begin())] == st, "split_by_groups: group ",
-                         g.group[i], " has samples of strata ", strata[static_cast<std::size_t>(at - ids.begin())],
-                         " and ", st, ", expected one stratum per group");
-    }
-  }
+  detail::GroupStrata gs = detail::group_strata(g, "split_by_groups");
+  const std::vector<std::int64_t>& ids = gs.ids;
   require<DataError>(ids.size() >= 2, "split_by_groups: ", ids.size(),
                      " group(s), expected at least 2 (one to fit on, one to validate on)");
-  std::vector<int> sorted = strata;
-  std::sort(sorted.begin(), sorted.end());
-  sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
   Rng rng(seed, detail::validation_salt);
   std::vector<std::int64_t> held;
-  for (const int st : sorted) {
-    std::vector<std::int64_t> mine;
-    for (std::size_t j = 0; j < ids.size(); ++j)
-      if (strata[j] == st) mine.push_back(ids[j]);
+  for (auto& [st, mine] : gs.by_stratum) {
     rng.shuffle(std::span<std::int64_t>(mine));
     const auto n = static_cast<long>(mine.size());
     const long k = n < 2 ? 0 : std::clamp(std::lround(fraction * static_cast<double>(n)), 1L, n - 1);
@@ -229,17 +236,12 @@ inline std::vector<ValidationSplit> validation_folds(int S, const HeadTrainConfi
   Rng rng(cfg.seed, detail::validation_salt);
   if (cfg.validation_groups && !groups.empty()) {
     groups.validate("validation_folds", S);
-    std::map<int, std::vector<std::int64_t>> by_stratum;  // distinct groups per stratum, first-seen order
+    detail::GroupStrata gs = detail::group_strata(groups, "validation_folds");
+    require<DataError>(static_cast<int>(gs.ids.size()) >= k, "validation_folds: ", gs.ids.size(), " group(s) for ", k,
+                       " folds, expected at least one group a fold");
     std::map<std::int64_t, int> fold_of_group;
-    for (int i = 0; i < S; ++i) {
-      const std::int64_t g = groups.group[static_cast<std::size_t>(i)];
-      const int st = groups.stratum.empty() ? 0 : groups.stratum[static_cast<std::size_t>(i)];
-      if (fold_of_group.emplace(g, -1).second) by_stratum[st].push_back(g);
-    }
-    require<DataError>(static_cast<int>(fold_of_group.size()) >= k, "validation_folds: ", fold_of_group.size(),
-                       " group(s) for ", k, " folds, expected at least one group a fold");
     int next = 0;
-    for (auto& [st, ids] : by_stratum) {
+    for (auto& [st, ids] : gs.by_stratum) {
       rng.shuffle(std::span<std::int64_t>(ids));
       for (const std::int64_t g : ids) fold_of_group[g] = next++ % k;
     }

@@ -305,8 +305,7 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
   HeadTrainResult chosen = mean_validation_curve(folds);
   restart();
   HeadTrainConfig all = cfg;
-  all.max_epochs = chosen.best_epoch + 1;
-  all.patience = all.max_epochs + 1;
+  all.max_epochs = chosen.best_epoch + 1;  // no validation: every epoch is the best so far, patience never ends it
   ValidationSplit every;
   for (int i = 0; i < S; ++i) every.fit.push_back(i);
   chosen.train_loss = detail::train_head_split(head, features, targets, all, every, log, log_every).train_loss;
