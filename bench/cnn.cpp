@@ -14,23 +14,13 @@
 #include <cstdint>
 #include <vector>
 
-#ifdef _OPENMP
-#include <omp.h>
-#endif
-
 #include <tjepa/baselines.hpp>
+
+#include "threads.hpp"
 
 namespace {
 
-struct Threads {  // the benchmark's first argument as the OpenMP thread count, restored after
-#ifdef _OPENMP
-  int previous = omp_get_max_threads();
-  explicit Threads(const benchmark::State& s) { omp_set_num_threads(static_cast<int>(s.range(0))); }
-  ~Threads() { omp_set_num_threads(previous); }
-#else
-  explicit Threads(const benchmark::State&) {}
-#endif
-};
+using tjepa_bench::Threads;
 
 std::vector<float> random_images(int B, int S, int C, std::uint64_t seed) {
   tjepa::Rng rng(seed);
