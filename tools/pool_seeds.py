@@ -1,15 +1,17 @@
 #!/usr/bin/env python3
 """Pools one table of several `tjepa eval` runs (results.json) over their pre-training seeds.
 
-    tools/pool_seeds.py TABLE RESULTS.json [RESULTS.json ...] [--rows NAME ...]
+    tools/pool_seeds.py TABLE RESULTS.json [RESULTS.json ...] [--rows NAME ...] [--contrast ROW AGAINST]
 
-TABLE is main, ablation, linear or ablation_linear. Rows are matched by name; each run's seeds
-come from its config ("seeds"; a run stopped early holds its first seeds, and the script says so),
-and a seed found in two runs of the same row is an error. For each
+TABLE is main, ablation, linear or ablation_linear, or trials for `tjepa eval --trials` runs (each
+label share's table pooled on its own; the runs must have the same shares). Rows are matched by
+name; each run's seeds come from its config ("seeds"; a run stopped early holds its first seeds,
+and the script says so), and a seed found in two runs of the same row is an error. For each
 primary metric: the heads' mean per seed, then mean ± sample sd over seeds, the rank of each row,
 and the one-sided Welch test of the best row against the second (as downstream/welch.hpp: the
-best's mean is better). Writes markdown on stdout. Pool only runs whose heads were trained alike:
-the script cannot tell (it prints each run's command).
+best's mean is better), and of each --contrast pair (ROW better than AGAINST). Writes markdown
+on stdout. Pool only runs whose heads were trained alike: the script cannot tell (it prints each
+run's command).
 """
 import argparse
 import json
@@ -60,23 +62,12 @@ def welch_less(a, b):
     return t, df, (tail if t < 0 else 1 - tail)
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("table", choices=["main", "ablation", "linear", "ablation_linear"])
-    ap.add_argument("results", nargs="+")
-    ap.add_argument("--rows", nargs="*", help="only these rows, in this order")
-    args = ap.parse_args()
-
+def pool(runs, args):
+    """Pools one table of several runs: runs is a list of (path, command, seeds, table)."""
     metrics, rows, order = None, {}, []
-    for path in args.results:
-        with open(path) as f:
-            run = json.load(f)
-        table = run.get(args.table)
-        if table is None:
-            sys.exit(f"{path}: no table '{args.table}'")
+    for path, command, seeds, table in runs:
         metrics = metrics or [m for m in table["metrics"] if m["primary"]]
-        print(f"- {path}: `{run.get('command', '?')}`")
-        seeds = run["config"]["seeds"]
+        print(f"- {path}: `{command}`")
         for row in table["rows"]:
             if args.rows and row["name"] not in args.rows:
                 continue
@@ -105,6 +96,16 @@ def main():
     def mean(v):
         return sum(v) / len(v)
 
+    def test(m, better, worse):
+        """One-sided Welch test that row better's mean beats row worse's in metric m."""
+        a, b = values(better, m["key"]), values(worse, m["key"])
+        if len(a) < 2 or len(b) < 2:
+            return "not tested (fewer than 2 seeds)"
+        if m["higher_is_better"]:
+            a, b = [-x for x in a], [-x for x in b]
+        t, df, p = welch_less(a, b)
+        return f"one-sided Welch t = {abs(t):.2f}, df {df:.1f}, p = {p:.3g}"
+
     print()
     print("| row | seeds | " + " | ".join(f"{m['name']} ({m['unit']}) {'↑' if m['higher_is_better'] else '↓'}" for m in metrics) + " |")
     print("|---|---|" + "---|" * len(metrics))
@@ -123,14 +124,46 @@ def main():
     print()
     for m in metrics:
         best, second = sorted(names, key=lambda n: ranks[m["key"]][n])[:2]
-        a, b = values(best, m["key"]), values(second, m["key"])
-        if len(a) < 2 or len(b) < 2:
-            print(f"- {m['name']}: best {best}, second {second}; not tested (fewer than 2 seeds)")
-            continue
-        if m["higher_is_better"]:
-            a, b = [-x for x in a], [-x for x in b]
-        t, df, p = welch_less(a, b)
-        print(f"- {m['name']}: best {best}, second {second}; one-sided Welch t = {abs(t):.2f}, df {df:.1f}, p = {p:.3g}")
+        print(f"- {m['name']}: best {best}, second {second}; {test(m, best, second)}")
+        for row, against in args.contrast or []:
+            for n in (row, against):
+                if n not in rows:
+                    sys.exit(f"--contrast: no row '{n}' (rows: {', '.join(order)})")
+            print(f"- {m['name']}: {row} against {against}; {test(m, row, against)}")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("table", choices=["main", "ablation", "linear", "ablation_linear", "trials"])
+    ap.add_argument("results", nargs="+")
+    ap.add_argument("--rows", nargs="*", help="only these rows, in this order")
+    ap.add_argument("--contrast", nargs=2, action="append", metavar=("ROW", "AGAINST"),
+                    help="also test that ROW beats AGAINST (one-sided Welch), per metric")
+    args = ap.parse_args()
+
+    runs = []
+    for path in args.results:
+        with open(path) as f:
+            runs.append((path, json.load(f)))
+    if args.table != "trials":
+        tables = []
+        for path, run in runs:
+            if run.get(args.table) is None:
+                sys.exit(f"{path}: no table '{args.table}'")
+            tables.append((path, run.get("command", "?"), run["config"]["seeds"], run[args.table]))
+        return pool(tables, args)
+    # tjepa eval --trials: one table per label share, matched by share across the runs.
+    shares = None
+    for path, run in runs:
+        if "tables" not in run or "label_fractions" not in run:
+            sys.exit(f"{path}: not the results of tjepa eval --trials (no 'tables')")
+        if shares is None:
+            shares = run["label_fractions"]
+        elif run["label_fractions"] != shares:
+            sys.exit(f"{path}: label shares {run['label_fractions']}, the first run's are {shares}")
+    for k, share in enumerate(shares):
+        print(f"\n### {runs[0][1]['tables'][k]['title']}\n")
+        pool([(path, run.get("command", "?"), run["seeds"], run["tables"][k]) for path, run in runs], args)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,60 @@
+#!/usr/bin/env python3
+"""Checks tools/pool_seeds.py on made-up `tjepa eval --trials` results: the pooled mean ± sd per
+row and share, the best-against-second test and a --contrast test against values worked by hand
+(Welch's t for [1, 2, 3] against [2, 3, 4]: t = -1.2247, df 4, one-sided p = 0.144, the t
+distribution's tail integrated numerically below), and a clear error for mismatched shares.
+    pool_seeds_check.py TOOLS_DIR WORK_DIR"""
+import json
+import math
+import os
+import subprocess
+import sys
+
+tools, work = sys.argv[1], sys.argv[2]
+os.makedirs(work, exist_ok=True)
+metrics = [{"key": "acc", "name": "top-1", "unit": "%", "higher_is_better": True, "primary": True}]
+
+
+def run_file(seed, shares, a, b):
+    tables = [{"title": f"share {s}", "metrics": metrics,
+               "rows": [{"name": "A", "runs": [[{"acc": a + 10 * k}]]}, {"name": "B", "runs": [[{"acc": b + 10 * k}]]}]}
+              for k, s in enumerate(shares)]
+    path = os.path.join(work, f"s{seed}.json")
+    with open(path, "w") as f:
+        json.dump({"command": f"tjepa eval --seeds {seed}", "seeds": [seed], "label_fractions": shares,
+                   "tables": tables}, f)
+    return path
+
+
+# Seeds 0, 1, 2: row B reads 2, 3, 4 and row A 1, 2, 3 (share 1); both 10 higher at share 0.1.
+files = [run_file(s, [1, 0.1], 1 + s, 2 + s) for s in range(3)]
+out = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", *files,
+                      "--contrast", "A", "B"], capture_output=True, text=True, check=True).stdout
+
+
+def tail(t, df, n=200000):
+    """P(T > t) for Student's t with df degrees of freedom (Simpson's rule on [t, 60])."""
+    c = math.gamma((df + 1) / 2) / (math.sqrt(df * math.pi) * math.gamma(df / 2))
+    f = lambda x: c * (1 + x * x / df) ** (-(df + 1) / 2)
+    h = (60 - t) / n
+    return h / 3 * sum((1 if i in (0, n) else 4 if i % 2 else 2) * f(t + i * h) for i in range(n + 1))
+
+
+p = tail(1 / math.sqrt(2 / 3), 4)  # the worked value: A's mean is below B's, so "A beats B" has p = 1 - tail
+expected = [
+    "### share 1", "### share 0.1",
+    "| B | 0,1,2 | 3 ± 1 (1) |", "| A | 0,1,2 | 2 ± 1 (2) |", "| B | 0,1,2 | 13 ± 1 (1) |",
+    f"top-1: best B, second A; one-sided Welch t = 1.22, df 4.0, p = {p:.3g}",
+    f"top-1: A against B; one-sided Welch t = 1.22, df 4.0, p = {1 - p:.3g}",
+]
+missing = [e for e in expected if e not in out]
+if missing:
+    sys.exit("pool_seeds.py printed:\n" + out + "\nwithout:\n" + "\n".join(missing))
+assert out.count("one-sided Welch") == 4, out
+
+bad = run_file(3, [1, 0.25], 0, 0)
+r = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", files[0], bad],
+                   capture_output=True, text=True)
+if r.returncode == 0 or "label shares [1, 0.25], the first run's are [1, 0.1]" not in r.stderr:
+    sys.exit(f"mismatched shares: exit {r.returncode}, stderr {r.stderr!r}")
+print("pool_seeds.py: ok")
