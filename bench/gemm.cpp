@@ -3,8 +3,9 @@
 // the products whose depth (the batch's rows) is split into slabs over the threads
 // (kernels/detail/sgemm.hpp's run_split_depth). The sizes are the context encoder's at batch 8
 // (bench/jepa_setup.hpp: 164 context tokens a window, M = 1312; d 192, MLP 768): fc1 (K 192,
-// N 768), fc2 (768, 192), qkv (192, 576). Run with repetitions and read the "min" rows: on a
-// shared 2-core VM a slow spell of the other core falls on the medians.
+// N 768), fc2 (768, 192), qkv (192, 576). Run with repetitions and read the real time of the
+// "min" rows (their GFLOP/s is the slowest repetition's): on a shared 2-core VM a slow spell of
+// the other core falls on the medians.
 //   tjepa_bench --benchmark_filter=BM_WeightGradient --benchmark_repetitions=20
 #include <benchmark/benchmark.h>
 

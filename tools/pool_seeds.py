@@ -86,7 +86,7 @@ def pool(runs, args):
                     sys.exit(f"{path}: row '{row['name']}' seed {seed} is in an earlier file too")
                 mine[seed] = {m["key"]: sum(h[m["key"]] for h in heads) / len(heads) for m in metrics}
     names = args.rows or order
-    for n in names:
+    for n in names + [n for pair in args.contrast or [] for n in pair]:
         if n not in rows:
             sys.exit(f"no row '{n}' (rows: {', '.join(order)})")
 
@@ -126,9 +126,6 @@ def pool(runs, args):
         best, second = sorted(names, key=lambda n: ranks[m["key"]][n])[:2]
         print(f"- {m['name']}: best {best}, second {second}; {test(m, best, second)}")
         for row, against in args.contrast or []:
-            for n in (row, against):
-                if n not in rows:
-                    sys.exit(f"--contrast: no row '{n}' (rows: {', '.join(order)})")
             print(f"- {m['name']}: {row} against {against}; {test(m, row, against)}")
 
 
@@ -161,7 +158,7 @@ def main():
             shares = run["label_fractions"]
         elif run["label_fractions"] != shares:
             sys.exit(f"{path}: label shares {run['label_fractions']}, the first run's are {shares}")
-    for k, share in enumerate(shares):
+    for k in range(len(shares)):
         print(f"\n### {runs[0][1]['tables'][k]['title']}\n")
         pool([(path, run.get("command", "?"), run["seeds"], run["tables"][k]) for path, run in runs], args)
 

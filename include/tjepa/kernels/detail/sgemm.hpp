@@ -327,8 +327,7 @@ void run_split_depth(int rows, int cols, int depth, int tasks_per_slab, Pack&& p
     // About 16 tasks a thread, taken as threads free up: with 4 the context encoder's weight
     // gradients at batch 8 (depth 1312: 3 slabs) made 3 chunks a slab, 9 tasks, 5 for one of 2
     // threads and 4 for the other (at most 1.8x); with 16, 33 tasks (at most 1.94x, and a slow
-    // spell of one core costs one small task). Interleaved in one process on a 2-core Zen 4 VM
-    // (best of 40, 2026-12-04) those products went from 1.81-1.88x to 1.88-1.93x on 2 threads.
+    // spell of one core costs one small task). bench/gemm.cpp's BM_WeightGradient times them.
     const int chunks = std::clamp((16 * team_size() + slabs - 1) / slabs, 1, std::max(1, blocks / 4));
     TJEPA_OMP(omp for schedule(dynamic, 1))
     for (int task = 0; task < slabs * chunks; ++task) {
