@@ -31,6 +31,7 @@ std::vector<float> random_images(int B, int S, int C, std::uint64_t seed) {
 
 void alexnet(benchmark::State& state, bool train) {
   const Threads threads(state);
+  if (threads.skipped()) return;
   const int B = 8;
   const tjepa::AlexNetConfig c;
   tjepa::ParamSet<float> ps;
@@ -58,6 +59,7 @@ BENCHMARK(BM_AlexNetTrain)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRe
 
 void BM_ByolStep(benchmark::State& state) {
   const Threads threads(state);
+  if (threads.skipped()) return;
   const int B = 8;
   tjepa::ByolConfig c;  // the reference's sizes: 224, AlexNet, projection 1024, hidden 4096
   tjepa::ByolModel<float> model(c, 1);

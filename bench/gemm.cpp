@@ -21,6 +21,7 @@ namespace {
 
 void BM_WeightGradient(benchmark::State& state) {
   const tjepa_bench::Threads threads(state, 3);
+  if (threads.skipped()) return;
   const int M = static_cast<int>(state.range(0)), K = static_cast<int>(state.range(1)),
             N = static_cast<int>(state.range(2));
   tjepa::Rng rng(1);

@@ -11,28 +11,18 @@
 #include <cstdint>
 #include <string_view>
 
-#ifdef _OPENMP
-#include <omp.h>
-#endif
-
 #include <tjepa/tjepa.hpp>
 
 #include "jepa_setup.hpp"
+#include "threads.hpp"
 
 namespace {
 
 void run_jepa_step(benchmark::State& state, std::string_view skin, tjepa::Precision precision) {
   if (precision == tjepa::Precision::bf16 && !tjepa::has_native_bf16())
     return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
-#ifdef _OPENMP
-  const int previous = omp_get_max_threads();
-  omp_set_num_threads(static_cast<int>(state.range(0)));
-#else
-  if (state.range(0) > 1) {
-    state.SkipWithError("built without OpenMP");
-    return;
-  }
-#endif
+  const tjepa_bench::Threads threads(state);
+  if (threads.skipped()) return;
   const auto setup = tjepa_bench::jepa_setup(skin);
   const int B = setup.B;
   tjepa_bench::JepaRun run(setup, precision);
@@ -52,9 +42,6 @@ void run_jepa_step(benchmark::State& state, std::string_view skin, tjepa::Precis
   state.counters["windows/s"] = benchmark::Counter(B, benchmark::Counter::kIsIterationInvariantRate);
   state.counters["K"] = masks.K;
   state.counters["N"] = N;
-#ifdef _OPENMP
-  omp_set_num_threads(previous);
-#endif
 }
 
 void BM_JepaTrainStep(benchmark::State& state) { run_jepa_step(state, "allegro", tjepa::Precision::fp32); }
