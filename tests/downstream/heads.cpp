@@ -682,7 +682,7 @@ void final_run(ProbeHead<float>& head, Features& f, const HeadTargets& targets, 
 }
 }  // namespace
 
-TEST_CASE("train_head with folds: the epochs of the lowest mean fold curve / then every sample for that many") {
+TEST_CASE("train_head with folds: side by side until the mean curve stops improving / then every sample for the best epoch count") {
   const int S = 160, L = 2, d = 12;
   auto [x, targets] = encoded_samples(S, L, d, 4);
   for (int i = 0; i < S; ++i) targets.groups.group.push_back(i / 4), targets.groups.stratum.push_back(0);  // 40 groups of 4
@@ -692,18 +692,25 @@ TEST_CASE("train_head with folds: the epochs of the lowest mean fold curve / the
   const ProbeHead<float> start(d, 3, 2, 4, 0);
   ProbeHead<float> head = start;
   const HeadTrainResult r = train_head(head, f, targets, cfg);
-  // The folds by hand: each from the same start, validating on its fold.
+  const int E = r.epochs();
+  // Stopped by the Trainer's rule on the mean: patience epochs after the lowest, or at max_epochs.
+  CHECK((E == cfg.max_epochs || E - 1 - r.best_epoch == cfg.patience));
+  // The folds by hand: each from the same start, validating on its fold, for the same E epochs and
+  // not stopped on its own (the lockstep changes no fold's bits).
+  HeadTrainConfig by_hand = cfg;
+  by_hand.max_epochs = E;
+  by_hand.patience = E;
   std::vector<HeadTrainResult> folds;
   for (const ValidationSplit& split : validation_folds(S, cfg, targets.groups)) {
     ProbeHead<float> h = start;
-    folds.push_back(detail::train_head_split(h, f, targets, cfg, split, nullptr, 0));
+    folds.push_back(detail::train_head_split(h, f, targets, by_hand, split, nullptr, 0));
   }
   const HeadTrainResult mean = mean_validation_curve(folds);
   CHECK(r.validation_loss == mean.validation_loss);
   CHECK(r.best_epoch == mean.best_epoch);
   const auto best = std::min_element(r.validation_loss.begin(), r.validation_loss.end());
   CHECK(r.best_epoch == best - r.validation_loss.begin());
-  for (const auto& fr : folds) CHECK(r.validation_loss.size() <= fr.validation_loss.size());
+  for (const auto& fr : folds) CHECK(fr.validation_loss.size() == static_cast<std::size_t>(E));
   CHECK(r.validation_loss[0] == doctest::Approx((folds[0].validation_loss[0] + folds[1].validation_loss[0] +
                                                  folds[2].validation_loss[0]) / 3));
   // Then best_epoch + 1 epochs on all 160 samples from the start again: the same parameters.
@@ -752,6 +759,18 @@ TEST_CASE("train_head end to end with folds: the encoder starts each fold and th
   final_run(again, feats2, targets, cfg, r.best_epoch);
   CHECK(std::equal(ps.values().begin(), ps.values().end(), ps2.values().begin()));
   CHECK(std::equal(head.params.values().begin(), head.params.values().end(), again.params.values().begin()));
+  // Each fold by hand with an encoder of its own: the folds run side by side, sharing one encoder
+  // swapped in and out, give the same curves.
+  HeadTrainConfig by_hand = cfg;
+  by_hand.max_epochs = by_hand.patience = r.epochs();
+  std::vector<HeadTrainResult> folds;
+  for (const ValidationSplit& split : validation_folds(S, cfg, targets.groups)) {
+    ParamSet<float> own = encoder_start;
+    EncoderFeatures<float> own_feats(own, tok, enc, src, windows);
+    ProbeHead<float> h = start;
+    folds.push_back(detail::train_head_split(h, own_feats, targets, by_hand, split, nullptr, 0));
+  }
+  CHECK(r.validation_loss == mean_validation_curve(folds).validation_loss);
 }
 
 TEST_CASE("train_head: stops after patience epochs without improvement on unlearnable targets") {

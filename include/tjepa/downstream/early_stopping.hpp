@@ -52,9 +52,10 @@ struct HeadTrainConfig {
   // still improves (confident mistakes on an atypical episode). Regression heads ignore it.
   bool stop_on_error = false;
   // folds > 1: the epoch count is chosen by k-fold cross-validation (validation_folds: every
-  // sample, or group, validates once), the folds' validation curves averaged; the head then trains
-  // on every sample for that many epochs (train_head). One small validation split can be
-  // unrepresentative and stop a head at its first epochs; the mean of k rarely is.
+  // sample, or group, validates once), the folds trained side by side and stopped together on the
+  // mean of their validation values (patience applies to the mean); the head then trains on every
+  // sample for that many epochs (train_head). One small validation split can be unrepresentative
+  // and stop a head at its first epochs; the mean of k rarely is.
   int folds = 1;
   std::uint64_t seed = 0;            // head init, split and data order
 
@@ -266,7 +267,8 @@ inline std::vector<ValidationSplit> validation_folds(int S, const HeadTrainConfi
 }
 
 // The epoch whose mean over the folds' validation curves is lowest, over the epochs every fold
-// ran (an early-stopped fold ran fewer); the record of the choice: the mean curve, that epoch, its value.
+// ran (train_head's folds all run the same epochs); the record of the choice: the mean curve, that
+// epoch, its value.
 inline EarlyStoppingRecord mean_validation_curve(const std::vector<EarlyStoppingRecord>& folds) {
   require<DataError>(!folds.empty(), "mean_validation_curve: no folds");
   std::size_t L = folds.front().validation_loss.size();

@@ -16,6 +16,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <memory>
 #include <optional>
 #include <span>
 #include <vector>
@@ -206,62 +208,93 @@ double head_validation(const ProbeHead<T>& head, Features& features, const HeadT
 
 namespace detail {
 // One early-stopped training of head on split (split.validation empty: no validation, every
-// epoch counts as the best so far, so the last one is kept and the run goes to max_epochs).
+// epoch counts as the best so far, so the last one is kept and the run goes to max_epochs), as an
+// object that runs a given number of epochs at a time: train_head runs its folds side by side.
+// It holds references to head, features and targets, and lambdas that point into it: not movable.
+template <class T, class Features>
+class HeadSplitRun {
+ public:
+  HeadSplitRun(ProbeHead<T>& head, Features& features, const HeadTargets& targets, const HeadTrainConfig& cfg,
+               ValidationSplit split, std::ostream* log, std::int64_t log_every)
+      : head_(head), features_(features), targets_(targets), cfg_(cfg), split_(std::move(split)) {
+    const int R = head.regression, C = head.classes;
+    if (R > 0) head.scaler = ColumnScaler::fit(targets.value, R, split_.fit);
+    std::vector<PrefixedParams<T>> parts{{"probe.", &head.params}};
+    if (ParamSet<T>* enc = features.trainable()) parts.push_back({"encoder.", enc});
+    auto forward = [this](std::span<const std::int64_t> ids) { return forward_batch(ids); };
+    auto backward = [this] { backward_batch(); };
+    auto validate = [this] {
+      if (split_.validation.empty()) return -(epochs_done_ += 1);  // no validation: the latest epoch is the best
+      return head_validation(head_, features_, targets_, split_.validation, cfg_);
+    };
+    trainer_.emplace(std::move(parts), split_.fit, cfg, forward, backward, validate,
+                     nlohmann::json{{"kind", "probe"}, {"regression", R}, {"classes", C}});
+    if (log) {
+      trainer_->log = log;
+      trainer_->log_every = log_every;
+    }
+  }
+  HeadSplitRun(const HeadSplitRun&) = delete;
+  HeadSplitRun& operator=(const HeadSplitRun&) = delete;
+
+  // Runs `epochs` more epochs (< 0: to the end), fewer if the run stops early or ends.
+  void run(int epochs = -1) { trainer_->run(epochs < 0 ? -1 : std::int64_t(epochs) * trainer_->steps_per_epoch()); }
+  bool done() const { return trainer_->stopped_early() || trainer_->step() == trainer_->total_steps(); }
+  const HeadTrainResult& record() const { return trainer_->record(); }
+
+ private:
+  double forward_batch(std::span<const std::int64_t> ids) {
+    const int R = head_.regression, C = head_.classes, out = head_.outputs(), L = features_.tokens();
+    B_ = static_cast<int>(ids.size());
+    z_.resize(static_cast<std::size_t>(B_) * R);
+    lab_.resize(C > 0 ? static_cast<std::size_t>(B_) : 0);
+    for (int b = 0; b < B_; ++b) {
+      const auto s = static_cast<std::size_t>(ids[static_cast<std::size_t>(b)]);
+      for (int a = 0; a < R; ++a)
+        z_[static_cast<std::size_t>(b) * R + a] = head_.scaler.standardize(targets_.value[s * R + a], a);
+      if (C > 0) lab_[static_cast<std::size_t>(b)] = targets_.label[s];
+    }
+    T* yp = detail::grow(y_, static_cast<std::size_t>(B_) * out);
+    T* dyp = detail::grow(dy_, static_cast<std::size_t>(B_) * out);
+    const T* x = features_.forward(ids, true);
+    head_.probe.forward(head_.params, {x, B_, L}, yp, cache_, ws_);
+    const auto [f, ce] = detail::head_loss(yp, static_cast<std::size_t>(out), z_.data(), lab_.data(), B_, R, C,
+                                           cfg_.class_weight, dyp);
+    return f + cfg_.class_weight * ce;
+  }
+  void backward_batch() {
+    T* dxp = nullptr;
+    if (features_.trainable()) {
+      const std::size_t n = static_cast<std::size_t>(B_) * features_.tokens() * features_.dim();
+      dxp = detail::grow(dx_, n);
+      std::fill(dxp, dxp + n, T(0));
+    }
+    head_.probe.backward(head_.params, dy_.data(), dxp, cache_, ws_);
+    if (dxp) features_.backward(dxp);
+  }
+
+  ProbeHead<T>& head_;
+  Features& features_;
+  const HeadTargets& targets_;
+  HeadTrainConfig cfg_;
+  ValidationSplit split_;
+  Workspace<T> ws_;
+  ProbeCache<T> cache_;
+  AlignedVector<T> y_, dy_, dx_;
+  std::vector<double> z_;
+  std::vector<int> lab_;
+  int B_ = 0;
+  double epochs_done_ = 0;
+  std::optional<Trainer<HeadObjective<T>>> trainer_;
+};
+
 template <class T, class Features>
 HeadTrainResult train_head_split(ProbeHead<T>& head, Features& features, const HeadTargets& targets,
                                  const HeadTrainConfig& cfg, const ValidationSplit& split, std::ostream* log,
                                  std::int64_t log_every) {
-  const int R = head.regression, C = head.classes, out = head.outputs();
-  if (R > 0) head.scaler = ColumnScaler::fit(targets.value, R, split.fit);
-
-  std::vector<PrefixedParams<T>> parts{{"probe.", &head.params}};
-  if (ParamSet<T>* enc = features.trainable()) parts.push_back({"encoder.", enc});
-  const int L = features.tokens(), d = features.dim();
-  Workspace<T> ws;
-  ProbeCache<T> cache;
-  AlignedVector<T> y, dy, dx;
-  std::vector<double> z;
-  std::vector<int> lab;
-  int B = 0;
-  auto forward = [&](std::span<const std::int64_t> ids) {
-    B = static_cast<int>(ids.size());
-    z.resize(static_cast<std::size_t>(B) * R);
-    lab.resize(C > 0 ? static_cast<std::size_t>(B) : 0);
-    for (int b = 0; b < B; ++b) {
-      const auto s = static_cast<std::size_t>(ids[static_cast<std::size_t>(b)]);
-      for (int a = 0; a < R; ++a) z[static_cast<std::size_t>(b) * R + a] = head.scaler.standardize(targets.value[s * R + a], a);
-      if (C > 0) lab[static_cast<std::size_t>(b)] = targets.label[s];
-    }
-    T* yp = detail::grow(y, static_cast<std::size_t>(B) * out);
-    T* dyp = detail::grow(dy, static_cast<std::size_t>(B) * out);
-    const T* x = features.forward(ids, true);
-    head.probe.forward(head.params, {x, B, L}, yp, cache, ws);
-    const auto [f, ce] = detail::head_loss(yp, static_cast<std::size_t>(out), z.data(), lab.data(), B, R, C,
-                                           cfg.class_weight, dyp);
-    return f + cfg.class_weight * ce;
-  };
-  auto backward = [&] {
-    T* dxp = nullptr;
-    if (features.trainable()) {
-      dxp = detail::grow(dx, static_cast<std::size_t>(B) * L * d);
-      std::fill(dxp, dxp + static_cast<std::size_t>(B) * L * d, T(0));
-    }
-    head.probe.backward(head.params, dy.data(), dxp, cache, ws);
-    if (dxp) features.backward(dxp);
-  };
-  double epochs_done = 0;
-  auto validate = [&] {
-    if (split.validation.empty()) return -(epochs_done += 1);  // no validation: the latest epoch is the best
-    return head_validation(head, features, targets, split.validation, cfg);
-  };
-  Trainer<HeadObjective<T>> trainer(std::move(parts), split.fit, cfg, forward, backward, validate,
-                                    nlohmann::json{{"kind", "probe"}, {"regression", R}, {"classes", C}});
-  if (log) {
-    trainer.log = log;
-    trainer.log_every = log_every;
-  }
-  trainer.run();
-  return trainer.record();
+  HeadSplitRun<T, Features> run(head, features, targets, cfg, split, log, log_every);
+  run.run();
+  return run.record();
 }
 }  // namespace detail
 
@@ -269,11 +302,13 @@ HeadTrainResult train_head_split(ProbeHead<T>& head, Features& features, const H
 // stopping (a Trainer over a HeadObjective): the scaler is fitted on the fitting split, the
 // validation split is held out of training; at return the parameters are those of the best
 // validation epoch. log: the Trainer's log line every log_every steps.
-// cfg.folds = k > 1 (and no validation groups given in targets.groups.held): k early-stopped
-// trainings from the same start, fold f validating on validation_folds' fold f; the epoch e with
-// the lowest mean validation loss over the folds (mean_validation_curve); then, from the same
-// start again, e + 1 epochs on every sample. The record: that final run's training losses, the
-// mean validation curve, e and its mean loss.
+// cfg.folds = k > 1 (and no validation groups given in targets.groups.held): k trainings from the
+// same start, fold f validating on validation_folds' fold f, run side by side one epoch at a time;
+// they stop together once the mean of their validation values has not been lowest for `patience`
+// epochs (or at max_epochs), so no fold's own early stop cuts the mean curve short. The epoch e
+// with the lowest mean (mean_validation_curve); then, from the same start again, e + 1 epochs on
+// every sample. The record: that final run's training losses, the mean validation curve, e and
+// its mean loss. A trainable encoder is swapped in and out around each fold's epoch.
 template <class T, class Features>
 HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTargets& targets,
                            const HeadTrainConfig& cfg, std::ostream* log = nullptr, std::int64_t log_every = 0) {
@@ -289,21 +324,40 @@ HeadTrainResult train_head(ProbeHead<T>& head, Features& features, const HeadTar
   if (cfg.folds <= 1 || !targets.groups.held.empty())
     return detail::train_head_split(head, features, targets, cfg, validation_split(S, cfg, targets.groups), log,
                                     log_every);
-  const ProbeHead<T> start = head;
+  const std::vector<ValidationSplit> splits = validation_folds(S, cfg, targets.groups);
+  const std::size_t k = splits.size();
+  // A trainable encoder's values per fold, swapped in and out of the one the features train.
   ParamSet<T>* encoder = features.trainable();
-  std::optional<ParamSet<T>> encoder_start;
-  if (encoder) encoder_start = *encoder;
-  auto restart = [&] {
-    head = start;
-    if (encoder) *encoder = *encoder_start;
+  std::vector<std::vector<T>> encoders;
+  if (encoder) encoders.assign(k + 1, std::vector<T>(encoder->values().begin(), encoder->values().end()));  // [k]: the start
+  auto load = [&](std::size_t f) {
+    if (encoder) std::copy(encoders[f].begin(), encoders[f].end(), encoder->values().begin());
   };
-  std::vector<HeadTrainResult> folds;
-  for (const ValidationSplit& split : validation_folds(S, cfg, targets.groups)) {
-    restart();
-    folds.push_back(detail::train_head_split(head, features, targets, cfg, split, log, log_every));
+  HeadTrainConfig fold_cfg = cfg;
+  fold_cfg.patience = cfg.max_epochs;  // no fold stops on its own: the mean decides
+  std::vector<ProbeHead<T>> heads(k, head);
+  std::vector<std::unique_ptr<detail::HeadSplitRun<T, Features>>> runs;
+  for (std::size_t f = 0; f < k; ++f)
+    runs.push_back(std::make_unique<detail::HeadSplitRun<T, Features>>(heads[f], features, targets, fold_cfg,
+                                                                         splits[f], log, log_every));
+  double best = std::numeric_limits<double>::infinity();
+  for (int e = 0, best_epoch = -1; e < cfg.max_epochs; ++e) {  // the Trainer's rule, on the mean
+    double mean = 0;
+    for (std::size_t f = 0; f < k; ++f) {
+      load(f);
+      runs[f]->run(1);
+      if (encoder) std::copy(encoder->values().begin(), encoder->values().end(), encoders[f].begin());
+      mean += runs[f]->record().validation_loss.back() / static_cast<double>(k);
+    }
+    if (mean < best)
+      best = mean, best_epoch = e;
+    else if (e - best_epoch >= cfg.patience)
+      break;
   }
+  std::vector<HeadTrainResult> folds;
+  for (const auto& r : runs) folds.push_back(r->record());
   HeadTrainResult chosen = mean_validation_curve(folds);
-  restart();
+  load(k);
   HeadTrainConfig all = cfg;
   all.max_epochs = chosen.best_epoch + 1;  // no validation: every epoch is the best so far, patience never ends it
   ValidationSplit every;
