@@ -239,7 +239,6 @@ class HeadSplitRun {
 
   // Runs `epochs` more epochs (< 0: to the end), fewer if the run stops early or ends.
   void run(int epochs = -1) { trainer_->run(epochs < 0 ? -1 : std::int64_t(epochs) * trainer_->steps_per_epoch()); }
-  bool done() const { return trainer_->stopped_early() || trainer_->step() == trainer_->total_steps(); }
   const HeadTrainResult& record() const { return trainer_->record(); }
 
  private:
