@@ -2,6 +2,7 @@
 """Pools one table of several `tjepa eval` runs (results.json) over their pre-training seeds.
 
     tools/pool_seeds.py TABLE RESULTS.json [RESULTS.json ...] [--rows NAME ...] [--contrast ROW AGAINST]
+                        [--first-heads K]
 
 TABLE is main, ablation, linear or ablation_linear, or trials for `tjepa eval --trials` runs (each
 label share's table pooled on its own; the runs must have the same shares). Rows are matched by
@@ -9,8 +10,11 @@ name; each run's seeds come from its config ("seeds"; a run stopped early holds 
 and the script says so), and a seed found in two runs of the same row is an error. For each
 primary metric: the heads' mean per seed, then mean ± sample sd over seeds, the rank of each row,
 and the one-sided Welch test of the best row against the second (as downstream/welch.hpp: the
-best's mean is better), and of each --contrast pair (ROW better than AGAINST). Writes markdown
-on stdout. Pool only runs whose heads were trained alike: the script cannot tell (it prints each
+best's mean is better), and of each --contrast pair (ROW better than AGAINST). For a contrast
+whose rows have the same heads, also the paired differences head by head (in `tjepa eval --trials`
+a head seed draws the labelled trials, the same for every row): their mean, how many favour ROW,
+their range. --first-heads K keeps each seed's first K heads (K 1 pools runs of one head with the
+first head of runs of several: the same draws). Writes markdown on stdout. Pool only runs whose heads were trained alike: the script cannot tell (it prints each
 run's command).
 """
 import argparse
@@ -64,7 +68,7 @@ def welch_less(a, b):
 
 def pool(runs, args):
     """Pools one table of several runs: runs is a list of (path, command, seeds, table)."""
-    metrics, rows, order = None, {}, []
+    metrics, rows, heads_of, order = None, {}, {}, []
     for path, command, seeds, table in runs:
         metrics = metrics or [m for m in table["metrics"] if m["primary"]]
         print(f"- {path}: `{command}`")
@@ -84,7 +88,13 @@ def pool(runs, args):
             for seed, heads in zip(seeds, row["runs"]):
                 if seed in mine:
                     sys.exit(f"{path}: row '{row['name']}' seed {seed} is in an earlier file too")
+                if args.first_heads:
+                    if len(heads) < args.first_heads:
+                        sys.exit(f"{path}: row '{row['name']}' seed {seed} has {len(heads)} heads, "
+                                 f"--first-heads {args.first_heads}")
+                    heads = heads[:args.first_heads]
                 mine[seed] = {m["key"]: sum(h[m["key"]] for h in heads) / len(heads) for m in metrics}
+                heads_of.setdefault(row["name"], {})[seed] = heads
     names = args.rows or order
     for n in names + [n for pair in args.contrast or [] for n in pair]:
         if n not in rows:
@@ -106,6 +116,16 @@ def pool(runs, args):
         t, df, p = welch_less(a, b)
         return f"one-sided Welch t = {abs(t):.2f}, df {df:.1f}, p = {p:.3g}"
 
+    def paired(m, better, worse):
+        """The head-by-head differences of two rows with the same seeds and heads, or ""."""
+        a, b = heads_of[better], heads_of[worse]
+        if sorted(a) != sorted(b) or any(len(a[s]) != len(b[s]) for s in a):
+            return ""
+        sign = 1 if m["higher_is_better"] else -1
+        d = [sign * (x[m["key"]] - y[m["key"]]) for s in sorted(a) for x, y in zip(a[s], b[s])]
+        return (f"; head by head (same draws): {better} ahead by {mean(d):.4g} on average, "
+                f"in {sum(x > 0 for x in d)} of {len(d)}, from {min(d):.4g} to {max(d):.4g}")
+
     print()
     print("| row | seeds | " + " | ".join(f"{m['name']} ({m['unit']}) {'↑' if m['higher_is_better'] else '↓'}" for m in metrics) + " |")
     print("|---|---|" + "---|" * len(metrics))
@@ -126,7 +146,7 @@ def pool(runs, args):
         best, second = sorted(names, key=lambda n: ranks[m["key"]][n])[:2]
         print(f"- {m['name']}: best {best}, second {second}; {test(m, best, second)}")
         for row, against in args.contrast or []:
-            print(f"- {m['name']}: {row} against {against}; {test(m, row, against)}")
+            print(f"- {m['name']}: {row} against {against}; {test(m, row, against)}{paired(m, row, against)}")
 
 
 def main():
@@ -136,7 +156,10 @@ def main():
     ap.add_argument("--rows", nargs="*", help="only these rows, in this order")
     ap.add_argument("--contrast", nargs=2, action="append", metavar=("ROW", "AGAINST"),
                     help="also test that ROW beats AGAINST (one-sided Welch), per metric")
+    ap.add_argument("--first-heads", type=int, metavar="K", help="keep each seed's first K heads")
     args = ap.parse_args()
+    if args.first_heads is not None and args.first_heads < 1:
+        sys.exit(f"--first-heads {args.first_heads}: must be at least 1")
 
     runs = []
     for path in args.results:

@@ -2,7 +2,8 @@
 """Checks tools/pool_seeds.py on made-up `tjepa eval --trials` results: the pooled mean ± sd per
 row and share, the best-against-second test and a --contrast test against values worked by hand
 (Welch's t for [1, 2, 3] against [2, 3, 4]: t = -1.2247, df 4, one-sided p = 0.144, the t
-distribution's tail integrated numerically below), and a clear error for mismatched shares.
+distribution's tail integrated numerically below), the head-by-head differences of a contrast,
+--first-heads, and clear errors for mismatched shares and too few heads.
     pool_seeds_check.py TOOLS_DIR WORK_DIR"""
 import json
 import math
@@ -15,11 +16,13 @@ os.makedirs(work, exist_ok=True)
 metrics = [{"key": "acc", "name": "top-1", "unit": "%", "higher_is_better": True, "primary": True}]
 
 
-def run_file(seed, shares, a, b):
+def run_file(seed, shares, a, b, extra_heads=()):
+    """Rows A and B, one head reading a and b (+10 per share), then the heads (a', b') of extra_heads."""
+    heads = [(a, b), *extra_heads]
     tables = [{"title": f"share {s}", "metrics": metrics,
-               "rows": [{"name": "A", "runs": [[{"acc": a + 10 * k}]]}, {"name": "B", "runs": [[{"acc": b + 10 * k}]]}]}
+               "rows": [{"name": n, "runs": [[{"acc": h[i] + 10 * k} for h in heads]]} for i, n in enumerate("AB")]}
               for k, s in enumerate(shares)]
-    path = os.path.join(work, f"s{seed}.json")
+    path = os.path.join(work, f"s{seed}{'h' if extra_heads else ''}.json")
     with open(path, "w") as f:
         json.dump({"command": f"tjepa eval --seeds {seed}", "seeds": [seed], "label_fractions": shares,
                    "tables": tables}, f)
@@ -45,7 +48,8 @@ expected = [
     "### share 1", "### share 0.1",
     "| B | 0,1,2 | 3 ± 1 (1) |", "| A | 0,1,2 | 2 ± 1 (2) |", "| B | 0,1,2 | 13 ± 1 (1) |",
     f"top-1: best B, second A; one-sided Welch t = 1.22, df 4.0, p = {p:.3g}",
-    f"top-1: A against B; one-sided Welch t = 1.22, df 4.0, p = {1 - p:.3g}",
+    f"top-1: A against B; one-sided Welch t = 1.22, df 4.0, p = {1 - p:.3g}; head by head (same draws): "
+    "A ahead by -1 on average, in 0 of 3, from -1 to -1",
 ]
 missing = [e for e in expected if e not in out]
 if missing:
@@ -57,4 +61,21 @@ r = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trial
                    capture_output=True, text=True)
 if r.returncode == 0 or "label shares [1, 0.25], the first run's are [1, 0.1]" not in r.stderr:
     sys.exit(f"mismatched shares: exit {r.returncode}, stderr {r.stderr!r}")
+# A second head per seed where A leads by 3: pooled, A - B is (-1 + 3) / 2 = 1 per seed, and the
+# heads' differences run from -1 to 3; --first-heads 1 gives back the one-head pooling above.
+two = [run_file(s, [1, 0.1], 1 + s, 2 + s, [(5 + s, 2 + s)]) for s in range(3)]
+out2 = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", *two, "--contrast", "A", "B"],
+                      capture_output=True, text=True, check=True).stdout
+for e in ["| A | 0,1,2 | 4 ± 1 (1) |", "| B | 0,1,2 | 3 ± 1 (2) |",
+          "head by head (same draws): A ahead by 1 on average, in 3 of 6, from -1 to 3"]:
+    if e not in out2:
+        sys.exit("pool_seeds.py (two heads) printed:\n" + out2 + "\nwithout:\n" + e)
+first = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", *two, "--contrast", "A", "B",
+                        "--first-heads", "1"], capture_output=True, text=True, check=True).stdout
+if first.replace("h.json", ".json") != out:
+    sys.exit(f"--first-heads 1 printed:\n{first}\nnot the one-head runs':\n{out}")
+r = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", files[0], "--first-heads", "2"],
+                   capture_output=True, text=True)
+if r.returncode == 0 or "seed 0 has 1 heads, --first-heads 2" not in r.stderr:
+    sys.exit(f"--first-heads 2 on one head: exit {r.returncode}, stderr {r.stderr!r}")
 print("pool_seeds.py: ok")
