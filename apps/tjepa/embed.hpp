@@ -59,11 +59,16 @@ inline int run_embed(const EmbedOptions& o, std::ostream& out) {
     const TrialTable t = read_trial_table(o.trials.table);
     std::vector<int> all(t.size());
     for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+    // The split of pretrain, probe and eval (the table's column, or the seeded split by trial).
+    const TrialSplits sp = split_trials(t, o.trials.test_fraction, o.trials.seed);
+    std::vector<TrialSplit> split_of(t.size(), TrialSplit::train);
+    for (int i : sp.val) split_of[static_cast<std::size_t>(i)] = TrialSplit::val;
+    for (int i : sp.test) split_of[static_cast<std::size_t>(i)] = TrialSplit::test;
     TrialRecordings tr = read_trials(t, all, o.format, skin, m.config.data.tau, "trials", out);
     recs = std::move(tr.recordings);
     for (int i : tr.trial) {
       label.push_back(t.trials[static_cast<std::size_t>(i)].label);
-      split.push_back(trial_split_name(t.trials[static_cast<std::size_t>(i)].split));
+      split.push_back(trial_split_name(split_of[static_cast<std::size_t>(i)]));
     }
   } else {
     for (const std::string& p : o.data) recs.push_back(in_layout_order(read_recording(p, o.format), skin, p));
@@ -122,6 +127,9 @@ inline CLI::App* add_embed_command(CLI::App& app, EmbedOptions& o) {
   sub->add_option("--checkpoint", o.checkpoint, "checkpoint of `tjepa pretrain`")->required();
   sub->add_option("--data", o.data, "recordings (.npy [T, N, m] or CSV), windows cut inside each");
   add_trial_options(sub, o.trials);
+  sub->add_option("--test-fraction", o.trials.test_fraction,
+                  "--trials without a split column: the share of trials held out (the split column of --windows)")
+      ->capture_default_str();
   sub->add_option("--windows", o.windows, "the CSV of which window is which (default: --out with .windows.csv)");
   sub->add_option("--out", o.out, "output .npy")->required();
   sub->add_option("--encoder", o.encoder, "target | context")->capture_default_str();

@@ -17,6 +17,7 @@
 #include <fstream>
 #include <map>
 #include <set>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -363,6 +364,32 @@ TEST_CASE("trials: iCub grasps / a seeded split by trial stratified by object / 
   }
   CHECK(per_object == std::map<std::string, int>{{"blue_bear", 2}, {"book", 2}, {"lotion", 2}});
   CHECK(j["results"][1]["mean"].contains("trial_top1"));
+  // embed writes the same split in its windows CSV (the table has no split column).
+  EmbedOptions eo;
+  eo.checkpoint = pb.checkpoint;
+  eo.trials.table = pb.trials.table;
+  eo.trials.test_fraction = 0.34;
+  eo.format = icub_format();
+  eo.out = (t / "emb.npy").string();
+  eo.quiet = true;
+  std::ostringstream eout;
+  REQUIRE(run_embed(eo, eout) == 0);
+  std::set<std::string> test_files, embedded_test;
+  for (const auto& f : j["trials"]["test_files"]) test_files.insert(fs::path(std::string(f)).filename().string());
+  std::ifstream wcsv(t / "emb.windows.csv");
+  std::string line;
+  std::getline(wcsv, line);
+  int train_rows = 0;
+  while (std::getline(wcsv, line)) {
+    const auto f = fields(line);
+    REQUIRE(f.size() == 6u);
+    const std::string file = fs::path(f[1]).filename().string();
+    CHECK_MESSAGE((f[5] == (test_files.count(file) ? "test" : "train")), file, " split ", f[5]);
+    if (f[5] == "test") embedded_test.insert(file);
+    train_rows += f[5] == "train";
+  }
+  CHECK(train_rows > 0);
+  CHECK(embedded_test == test_files);
 
   // --center-tokens acts: the probe reads other embeddings.
   ProbeOptions centred = pb;
