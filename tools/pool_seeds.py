@@ -5,7 +5,7 @@
                         [--first-heads K]
 
 TABLE is main, ablation, linear or ablation_linear, or trials for `tjepa eval --trials` runs (each
-label share's table pooled on its own; the runs must have the same shares). Rows are matched by
+label share's table pooled on its own, for the shares every run has). Rows are matched by
 name; each run's seeds come from its config ("seeds"; a run stopped early holds its first seeds,
 and the script says so), and a seed found in two runs of the same row is an error. For each
 primary metric: the heads' mean per seed, then mean ± sample sd over seeds, the rank of each row,
@@ -100,8 +100,11 @@ def pool(runs, args):
         if n not in rows:
             sys.exit(f"no row '{n}' (rows: {', '.join(order)})")
 
+    # results.json keeps shares as fractions; a metric whose unit is % is printed in %.
+    scale = {m["key"]: 100.0 if m.get("unit") == "%" else 1.0 for m in metrics}
+
     def values(name, key):
-        return [rows[name][s][key] for s in sorted(rows[name])]
+        return [scale[key] * rows[name][s][key] for s in sorted(rows[name])]
 
     def mean(v):
         return sum(v) / len(v)
@@ -122,7 +125,7 @@ def pool(runs, args):
         if sorted(a) != sorted(b) or any(len(a[s]) != len(b[s]) for s in a):
             return ""
         sign = 1 if m["higher_is_better"] else -1
-        d = [sign * (x[m["key"]] - y[m["key"]]) for s in sorted(a) for x, y in zip(a[s], b[s])]
+        d = [sign * scale[m["key"]] * (x[m["key"]] - y[m["key"]]) for s in sorted(a) for x, y in zip(a[s], b[s])]
         return (f"; head by head (same draws): {better} ahead by {mean(d):.4g} on average, "
                 f"in {sum(x > 0 for x in d)} of {len(d)}, from {min(d):.4g} to {max(d):.4g}")
 
@@ -143,8 +146,9 @@ def pool(runs, args):
         print(f"| {n} | {','.join(str(s) for s in sorted(rows[n]))} | " + " | ".join(cells) + " |")
     print()
     for m in metrics:
-        best, second = sorted(names, key=lambda n: ranks[m["key"]][n])[:2]
-        print(f"- {m['name']}: best {best}, second {second}; {test(m, best, second)}")
+        if len(names) >= 2:
+            best, second = sorted(names, key=lambda n: ranks[m["key"]][n])[:2]
+            print(f"- {m['name']}: best {best}, second {second}; {test(m, best, second)}")
         for row, against in args.contrast or []:
             print(f"- {m['name']}: {row} against {against}; {test(m, row, against)}{paired(m, row, against)}")
 
@@ -172,19 +176,23 @@ def main():
                 sys.exit(f"{path}: no table '{args.table}'")
             tables.append((path, run.get("command", "?"), run["config"]["seeds"], run[args.table]))
         return pool(tables, args)
-    # tjepa eval --trials: one table per label share, matched by share across the runs.
-    shares = None
+    # tjepa eval --trials: one table per label share, matched by share across the runs; the shares
+    # every run has are pooled (a run of --label-fractions 0.1 beside one of 1 0.1 0.03: the 10 %).
     for path, run in runs:
         if "tables" not in run or "label_fractions" not in run:
             sys.exit(f"{path}: not the results of tjepa eval --trials (no 'tables')")
-        if shares is None:
-            shares = run["label_fractions"]
-        elif run["label_fractions"] != shares:
-            sys.exit(f"{path}: label shares {run['label_fractions']}, the first run's are {shares}")
-    for k in range(len(shares)):
-        print(f"\n### {runs[0][1]['tables'][k]['title']}\n")
-        pool([(path, run.get("command", "?"), run["seeds"], run["tables"][k]) for path, run in runs], args)
-
+    first = runs[0][1]["label_fractions"]
+    shares = [f for f in first if all(f in run["label_fractions"] for _, run in runs)]
+    if not shares:
+        listing = "; ".join(f"{path}: {run['label_fractions']}" for path, run in runs)
+        sys.exit(f"no label share is in every run: {listing}")
+    for path, run in runs:
+        if run["label_fractions"] != shares:
+            print(f"- {path}: label shares {run['label_fractions']}; pooled: {shares} (the shares every run has)")
+    for f in shares:
+        print(f"\n### {runs[0][1]['tables'][first.index(f)]['title']}\n")
+        pool([(path, run.get("command", "?"), run["seeds"], run["tables"][run["label_fractions"].index(f)])
+              for path, run in runs], args)
 
 if __name__ == "__main__":
     main()

@@ -3,7 +3,7 @@
 row and share, the best-against-second test and a --contrast test against values worked by hand
 (Welch's t for [1, 2, 3] against [2, 3, 4]: t = -1.2247, df 4, one-sided p = 0.144, the t
 distribution's tail integrated numerically below), the head-by-head differences of a contrast,
---first-heads, and clear errors for mismatched shares and too few heads.
+--first-heads, the shares every run has, and clear errors for no common share and too few heads.
     pool_seeds_check.py TOOLS_DIR WORK_DIR"""
 import json
 import math
@@ -13,14 +13,15 @@ import sys
 
 tools, work = sys.argv[1], sys.argv[2]
 os.makedirs(work, exist_ok=True)
+# Shares as results.json keeps them; a % metric is printed times 100.
 metrics = [{"key": "acc", "name": "top-1", "unit": "%", "higher_is_better": True, "primary": True}]
 
 
 def run_file(seed, shares, a, b, extra_heads=()):
-    """Rows A and B, one head reading a and b (+10 per share), then the heads (a', b') of extra_heads."""
+    """Rows A and B, one head reading a and b % (+10 per share), then the heads (a', b') of extra_heads."""
     heads = [(a, b), *extra_heads]
     tables = [{"title": f"share {s}", "metrics": metrics,
-               "rows": [{"name": n, "runs": [[{"acc": h[i] + 10 * k} for h in heads]]} for i, n in enumerate("AB")]}
+               "rows": [{"name": n, "runs": [[{"acc": (h[i] + 10 * k) / 100} for h in heads]]} for i, n in enumerate("AB")]}
               for k, s in enumerate(shares)]
     path = os.path.join(work, f"s{seed}{'h' if extra_heads else ''}.json")
     with open(path, "w") as f:
@@ -56,11 +57,20 @@ if missing:
     sys.exit("pool_seeds.py printed:\n" + out + "\nwithout:\n" + "\n".join(missing))
 assert out.count("one-sided Welch") == 4, out
 
-bad = run_file(3, [1, 0.25], 0, 0)
+# Shares in only some runs: the shares every run has are pooled, and the script says so; none in
+# common is an error naming each run's shares.
+part = run_file(3, [1, 0.25], 0, 0)
+r = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", files[0], part],
+                   capture_output=True, text=True, check=True).stdout
+if f"{part}: label shares [1, 0.25]; pooled: [1] (the shares every run has)" not in r or "### share 0.1" in r \
+        or "| A | 0,3 | 0.5 ± 0.707 (2) |" not in r:
+    sys.exit(f"partly shared label shares printed:\n{r}")
+bad = run_file(4, [0.25], 0, 0)
 r = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", files[0], bad],
                    capture_output=True, text=True)
-if r.returncode == 0 or "label shares [1, 0.25], the first run's are [1, 0.1]" not in r.stderr:
-    sys.exit(f"mismatched shares: exit {r.returncode}, stderr {r.stderr!r}")
+if r.returncode == 0 or "no label share is in every run" not in r.stderr or "[0.25]" not in r.stderr:
+    sys.exit(f"no common share: exit {r.returncode}, stderr {r.stderr!r}")
+
 # A second head per seed where A leads by 3: pooled, A - B is (-1 + 3) / 2 = 1 per seed, and the
 # heads' differences run from -1 to 3; --first-heads 1 gives back the one-head pooling above.
 two = [run_file(s, [1, 0.1], 1 + s, 2 + s, [(5 + s, 2 + s)]) for s in range(3)]
