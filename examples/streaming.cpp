@@ -1,10 +1,3 @@
-// The control loop runs one window at a time (batch 1), and the library parallelizes over the
-// batch: OpenMP would add nothing but a team allocation per parallel region (libgomp allocates
-// its team each time), so this program is single-threaded by construction.
-// GCC 12 flags Eigen's AVX-512 GEMM kernels (avx512fintrin.h, -W[maybe-]uninitialized), a known
-// false positive in a system header that -Werror would otherwise turn into an error.
-#undef _OPENMP
-
 // Streaming inference: the library's Pipeline (downstream/pipeline.hpp) called at control-loop
 // rate on the frames of the 368-taxel Allegro hand, the frozen encoder and a head on top: a trained
 // one (--head, from `tjepa probe --task ... --save`, refused if it was trained on another encoder)
@@ -17,7 +10,7 @@
 // and the example checks it.
 //
 //   streaming [--checkpoint runs/demo/checkpoint.safetensors | --reference-size] [--head head.safetensors] [--ticks 2000] [--rate 100] [--spin]
-//             [--realtime] [--stages] [--controls] [--memory-kib 1024 4096] [--repack] [--precision bf16]
+//             [--threads 2] [--realtime] [--stages] [--controls] [--memory-kib 1024 4096] [--repack] [--precision bf16]
 // Prints latency p50 / p99 / max per tick and the allocations after warm-up. --stages times each
 // stage of every tick (StageClock) and says where the slowest ticks lose their time. --controls
 // then times fixed loops of the median tick's length the same way: FMAs in registers (what
@@ -29,6 +22,11 @@
 // scheduler alone can set the p99. --realtime (SCHED_FIFO) is how a control loop avoids that;
 // back to back it runs into the kernel's RT throttling (50 ms per second by default), so use it with
 // --rate.
+//
+// --threads T runs each window on T OpenMP threads (default 1): at batch 1 the library splits the
+// rows of every product and attention's heads × query chunks over them. The team is made in the
+// warm-up ticks and reused (no allocation in steady state, counted with malloc interposed), and
+// under --realtime its threads inherit SCHED_FIFO from the loop's thread, which sets it first.
 #include <CLI/CLI.hpp>
 #include <sched.h>
 #include <sys/resource.h>
@@ -45,6 +43,10 @@
 #include <optional>
 #include <string>
 #include <thread>
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 #include <vector>
 
 #include <allocation_counter.hpp>
@@ -209,7 +211,7 @@ int main(int argc, char** argv) {
   using namespace tjepa;
   CLI::App app{"Streaming inference of a frozen Tactile-JEPA encoder over a ring buffer of frames"};
   std::string checkpoint, head_file;
-  int ticks = 2000, warmup = 20;
+  int ticks = 2000, warmup = 20, threads = 1;
   double rate = 0;
   bool spin = false, stages = false, controls = false, repack = false, realtime = false, reference_size = false;
   std::vector<int> memory_kib{1024, 4096};
@@ -217,6 +219,9 @@ int main(int argc, char** argv) {
   app.add_option("--head", head_file, "head of `tjepa probe --task ... --save` (default: an untrained force and indenter probe)");
   app.add_option("--ticks", ticks, "control-loop ticks to time")->capture_default_str();
   app.add_option("--warmup", warmup, "ticks before timing and allocation counting")->capture_default_str();
+  app.add_option("--threads", threads, "OpenMP threads that run each window (batch 1: rows of each product, heads of attention)")
+      ->check(CLI::Range(1, 1024))
+      ->capture_default_str();
   app.add_option("--rate", rate, "control-loop rate in Hz (0: back to back)")->capture_default_str();
   app.add_flag("--reference-size", reference_size,
                "random weights of the reference's size (d 192, 12 blocks) instead of the demo's (d 96, 4 blocks)");
@@ -249,6 +254,11 @@ int main(int argc, char** argv) {
         return 1;
       }
     }
+#ifdef _OPENMP
+    omp_set_num_threads(threads);
+#else
+    require<ConfigError>(threads == 1, "--threads ", threads, ": this build has no OpenMP, so one thread only");
+#endif
     require<ConfigError>(ticks > 0 && warmup >= 1, "--ticks ", ticks, ", --warmup ", warmup, ", expected > 0");
     const Skin skin = layouts::allegro_xela();
     // The sensor: a simulated recording played back frame by frame.
@@ -332,7 +342,7 @@ int main(int argc, char** argv) {
                 N, m, tau, d, mc.encoder.depth, mc.encoder.heads, checkpoint.empty() ? " (random weights)" : "",
  precision.c_str(), precision == "bf16" && !has_native_bf16() ? " (no AVX512-BF16: computed in fp32)" : "");
     std::printf("head: %s\n", pipe.head()->info.task.c_str());
-    std::printf("%d ticks after %d warm-up ticks, 1 thread%s%s\n", ticks, warmup,
+    std::printf("%d ticks after %d warm-up ticks, %d thread%s%s%s\n", ticks, warmup, threads, threads > 1 ? "s" : "",
                 rate > 0 ? (spin ? ", busy-waiting between ticks" : ", sleeping between ticks") : ", back to back",
                 realtime ? ", SCHED_FIFO" : "");
     std::printf("latency per tick: p50 %.0f us, p99 %.0f us, max %.0f us (%.0f Hz sustainable at p99), p99/p50 %.3f\n",
