@@ -1071,4 +1071,40 @@ TEST_SUITE("train") {
     CHECK(worst <= 0.02);
     CHECK(bf16.back() < 0.5 * bf16.front());
   }
+
+  TEST_CASE("column_moments: a double reference, and the same bits on 1 and 2 threads for few long rows and many short ones") {
+    // [8, 70656] is the targets as [B, N·d] (the sample spread), [3000, 61] many rows; both above
+    // the grain, so split over the threads, the first over its columns.
+    Rng rng(77);
+    for (const auto& [M, D] : {std::pair<std::size_t, int>{8, 70656}, std::pair<std::size_t, int>{3000, 61}}) {
+      INFO("M ", M, ", D ", D);
+      std::vector<float> x(M * std::size_t(D));
+      for (auto& v : x) v = static_cast<float>(rng.normal() + 100.0);  // a large shared offset
+      const int previous = detail::max_threads();
+#if defined(_OPENMP)
+      omp_set_num_threads(1);
+#endif
+      const ColumnMoments one = column_moments(x.data(), M, D);
+#if defined(_OPENMP)
+      omp_set_num_threads(2);
+#endif
+      const ColumnMoments two = column_moments(x.data(), M, D);
+#if defined(_OPENMP)
+      omp_set_num_threads(previous);
+#endif
+      CHECK(one.mean == two.mean);
+      CHECK(one.m2 == two.m2);
+      double worst_mean = 0, worst_m2 = 0;
+      for (int j = 0; j < D; ++j) {
+        long double mu = 0, m2 = 0;
+        for (std::size_t m = 0; m < M; ++m) mu += x[m * D + j];
+        mu /= M;
+        for (std::size_t m = 0; m < M; ++m) m2 += (x[m * D + j] - mu) * (x[m * D + j] - mu);
+        worst_mean = std::max(worst_mean, double(std::abs(one.mean[j] - mu) / (std::abs(mu) + 1)));
+        worst_m2 = std::max(worst_m2, double(std::abs(one.m2[j] - m2) / (m2 + 1e-30)));
+      }
+      CHECK(worst_mean < 1e-13);
+      CHECK(worst_m2 < 1e-10);
+    }
+  }
 }

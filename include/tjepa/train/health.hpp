@@ -56,9 +56,10 @@ struct ColumnMoments {
   }
 };
 
-// The moments of the d columns of x [M, d]. Summed in double in fixed row chunks, so the result
-// does not depend on the thread count; two passes (mean, then squared deviations), stable for
-// large offsets.
+// The moments of the d columns of x [M, d]. Summed in double in fixed tasks of up to 256 rows ×
+// 1024 columns (the columns split too, so that a few long rows, the targets as [B, N·d], keep
+// every thread busy), so the result does not depend on the thread count; two passes (mean, then
+// squared deviations), stable for large offsets.
 template <class T>
 ColumnMoments column_moments(const T* x, std::size_t M, int d) {
   ColumnMoments out;
@@ -67,31 +68,30 @@ ColumnMoments column_moments(const T* x, std::size_t M, int d) {
   out.mean.assign(D, 0.0);
   out.m2.assign(D, 0.0);
   if (M == 0) return out;
-  constexpr std::size_t chunk = 256;
-  const std::size_t chunks = (M + chunk - 1) / chunk;
+  constexpr std::size_t chunk = 256, width = 1024;
+  const std::size_t chunks = (M + chunk - 1) / chunk, blocks = (D + width - 1) / width;
   std::vector<double> s1(chunks * D, 0.0), s2(chunks * D, 0.0);
-  const auto count = static_cast<std::ptrdiff_t>(chunks);
-  TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
-  for (std::ptrdiff_t c = 0; c < count; ++c) {
-    double* acc = s1.data() + static_cast<std::size_t>(c) * D;
-    const std::size_t end = std::min(M, (static_cast<std::size_t>(c) + 1) * chunk);
-    for (std::size_t m = static_cast<std::size_t>(c) * chunk; m < end; ++m)
-      for (std::size_t j = 0; j < D; ++j) acc[j] += static_cast<double>(x[m * D + j]);
-  }
+  const auto tasks = static_cast<std::ptrdiff_t>(chunks * blocks);
+  // Task t: rows of chunk t / blocks, columns of block t % blocks; acc (a chunk's sums) += f(m, j).
+  auto each_task = [&](std::vector<double>& sums, auto&& f) {
+    TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
+    for (std::ptrdiff_t t = 0; t < tasks; ++t) {
+      const std::size_t c = static_cast<std::size_t>(t) / blocks, j0 = static_cast<std::size_t>(t) % blocks * width;
+      const std::size_t j1 = std::min(D, j0 + width), end = std::min(M, (c + 1) * chunk);
+      double* acc = sums.data() + c * D;
+      for (std::size_t m = c * chunk; m < end; ++m)
+        for (std::size_t j = j0; j < j1; ++j) acc[j] += f(m, j);
+    }
+  };
+  each_task(s1, [&](std::size_t m, std::size_t j) { return static_cast<double>(x[m * D + j]); });
   std::vector<double>& mean = out.mean;
   for (std::size_t c = 0; c < chunks; ++c)
     for (std::size_t j = 0; j < D; ++j) mean[j] += s1[c * D + j];
   for (auto& v : mean) v /= static_cast<double>(M);
-  TJEPA_OMP(omp parallel for schedule(static) if (M * D > detail::parallel_grain))
-  for (std::ptrdiff_t c = 0; c < count; ++c) {
-    double* acc = s2.data() + static_cast<std::size_t>(c) * D;
-    const std::size_t end = std::min(M, (static_cast<std::size_t>(c) + 1) * chunk);
-    for (std::size_t m = static_cast<std::size_t>(c) * chunk; m < end; ++m)
-      for (std::size_t j = 0; j < D; ++j) {
-        const double e = static_cast<double>(x[m * D + j]) - mean[j];
-        acc[j] += e * e;
-      }
-  }
+  each_task(s2, [&](std::size_t m, std::size_t j) {
+    const double e = static_cast<double>(x[m * D + j]) - mean[j];
+    return e * e;
+  });
   for (std::size_t j = 0; j < D; ++j)
     for (std::size_t c = 0; c < chunks; ++c) out.m2[j] += s2[c * D + j];
   return out;
