@@ -1072,7 +1072,7 @@ TEST_SUITE("train") {
     CHECK(bf16.back() < 0.5 * bf16.front());
   }
 
-  TEST_CASE("column_moments: a double reference, and the same bits on 1 and 2 threads for few long rows and many short ones") {
+  TEST_CASE("column_moments: a double reference / the same bits on 1 and 2 threads for few long rows and many short ones") {
     // [8, 70656] is the targets as [B, N·d] (the sample spread), [3000, 61] many rows; both above
     // the grain, so split over the threads, the first over its columns.
     Rng rng(77);
