@@ -9,6 +9,7 @@
 #include <tjepa/optim/adamw.hpp>
 #include <tjepa/optim/detail/deterministic_sum.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <string>
@@ -169,6 +170,33 @@ TEST_SUITE("optim") {
     CHECK(tjepa::detail::deterministic_sum(3, term, 2) == (term(0) + term(1)) + term(2));
   }
 
+  TEST_CASE("deterministic_sum_squares: the sum of squares in double to rounding / same bits on 1 and 2 threads") {
+    const std::size_t n = tjepa::detail::parallel_grain + 4321;  // parallel / a partial last chunk and lane run
+    std::vector<float> x(n);
+    tjepa::Rng rng(9);
+    for (auto& v : x) v = static_cast<float>(rng.normal());
+    long double exact = 0;
+    for (float v : x) exact += static_cast<long double>(v) * static_cast<long double>(v);
+#if defined(_OPENMP)
+    const int previous = omp_get_max_threads();
+    omp_set_num_threads(1);
+#endif
+    const double one = tjepa::detail::deterministic_sum_squares(x.data(), n);
+#if defined(_OPENMP)
+    omp_set_num_threads(2);
+#endif
+    const double two = tjepa::detail::deterministic_sum_squares(x.data(), n);
+#if defined(_OPENMP)
+    omp_set_num_threads(previous);
+#endif
+    CHECK(one == two);
+    CHECK(one == doctest::Approx(static_cast<double>(exact)).epsilon(1e-14));
+    // Fewer terms than lanes: each in its own running sum, added in order.
+    const float y[3] = {1.5f, -2.0f, 0.25f};
+    CHECK(tjepa::detail::deterministic_sum_squares(y, 3) == (2.25 + 4.0) + 0.0625);
+    CHECK(tjepa::detail::deterministic_sum_squares(y, 0) == 0.0);
+  }
+
   TEST_CASE("AdamW matches the textbook update and decays only 2-D weights") {
     auto ps = make_params<double>(7);
     auto ref = ps;  // the reference copy, updated by the plain formula below
@@ -197,6 +225,73 @@ TEST_SUITE("optim") {
       CHECK(opt.exp_avg(0)[j] == doctest::Approx(m[j]).epsilon(1e-12));
       CHECK(opt.exp_avg_sq(0)[j] == doctest::Approx(v[j]).epsilon(1e-12));
     }
+  }
+
+  TEST_CASE("AdamW in vectors: the formula in float / a partial last vector as if whole / same bits on 1 and 2 threads") {
+    // "a" (37 values) is "b"'s first 37 (48 values): a's last 5 sit in a partial vector, b's in a
+    // whole one. "big" is above the parallel grain, so two threads split it.
+    const int big_rows = static_cast<int>(tjepa::detail::parallel_grain / 61) + 3;
+    auto make = [&] {
+      tjepa::ParamSet<float> ps;
+      ps.add("a.weight", {37, 1});
+      ps.add("b.weight", {48, 1});
+      ps.add("big.weight", {big_rows, 61});
+      ps.add("big.bias", {61});
+      ps.allocate();
+      tjepa::Rng rng(5);
+      for (std::size_t i = 0; i < ps.count(); ++i)
+        for (auto& v : ps.value_span(ps.id(i))) v = static_cast<float>(rng.normal());
+      auto a = ps.value_span(ps.id(0));
+      std::copy(a.begin(), a.end(), ps.value_span(ps.id(1)).begin());
+      return ps;
+    };
+    auto grads = [](tjepa::ParamSet<float>& ps, int t) {
+      fill_grads(ps, 300 + t);
+      auto a = ps.grad_span(ps.id(0));
+      std::copy(a.begin(), a.end(), ps.grad_span(ps.id(1)).begin());
+    };
+    auto run = [&](int threads) {
+      auto ps = make();
+#if defined(_OPENMP)
+      const int previous = omp_get_max_threads();
+      omp_set_num_threads(threads);
+#else
+      (void)threads;
+#endif
+      tjepa::AdamW<float> opt({{"", &ps}});
+      for (int t = 1; t <= 3; ++t) {
+        grads(ps, t);
+        opt.step(1e-2, 0.05);
+      }
+#if defined(_OPENMP)
+      omp_set_num_threads(previous);
+#endif
+      return ps;
+    };
+    const auto one = run(1), two = run(2);
+    CHECK(std::equal(one.values().begin(), one.values().end(), two.values().begin()));
+    const auto a = one.value_span(one.id(0)), b = one.value_span(one.id(1));
+    CHECK(std::equal(a.begin(), a.end(), b.begin()));
+    // The textbook update in double, three steps.
+    auto ref = make();
+    std::vector<double> m(ref.flat_size(), 0.0), v(ref.flat_size(), 0.0), p(ref.values().begin(), ref.values().end());
+    const tjepa::AdamWConfig c;
+    for (int t = 1; t <= 3; ++t) {
+      grads(ref, t);
+      for (const auto& info : ref.infos())
+        for (std::size_t j = info.offset; j < info.offset + info.size; ++j) {
+          const double g = ref.grads()[j];
+          if (info.decay) p[j] -= 1e-2 * 0.05 * p[j];
+          m[j] = c.beta1 * m[j] + (1 - c.beta1) * g;
+          v[j] = c.beta2 * v[j] + (1 - c.beta2) * g * g;
+          p[j] -= 1e-2 * (m[j] / (1 - std::pow(c.beta1, t))) / (std::sqrt(v[j] / (1 - std::pow(c.beta2, t))) + c.eps);
+        }
+    }
+    double worst = 0;
+    for (const auto& info : ref.infos())
+      for (std::size_t j = info.offset; j < info.offset + info.size; ++j)
+        worst = std::max(worst, std::abs(double(one.values()[j]) - p[j]) / (1e-3 + std::abs(p[j])));
+    CHECK(worst < 1e-5);
   }
 
   TEST_CASE("no weight decay reaches biases or LayerNorm parameters") {

@@ -9,12 +9,15 @@
 //   v ← β2·v + (1 − β2)·g²
 //   p ← p − lr/(1 − β1^t) · m / (√v / √(1 − β2^t) + ε)
 // Padding between tensors has zero gradients and moments and stays zero.
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <span>
 #include <utility>
 #include <vector>
+
+#include "tjepa/core/detail/vendor.hpp"
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/error.hpp"
@@ -70,20 +73,30 @@ class AdamW {
       const auto& infos = ps.infos();
       TJEPA_OMP(omp parallel if (ps.flat_size() > detail::parallel_grain))
       for (const ParamInfo& info : infos) {
+        const Update u{one_minus_b1, b2, one_minus_b2, step_size, bc2_sqrt, eps, info.decay ? decay_factor : T(1)};
         T* p = p_all + info.offset;
         const T* g = g_all + info.offset;
         T* m = m_all + info.offset;
         T* v = v_all + info.offset;
-        const T keep = info.decay ? decay_factor : T(1);
         const auto n = static_cast<std::ptrdiff_t>(info.size);
         TJEPA_OMP(omp for schedule(static) nowait)
-        for (std::ptrdiff_t i = 0; i < n; ++i) {
-          const T gi = g[i];
-          const T mi = m[i] + one_minus_b1 * (gi - m[i]);
-          const T vi = b2 * v[i] + one_minus_b2 * gi * gi;
-          m[i] = mi;
-          v[i] = vi;
-          p[i] = p[i] * keep - step_size * (mi / (std::sqrt(vi) / bc2_sqrt + eps));
+        for (std::ptrdiff_t i = 0; i < n; i += W) {
+          if (i + W <= n) {
+            u(p + i, g + i, m + i, v + i);
+            continue;
+          }
+          // The last, partial vector through zero-padded copies: the same operations, so the
+          // same bits as if it were whole (zeros give m = v = 0 and leave p as it is).
+          alignas(64) T tp[W] = {}, tg[W] = {}, tm[W] = {}, tv[W] = {};
+          const std::ptrdiff_t r = n - i;
+          std::copy(p + i, p + n, tp);
+          std::copy(g + i, g + n, tg);
+          std::copy(m + i, m + n, tm);
+          std::copy(v + i, v + n, tv);
+          u(tp, tg, tm, tv);
+          std::copy(tp, tp + r, p + i);
+          std::copy(tm, tm + r, m + i);
+          std::copy(tv, tv + r, v + i);
         }
       }
     }
@@ -112,6 +125,26 @@ class AdamW {
   }
 
  private:
+  using V = xsimd::batch<T>;
+  static constexpr std::ptrdiff_t W = static_cast<std::ptrdiff_t>(V::size);
+  // The update of W consecutive elements (the formula at the top), in vectors: the compiler does
+  // not vectorize the scalar loop (std::sqrt may set errno), which ran at a third of the memory
+  // bandwidth (21 ms for the JEPA step's 7 M parameters on a Zen 5 core). sqrt and division are
+  // correctly rounded in both forms.
+  struct Update {
+    V one_minus_b1, b2, one_minus_b2, step_size, bc2_sqrt, eps, keep;
+    Update(T c1, T beta2, T c2, T step, T bc2, T e, T k)
+        : one_minus_b1(c1), b2(beta2), one_minus_b2(c2), step_size(step), bc2_sqrt(bc2), eps(e), keep(k) {}
+    void operator()(T* p, const T* g, T* m, T* v) const {
+      const V gi = V::load_unaligned(g), m0 = V::load_unaligned(m), v0 = V::load_unaligned(v);
+      const V mi = m0 + one_minus_b1 * (gi - m0);
+      const V vi = b2 * v0 + one_minus_b2 * gi * gi;
+      mi.store_unaligned(m);
+      vi.store_unaligned(v);
+      (V::load_unaligned(p) * keep - step_size * (mi / (xsimd::sqrt(vi) / bc2_sqrt + eps))).store_unaligned(p);
+    }
+  };
+
   std::vector<PrefixedParams<T>> parts_;
   AdamWConfig config_;
   std::vector<AlignedVector<T>> exp_avg_, exp_avg_sq_;

@@ -3,8 +3,8 @@
 // 2-norm): the norm is taken over all gradients together, and when it exceeds max_norm every
 // gradient is scaled by max_norm / (norm + 1e-6). The reference clips at 10.
 //
-// The norm is summed in double in fixed-size chunks, so it is bitwise the same for any thread
-// count (padding between tensors holds zero gradients and adds nothing).
+// The norm is summed in double in fixed-size chunks (detail::deterministic_sum_squares), so it is
+// bitwise the same for any thread count (padding between tensors holds zero gradients and adds nothing).
 #include <cmath>
 #include <cstddef>
 #include <initializer_list>
@@ -21,11 +21,7 @@ namespace tjepa {
 // Sum of squared gradients of one ParamSet, in double.
 template <class T>
 double grad_sum_squares(const ParamSet<T>& params) {
-  const T* g = params.grads().data();
-  return detail::deterministic_sum(params.flat_size(), [g](std::size_t i) {
-    const double x = static_cast<double>(g[i]);
-    return x * x;
-  });
+  return detail::deterministic_sum_squares(params.grads().data(), params.flat_size());
 }
 
 // The 2-norm of all gradients of all parts.
