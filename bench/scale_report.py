@@ -68,7 +68,8 @@ print(f"`bench/scale.sh`, {day}, commit {measured}, "
       f"{peak:.0f} GFLOP/s on one core. `build/release/bench/tjepa_scale --skin <skin> --precision <p> "
       f"--threads 1,...,{sh('nproc')} --reps {reps}`: one JEPA step (bench/jepa_setup.hpp: ViT-Tiny, batch 8, "
       "no drop-path) timed phase by phase by its own StageClock marks, the thread counts taking turns "
-      f"repetition by repetition; medians. PyTorch (OpenBLAS kernels: {openblas}, bench/torch_env.sh): "
+      f"repetition by repetition, the thread team woken before each step's clock starts (a trainer's threads "
+      f"come to a step warm from the last); medians. PyTorch (OpenBLAS kernels: {openblas}, bench/torch_env.sh): "
       "`bench/compare_torch.py --only jepa --threads t` "
       "(timm-style drop-path 0.3, every branch computed: the same work), and its DINOv2 drop-path "
       "variant (branches on 5 of 8 samples: less work) in the last column.\n")
@@ -92,6 +93,30 @@ for (skin, precision), rows in runs.items():
         cells += [f"{predicted(f, n):.1f}×" if f is not None else "" for n in PREDICT]
         cells += [f"{pt:.0f}" if pt else "", f"{pt / r['ms']:.2f}×" if pt else "", f"{pd:.0f}" if pd else ""]
         print("| " + " | ".join(cells) + " |")
+
+ceiling = {}  # precision -> (alone ms, [each core's ms at once])
+for precision in ("fp32", "bf16"):
+    alone = d / f"ceiling_{precision}_alone.jsonl"
+    cores = sorted(d.glob(f"ceiling_{precision}_core*.jsonl"))
+    if alone.exists() and cores and all(load_jsonl(c) for c in cores) and load_jsonl(alone):
+        ceiling[precision] = (load_jsonl(alone)[0]["ms"], [load_jsonl(c)[0]["ms"] for c in cores])
+if ceiling:
+    print("\n### The machine's own ceiling\n")
+    print("The allegro step on 1 thread alone (core 0), then one such step on every core at once, as "
+          "independent processes (`taskset -c <core> tjepa_scale --threads 1`): they share no work and "
+          "nothing in them is serial, so what the cores give together, Σ alone/each, is the most any thread "
+          "count can give on this machine. f here is the serial fraction the threaded step's own speed-up "
+          "would show if the ceiling were all of it.\n")
+    print("| precision | 1 thread alone ms | each core's step, all at once, ms | together | f of the ceiling alone | "
+          "threaded step's speed-up (above) |")
+    print("|---|---|---|---|---|---|")
+    for precision, (alone, each) in ceiling.items():
+        t = len(each)
+        together = sum(alone / e for e in each)
+        steps = {r["threads"]: r["ms"] for r in runs.get(("allegro", precision), []) if r["phase"] == "step"}
+        threaded = f"{steps[1] / steps[t]:.2f}×" if 1 in steps and t in steps else ""
+        print(f"| {precision} | {alone:.0f} | {', '.join(f'{e:.0f}' for e in each)} | {together:.2f}× | "
+              f"{100 * serial_fraction(t, together):.1f}% | {threaded} |")
 
 for (skin, precision), rows in runs.items():
     by = {(r["phase"], r.get("stage"), r["threads"]): r for r in rows}
