@@ -103,6 +103,17 @@ TEST_SUITE("kernels") {
       kernels::ref::gelu_backward(dx1.data(), g.data(), x.data(), n);
       kernels::gelu_backward(dx2.data(), g.data(), x.data(), n);
       CHECK(max_scaled_diff(dx2, dx1) < simd_tolerance<T>());
+      // gelu and gelu' in one pass (the MLP's backward): gelu_forward's values, and gelu' (in place
+      // over the input too)
+      std::vector<T> y3(n), d3(n), dref(n);
+      for (std::size_t i = 0; i < n; ++i) dref[i] = detail::gelu_grad(x[i]);
+      kernels::gelu_forward_grad(y3.data(), d3.data(), x.data(), n);
+      CHECK(y3 == y2);
+      CHECK(max_scaled_diff(d3, dref) < simd_tolerance<T>());
+      std::vector<T> x3 = x;
+      kernels::gelu_forward_grad(y3.data(), x3.data(), x3.data(), n);
+      CHECK(y3 == y2);
+      CHECK(x3 == d3);
       std::vector<T> pre = x, xb(n);
       for (int m = 0; m < M; ++m)
         for (int c = 0; c < C; ++c) xb[std::size_t(m) * C + c] = x[std::size_t(m) * C + c] + b[std::size_t(c)];
@@ -262,11 +273,11 @@ TEST_SUITE("kernels") {
       detail::sgemm::gemm(N, K, M, g.data(), N, Order::col_major, x.data(), K, Order::row_major, dW2.data(), K, {true});
       CHECK(max_scaled_diff(dx2, expect(dx, [](std::size_t, double v) { return v + 0.5; })) < 3e-5);
       CHECK(max_scaled_diff(dW2, expect(dW, [](std::size_t, double v) { return v - 0.25; })) < 3e-5);
-      // dpre = (g·W) ⊙ gelu'(pre), overwritten: the MLP's backward through GELU (pre = x here)
+      // dpre = (g·W) ⊙ s, overwritten: the MLP's backward through GELU (s = gelu'(pre), here any values)
       std::vector<float> dpre(x.size(), 7.0f);
-      kernels::linear_backward_input_gelu(dpre.data(), g.data(), W.data(), x.data(), M, K, N);
-      CHECK(max_scaled_diff(dpre, expect(dx, [&](std::size_t i, double v) { return v * detail::gelu_grad(double(x[i])); })) <
-            3e-5);
+      const auto s = random_vector<float>(x.size(), rng);
+      kernels::linear_backward_input_scaled(dpre.data(), g.data(), W.data(), s.data(), M, K, N);
+      CHECK(max_scaled_diff(dpre, expect(dx, [&](std::size_t i, double v) { return v * s[i]; })) < 3e-5);
       // C = r + x·Wᵀ + b from a separate residual r (the block's residual add without a copy)
       std::vector<float> cr(y.size(), -1.0f);
       detail::sgemm::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, cr.data(), N,

@@ -311,20 +311,21 @@ void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, cons
   }
 }
 
-// The MLP's backward through fc2 and its GELU in one product: dpre[M, K] = (dout · w) ⊙ gelu'(pre)
-// for out = gelu(pre) · wᵀ + b (dout [M, N], w [N, K]). dpre is overwritten, not added to.
+// The MLP's backward through fc2 and its GELU in one product: dpre[M, K] = (dout · w) ⊙ scale for
+// out = gelu(pre) · wᵀ + b (dout [M, N], w [N, K]), scale [M, K] = gelu'(pre) (gelu_forward_grad
+// gives it with the activation). dpre is overwritten, not added to; it may not alias scale.
 template <class T>
-void linear_backward_input_gelu(T* dpre, const T* dout, const T* w, const T* pre, int M, int K, int N,
-                                Precision precision = Precision::fp32) {
+void linear_backward_input_scaled(T* dpre, const T* dout, const T* w, const T* scale, int M, int K, int N,
+                                  Precision precision = Precision::fp32) {
   if constexpr (std::is_same_v<T, float>) {
     using detail::sgemm::Order;
     detail::gemm(precision, M, K, N, dout, N, Order::row_major, w, K, Order::row_major, dpre, K,
-                 {false, nullptr, nullptr, pre});
+                 {false, nullptr, nullptr, scale});
   } else {
     const std::size_t n = std::size_t(M) * std::size_t(K);
     std::fill(dpre, dpre + n, T(0));
     detail::gemm_accumulate<Eigen::RowMajor, Eigen::RowMajor>(M, K, N, dout, N, w, K, dpre, K);
-    for (std::size_t i = 0; i < n; ++i) dpre[i] *= detail::gelu_grad(pre[i]);
+    for (std::size_t i = 0; i < n; ++i) dpre[i] *= scale[i];
   }
 }
 

@@ -54,11 +54,12 @@ struct Mlp {
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* h_pre, T* h, T* dh, T* dx, int M,
                 Precision precision = Precision::fp32) const {
-    kernels::gelu_forward(h, h_pre, std::size_t(M) * std::size_t(fc1.out));
+    // h = gelu(h_pre) and dh = gelu'(h_pre), one pass sharing the erf.
+    kernels::gelu_forward_grad(h, dh, h_pre, std::size_t(M) * std::size_t(fc1.out));
     fc2.backward(ps, dy, h, static_cast<T*>(nullptr), M, precision);  // y = h · W2ᵀ + b2: dW2, db2
-    // dh = ∂L/∂h_pre = (dy · W2) ⊙ gelu'(h_pre), one fused product.
-    kernels::linear_backward_input_gelu(dh, dy, ps.value(fc2.weight), h_pre, M, fc2.in, fc2.out, precision);
-    fc1.backward(ps, dh, x, dx, M, precision);  // h_pre = x · W1ᵀ + b1
+    // h, free now, = ∂L/∂h_pre = (dy · W2) ⊙ gelu'(h_pre), one product scaled by dh.
+    kernels::linear_backward_input_scaled(h, dy, ps.value(fc2.weight), dh, M, fc2.in, fc2.out, precision);
+    fc1.backward(ps, h, x, dx, M, precision);  // h_pre = x · W1ᵀ + b1
   }
 };
 

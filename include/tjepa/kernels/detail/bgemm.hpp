@@ -269,7 +269,7 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
         const std::uint32_t* b = packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR;
         kern(kc2, a, ald, b, C + i0 * ldc + n0, ldc, std::min(NR, cols - n0), c_in ? c_in + i0 * ldc + n0 : nullptr,
              first && e.bias ? e.bias + n0 : nullptr, last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
-             last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr);
+             last && e.scale ? e.scale + i0 * ldc + n0 : nullptr);
       }
     }
   }

@@ -38,20 +38,18 @@ enum class Order { row_major, col_major };
 
 // What happens to a finished tile. bias [cols] is added once; gelu [rows, ldc]: C keeps the
 // pre-activation and gelu receives gelu(C) (the MLP's fc1). accumulate: C += A·B, else C = A·B.
-// gelu_grad [rows, ldc] (with accumulate = false): C = (A·B) ⊙ gelu'(gelu_grad), the MLP's
-// backward through its GELU fused into the product that yields ∂L/∂h. residual [rows, ldc] (with
+// scale [rows, ldc] (with accumulate = false): C = (A·B) ⊙ scale, the MLP's backward through its
+// GELU fused into the product that yields ∂L/∂h (scale: gelu' at the pre-activation). residual [rows, ldc] (with
 // accumulate = false; may equal C): C = residual + A·B, a residual add without a copy of the stream.
 struct Epilogue {
   bool accumulate = false;
   const float* bias = nullptr;
   float* gelu = nullptr;
-  const float* gelu_grad = nullptr;
+  const float* scale = nullptr;
   const float* residual = nullptr;
 };
 
 inline V gelu(V x) { return detail::gelu<float>(x); }
-inline V gelu_grad(V x) { return detail::gelu_grad<float>(x); }
-inline float gelu_grad(float x) { return detail::gelu_grad(x); }
 inline float gelu(float x) {
   float y;
   kernels::ref::gelu_forward(&y, &x, 1);
@@ -105,7 +103,7 @@ template <Order AO, int R, int NK>
 // The epilogue of an R × (cols ≤ NK·W) tile of C whose product (of one depth block) is in tile
 // [R][NR]: c_in [R, ldc] is what the product is added to (C itself holding a partial sum or the
 // value accumulated into, or the residual) or nullptr; bias on the first depth block, g (gelu
-// output) and gg (gelu_grad input) on the last. The product kernels write the tile's first NK·W
+// output) and gg (scale) on the last. The product kernels write the tile's first NK·W
 // columns of each row; the edge path reads only cols <= NK·W of them. GCC cannot see that bound
 // and warns (maybe-uninitialized) in some inlining contexts: silenced here, for these functions
 // only. Shared by the float kernel below and the bf16 one (bgemm.hpp).
@@ -135,7 +133,7 @@ inline void finish_tile(const float* tile, float* c, std::ptrdiff_t ldc, int col
         V v = V::load_aligned(tile + i * NR + j * W);
         if (c_in) v += V::load_unaligned(c_in + i * ldc + j * W);
         if (bias) v += V::load_unaligned(bias + j * W);
-        if (gg) v *= gelu_grad(V::load_unaligned(gg + i * ldc + j * W));
+        if (gg) v *= V::load_unaligned(gg + i * ldc + j * W);
         v.store_unaligned(ci + j * W);
         if (g) gelu(v).store_unaligned(g + i * ldc + j * W);
       }
@@ -148,7 +146,7 @@ inline void finish_tile(const float* tile, float* c, std::ptrdiff_t ldc, int col
       float v = tile[i * NR + j];
       if (c_in) v += c_in[i * ldc + j];
       if (bias) v += bias[j];
-      if (gg) v *= gelu_grad(gg[i * ldc + j]);
+      if (gg) v *= gg[i * ldc + j];
       ci[j] = v;
       if (g) g[i * ldc + j] = gelu(v);
     }
@@ -264,7 +262,7 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
         (nc <= NH * W ? half : kern)(kc, a, lda, b, C + i0 * ldc + n0, ldc, nc, c_in ? c_in + i0 * ldc + n0 : nullptr,
                                      first && e.bias ? e.bias + n0 : nullptr,
                                      last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
-                                     last && e.gelu_grad ? e.gelu_grad + i0 * ldc + n0 : nullptr, p == 0 ? next : nullptr);
+                                     last && e.scale ? e.scale + i0 * ldc + n0 : nullptr, p == 0 ? next : nullptr);
       }
     }
   }
@@ -310,7 +308,7 @@ void run_product(int rows, int cols, int depth, int tasks, Pack&& pack, Compute&
 inline constexpr int depth_slab = 512;
 inline bool split_depth(int rows, int cols, int depth, const Epilogue& e) {
   return depth >= 2 * depth_slab && depth > rows && std::size_t(rows) * std::size_t(cols) <= (std::size_t(1) << 20) &&
-         !e.bias && !e.gelu && !e.gelu_grad && !e.residual;
+         !e.bias && !e.gelu && !e.scale && !e.residual;
 }
 template <class Pack, class Compute>
 void run_split_depth(int rows, int cols, int depth, int tasks_per_slab, Pack&& pack, Compute&& compute, float* C,
@@ -361,14 +359,14 @@ inline void gemm_packed(int rows, int cols, int depth, const float* A, std::ptrd
   });
 }
 
-// The epilogue alone, for depth 0: C = (C or residual or 0) + bias (then 0 under gelu_grad, and
+// The epilogue alone, for depth 0: C = (C or residual or 0) + bias (then 0 under scale, and
 // gelu(C) into gelu).
 inline void empty_product(int rows, int cols, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
   for (int i = 0; i < rows; ++i)
     for (int j = 0; j < cols; ++j) {
       float& c = C[std::ptrdiff_t(i) * ldc + j];
       c = (e.accumulate ? c : e.residual ? e.residual[std::ptrdiff_t(i) * ldc + j] : 0.0f) + (e.bias ? e.bias[j] : 0.0f);
-      if (e.gelu_grad) c = 0.0f;
+      if (e.scale) c = 0.0f;
       if (e.gelu) e.gelu[std::ptrdiff_t(i) * ldc + j] = gelu(c);
     }
 }
