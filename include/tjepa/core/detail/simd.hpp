@@ -18,9 +18,8 @@ inline constexpr std::size_t simd_width = xsimd::batch<T>::size;
 
 // exp2 on a batch, for arguments <= 0 as the softmax (x <= 0 after subtracting the row maximum)
 // and the GELU's Gaussian use them. 2^x = 2^n * 2^f with n = round(x), f in [-1/2, 1/2]; 2^f by a
-// polynomial (Cephes exp2f
-// in float, Taylor of degree 13 in double: both within ~1-2 ulp), 2^n by writing the exponent
-// bits. Arguments below the smallest normal exponent (and -inf) give exactly 0.
+// polynomial (Cephes exp2f in float, Taylor of degree 13 in double: both within ~1-2 ulp), 2^n by
+// writing the exponent bits. Arguments below the smallest normal exponent (and -inf) give exactly 0.
 template <class T>
 struct Exp2Traits;
 
