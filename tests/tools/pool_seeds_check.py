@@ -3,7 +3,9 @@
 row and share, the best-against-second test and a --contrast test against values worked by hand
 (Welch's t for [1, 2, 3] against [2, 3, 4]: t = -1.2247, df 4, one-sided p = 0.144, the t
 distribution's tail integrated numerically below), the head-by-head differences of a contrast,
---first-heads, the shares every run has, and clear errors for no common share and too few heads.
+--first-heads, the shares every run has, a row repeated with the same values (the references every
+run writes) kept once, and clear errors for no common share, too few heads and a repeated row
+whose values differ.
     pool_seeds_check.py TOOLS_DIR WORK_DIR"""
 import json
 import math
@@ -88,4 +90,27 @@ r = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trial
                    capture_output=True, text=True)
 if r.returncode == 0 or "seed 0 has 1 heads, --first-heads 2" not in r.stderr:
     sys.exit(f"--first-heads 2 on one head: exit {r.returncode}, stderr {r.stderr!r}")
+
+# The same seed of a row in two files: kept once when its heads are the same (the constant and the
+# ridge of two runs with one command's draws), an error when they differ.
+with open(files[0]) as f:
+    again = json.load(f)
+same = os.path.join(work, "s0_again.json")
+with open(same, "w") as f:
+    json.dump(again, f)
+r = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", files[0], same],
+                   capture_output=True, text=True, check=True).stdout
+alone = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", files[0]],
+                       capture_output=True, text=True, check=True).stdout
+if "row 'A' seed 0: the same heads as in an earlier file, kept once" not in r or \
+        [l for l in r.splitlines() if l.startswith("|")] != [l for l in alone.splitlines() if l.startswith("|")]:
+    sys.exit(f"a repeated row with the same values printed:\n{r}\nnot the single file's table:\n{alone}")
+again["tables"][0]["rows"][0]["runs"][0][0]["acc"] += 0.01
+other = os.path.join(work, "s0_other.json")
+with open(other, "w") as f:
+    json.dump(again, f)
+r = subprocess.run([sys.executable, os.path.join(tools, "pool_seeds.py"), "trials", files[0], other],
+                   capture_output=True, text=True)
+if r.returncode == 0 or "row 'A' seed 0 is in an earlier file too, with other values" not in r.stderr:
+    sys.exit(f"a repeated row with other values: exit {r.returncode}, stderr {r.stderr!r}")
 print("pool_seeds.py: ok")
