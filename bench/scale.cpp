@@ -106,10 +106,11 @@ int run(int argc, char** argv) {
     for (int t : threads) {
 #ifdef _OPENMP
       omp_set_num_threads(t);
-      // Wake the team before the clock starts (the barrier: an empty region does not wait for it). A trainer's threads come to each step warm from the
-      // last one; here the other thread counts' turn leaves them asleep for a whole step, and on a
-      // VM waking them costs the first parallel region milliseconds (5-20 ms on the first region,
-      // mask sampling's, on a 2-vCPU Zen 5 VM: a hypervisor's wake-up, not the step's work).
+      // Wake the team before the clock starts (the barrier: an empty region does not wait for it).
+      // A trainer's threads come to each step warm from the last one; here the other thread
+      // counts' turn leaves them asleep for a whole step, and on a VM waking them costs the first
+      // parallel region milliseconds (5-20 ms on the first region, mask sampling's, on a 2-vCPU
+      // Zen 5 VM: a hypervisor's wake-up, not the step's work).
 #pragma omp parallel
       {
 #pragma omp barrier

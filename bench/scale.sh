@@ -41,14 +41,16 @@ done
 # (independent processes: nothing shared, nothing serial). What the cores give together there,
 # Σ alone/each, is the most any thread count can give on this machine: on a VM the cores share
 # caches, memory and power with each other and with other tenants.
+one() {  # one() CORE PRECISION: the step's line of a 1-thread run on CORE
+  OMP_NUM_THREADS=1 taskset -c "$1" build/release/bench/tjepa_scale --skin allegro --precision "$2" --threads 1 \
+    --reps "$reps" | grep '"phase":"step"'
+}
 if [ "$cores" -gt 1 ]; then
   for precision in fp32 bf16; do
     [ -f "$out/tjepa_allegro_$precision.jsonl" ] || continue
     echo "the ceiling: $precision, one step alone, then one on each of $cores cores at once" >&2
-    one() { OMP_NUM_THREADS=1 taskset -c "$1" build/release/bench/tjepa_scale --skin allegro --precision "$precision" \
-      --threads 1 --reps "$reps" | grep '"phase":"step"'; }
-    one 0 >"$out/ceiling_${precision}_alone.jsonl"
-    for c in $(seq 0 $((cores - 1))); do one "$c" >"$out/ceiling_${precision}_core$c.jsonl" & done
+    one 0 "$precision" >"$out/ceiling_${precision}_alone.jsonl"
+    for c in $(seq 0 $((cores - 1))); do one "$c" "$precision" >"$out/ceiling_${precision}_core$c.jsonl" & done
     wait
   done
 fi

@@ -97,9 +97,10 @@ for (skin, precision), rows in runs.items():
 ceiling = {}  # precision -> (alone ms, [each core's ms at once])
 for precision in ("fp32", "bf16"):
     alone = d / f"ceiling_{precision}_alone.jsonl"
-    cores = sorted(d.glob(f"ceiling_{precision}_core*.jsonl"))
-    if alone.exists() and cores and all(load_jsonl(c) for c in cores) and load_jsonl(alone):
-        ceiling[precision] = (load_jsonl(alone)[0]["ms"], [load_jsonl(c)[0]["ms"] for c in cores])
+    each = [load_jsonl(c) for c in sorted(d.glob(f"ceiling_{precision}_core*.jsonl"))]
+    first = load_jsonl(alone) if alone.exists() else []
+    if first and each and all(each):
+        ceiling[precision] = (first[0]["ms"], [c[0]["ms"] for c in each])
 if ceiling:
     print("\n### The machine's own ceiling\n")
     print("The allegro step on 1 thread alone (core 0), then one such step on every core at once, as "

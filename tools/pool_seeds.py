@@ -68,7 +68,7 @@ def welch_less(a, b):
 
 def pool(runs, args):
     """Pools one table of several runs: runs is a list of (path, command, seeds, table)."""
-    metrics, rows, heads_of, raw_of, order = None, {}, {}, {}, []
+    metrics, rows, heads_of, order = None, {}, {}, []
     for path, command, seeds, table in runs:
         metrics = metrics or [m for m in table["metrics"] if m["primary"]]
         print(f"- {path}: `{command}`")
@@ -86,19 +86,18 @@ def pool(runs, args):
             if row["name"] not in order:
                 order.append(row["name"])
             for seed, heads in zip(seeds, row["runs"]):
-                if seed in mine:
-                    # The references (constant, ridge on raw windows) come out of every run alike:
-                    # the same seed and heads give the same values, kept once.
-                    if raw_of[row["name"]][seed] == heads:
-                        print(f"  - row '{row['name']}' seed {seed}: the same heads as in an earlier file, kept once")
-                        continue
-                    sys.exit(f"{path}: row '{row['name']}' seed {seed} is in an earlier file too, with other values")
-                raw_of.setdefault(row["name"], {})[seed] = heads
                 if args.first_heads:
                     if len(heads) < args.first_heads:
                         sys.exit(f"{path}: row '{row['name']}' seed {seed} has {len(heads)} heads, "
                                  f"--first-heads {args.first_heads}")
                     heads = heads[:args.first_heads]
+                if seed in mine:
+                    # The references (constant, ridge on raw windows) come out of every run alike:
+                    # the same seed and heads give the same values, kept once.
+                    if heads_of[row["name"]][seed] == heads:
+                        print(f"  - row '{row['name']}' seed {seed}: the same heads as in an earlier file, kept once")
+                        continue
+                    sys.exit(f"{path}: row '{row['name']}' seed {seed} is in an earlier file too, with other values")
                 mine[seed] = {m["key"]: sum(h[m["key"]] for h in heads) / len(heads) for m in metrics}
                 heads_of.setdefault(row["name"], {})[seed] = heads
     names = args.rows or order

@@ -61,17 +61,18 @@ template <class T>
 simd<T> gaussian(simd<T> x) {
   return exp2<T>(x * x * simd<T>(T(-0.5) * std::numbers::log2e_v<T>));
 }
-template <class T>
-simd<T> gelu_grad(simd<T> x) {
-  return T(0.5) * (T(1) + erf<T>(x * simd<T>(inv_sqrt2<T>))) +
-         x * simd<T>(inv_sqrt_2pi<T>) * gaussian<T>(x);
-}
-// gelu(x) and gelu'(x) from one erf: the same values as gelu() and gelu_grad().
+// gelu(x) (the same value as gelu()) and gelu'(x) from one erf.
 template <class T>
 void gelu_and_grad(simd<T> x, simd<T>& g, simd<T>& dg) {
   const simd<T> e = T(1) + erf<T>(x * simd<T>(inv_sqrt2<T>));
   g = T(0.5) * x * e;
   dg = T(0.5) * e + x * simd<T>(inv_sqrt_2pi<T>) * gaussian<T>(x);
+}
+template <class T>
+simd<T> gelu_grad(simd<T> x) {
+  simd<T> g, dg;
+  gelu_and_grad<T>(x, g, dg);
+  return dg;
 }
 }  // namespace tjepa::detail
 

@@ -39,8 +39,9 @@ enum class Order { row_major, col_major };
 // What happens to a finished tile. bias [cols] is added once; gelu [rows, ldc]: C keeps the
 // pre-activation and gelu receives gelu(C) (the MLP's fc1). accumulate: C += A·B, else C = A·B.
 // scale [rows, ldc] (with accumulate = false): C = (A·B) ⊙ scale, the MLP's backward through its
-// GELU fused into the product that yields ∂L/∂h (scale: gelu' at the pre-activation). residual [rows, ldc] (with
-// accumulate = false; may equal C): C = residual + A·B, a residual add without a copy of the stream.
+// GELU fused into the product that yields ∂L/∂h (scale: gelu' at the pre-activation). residual
+// [rows, ldc] (with accumulate = false; may equal C): C = residual + A·B, a residual add without a
+// copy of the stream.
 struct Epilogue {
   bool accumulate = false;
   const float* bias = nullptr;
