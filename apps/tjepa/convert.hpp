@@ -213,7 +213,7 @@ inline int run_convert(const ConvertOptions& o, std::ostream& out) {
   require<ConfigError>(ext != ".ckpt" && ext != ".pt" && ext != ".pth", o.in,
                        " is a PyTorch file; tjepa reads safetensors: python3 tools/reference/torch_checkpoint.py "
                        "to-safetensors ", o.in, " ref.safetensors [--config .hydra/config.yaml], then convert that");
-  require<FileError>(std::filesystem::exists(o.in), "no such file '", o.in, "'");
+  require_input_file(o.in, "input");
   OutputFiles::check_new(o.out, o.force);
   const SafetensorsFile f = load_safetensors(o.in);
   const auto it = f.metadata.find("format");

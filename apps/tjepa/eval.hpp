@@ -62,7 +62,7 @@ inline int run_trial_eval_command(const EvalOptions& o, std::ostream& out) {
       << o.trial.head_seeds << " head(s) per row and label share; " << max_threads() << " thread(s)\n" << std::flush;
   OutputFiles::check_new(dir / "results.json", o.force);
   auto write = [&](const TrialEvalResult& r) {  // the folder made at the first write: a bad flag leaves none
-    std::filesystem::create_directories(dir);
+    make_directories(dir);
     std::string md = "# " + o.command + "\n";
     nlohmann::json j = r.info;
     j["command"] = o.command;
@@ -92,7 +92,7 @@ inline int run_eval(const EvalOptions& o, std::ostream& out) {
       << o.eval.head_seeds << " head(s) per task; " << max_threads() << " thread(s)\n" << std::flush;
   const auto t0 = std::chrono::steady_clock::now();
   OutputFiles::check_new(dir / "results.json", o.force);
-  std::filesystem::create_directories(dir);
+  make_directories(dir);
   // The tables so far, rewritten (atomically) after every pre-training seed.
   auto write = [&](const GraspEvalResult& r) {
     std::string md = "# " + o.command + "\n\n" + r.main.markdown();

@@ -66,7 +66,7 @@ inline Recording read_label_frames(const std::filesystem::path& path, const std:
   f.axes = 1;
   f.columns = columns;
   Recording r;
-  if (path.extension() == ".npy" && std::filesystem::exists(path) && read_npy_header(path).shape.size() == 1) {
+  if (path.extension() == ".npy" && path_exists(path) && read_npy_header(path).shape.size() == 1) {
     NpyArray a = read_npy(path, NpyReadOptions{.require_finite = true, .map = false});  // [T]: one column
     r = Recording(static_cast<int>(a.shape[0]), 1, 1, AlignedVector<float>(a.values.values().begin(), a.values.values().end()),
                   a.source);

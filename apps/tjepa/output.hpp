@@ -16,6 +16,7 @@
 
 #include <unistd.h>
 
+#include <tjepa/core/files.hpp>
 #include <tjepa/eval.hpp>
 
 namespace tjepa::cli {
@@ -45,24 +46,21 @@ class OutputFiles {
   // Creates dir (and missing parents), remembering the ones it made.
   void make_dir(const std::filesystem::path& dir) {
     std::vector<std::filesystem::path> missing;
-    for (auto p = dir; !p.empty() && !std::filesystem::exists(p); p = p.parent_path()) {
+    for (auto p = dir; !p.empty() && !path_exists(p); p = p.parent_path()) {
       missing.push_back(p);
       if (p == p.parent_path()) break;
     }
-    std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    require<FileError>(!ec && std::filesystem::is_directory(dir), "cannot create the output directory '",
-                       dir.string(), "'", ec ? ": " + ec.message() : std::string());
+    make_directories(dir);
     dirs_.insert(dirs_.end(), missing.rbegin(), missing.rend());
   }
   // Registers a file about to be written (call before writing it).
   std::filesystem::path add(const std::filesystem::path& file) {
-    if (!std::filesystem::exists(file)) files_.push_back(file);
+    if (!path_exists(file)) files_.push_back(file);
     return file;
   }
   // Checks that a file does not exist yet unless overwriting is allowed.
   static void check_new(const std::filesystem::path& file, bool overwrite) {
-    require<FileError>(overwrite || !std::filesystem::exists(file), "'", file.string(),
+    require<FileError>(overwrite || !path_exists(file), "'", file.string(),
                        "' exists; pass --force to overwrite it");
   }
   void commit() { committed_ = true; }

@@ -238,8 +238,9 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
   const std::filesystem::path dir =
       !o.out.empty() ? std::filesystem::path(o.out)
                      : !o.resume.empty() ? std::filesystem::path(o.resume).parent_path() : std::filesystem::path("runs/pretrain");
-  const bool own_folder = !o.resume.empty() && std::filesystem::exists(dir) &&
-                          std::filesystem::equivalent(std::filesystem::absolute(o.resume).parent_path(), dir);
+  std::error_code ec;  // a name the system refuses: not the run's own folder (the writes name the problem)
+  const bool own_folder = !o.resume.empty() &&
+                          std::filesystem::equivalent(std::filesystem::absolute(o.resume, ec).parent_path(), dir, ec);
   OutputFiles::check_new(dir / "checkpoint.safetensors", o.force || own_folder);
   if (lead) files.make_dir(dir);
   const auto owned = make_jepa_model(run, skin.graph, axes, run.seed);

@@ -17,6 +17,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <tjepa/core/files.hpp>
 #include <tjepa/eval.hpp>
 
 namespace tjepa::cli {
@@ -61,11 +62,11 @@ inline Skin load_skin(const SkinSpec& s, std::ostream* warnings = nullptr) {
     r.skin = s.layout == "allegro" ? layouts::allegro_xela() : s.layout == "grid" ? layouts::grid_skin()
                                                                                 : layouts::two_part_skin();
   } else {
-    require<ConfigError>(std::filesystem::exists(s.layout), "layout '", s.layout,
+    require<ConfigError>(path_exists(s.layout), "layout '", s.layout,
                          "' is neither a built-in layout (allegro, grid, two-part) nor an existing CSV file");
     const LayoutCsvColumns cols = parse_csv_columns(s.columns);
     if (!s.edges.empty()) {
-      require<FileError>(std::filesystem::exists(s.edges), "no such edges file '", s.edges, "'");
+      require_input_file(s.edges, "edges file");
       r = read_skin_csv_checked(s.layout, s.edges, cols.nodes, cols.edges);
     } else {
       CoordinateSkinOptions o;
@@ -80,7 +81,7 @@ inline Skin load_skin(const SkinSpec& s, std::ostream* warnings = nullptr) {
       r.skin.layout.column = s.order == "xserver" ? layouts::allegro::xserver_columns()
                                                   : layouts::allegro::reference_columns();
     } else {
-      require<ConfigError>(std::filesystem::exists(s.order), "taxel order '", s.order,
+      require<ConfigError>(path_exists(s.order), "taxel order '", s.order,
                            "' is neither xserver, reference nor an existing order CSV (id,column)");
       r.skin.layout.column = read_taxel_order_csv(s.order, r.skin.layout);
     }
@@ -307,7 +308,7 @@ inline void note_dropped(const WindowSource& src, const std::string& what, std::
 // not be truncated or rewritten in place during the run). NaN/Inf readings are found here, before
 // any statistic sees them, and handled by the format's policy.
 inline Recording read_recording(const std::filesystem::path& path, const DataFormat& fmt = {}, bool map = false) {
-  require<FileError>(std::filesystem::exists(path), "no such file '", path.string(), "'");
+  require_input_file(path, "recording");
   const NonFinite policy = parse_non_finite(fmt.non_finite);
   Recording rec;
   if (path.extension() == ".npy") {

@@ -20,6 +20,7 @@
 #include "tjepa/core/error.hpp"
 #include "tjepa/core/random.hpp"
 #include "tjepa/core/atomic_write.hpp"
+#include "tjepa/core/files.hpp"
 #include "tjepa/core/json.hpp"
 #include "tjepa/core/param_set.hpp"
 #include "tjepa/core/prefixed_params.hpp"

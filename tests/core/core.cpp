@@ -279,6 +279,29 @@ TEST_SUITE("core") {
     CHECK(dir.names() == std::vector<std::string>{std::string(250, 'n')});
   }
 
+  TEST_CASE("input paths: a FileError naming the path and the system's reason / never a filesystem_error") {
+    AtomicDir dir;
+    tjepa::write_file_atomic(dir.path / "a.csv", "1\n");
+    const fs::path too_long = dir.path / std::string(300, 'x');  // over NAME_MAX: stat fails with ENAMETOOLONG
+    CHECK(tjepa::input_file_problem(dir.path / "a.csv").empty());
+    CHECK(tjepa::input_file_problem(dir.path / "none.csv") == "no such file");
+    CHECK(tjepa::input_file_problem(dir.path / "a.csv" / "b") == "no such file");  // a file as a folder: ENOTDIR
+    CHECK(tjepa::input_file_problem(dir.path) == "a directory, not a file");
+    CHECK(tjepa::input_file_problem(too_long) == std::strerror(ENAMETOOLONG));
+    const std::string refused = "t.csv:2: recording '" + too_long.string() + "': File name too long";
+    CHECK_THROWS_WITH_AS(tjepa::require_input_file(too_long, "recording", "t.csv:2: "), refused.c_str(), tjepa::FileError);
+    CHECK_NOTHROW(tjepa::require_input_file(dir.path / "a.csv", "recording"));
+    CHECK(tjepa::path_exists(dir.path / "a.csv"));
+    CHECK_FALSE(tjepa::path_exists(too_long));
+    tjepa::make_directories(dir.path / "p" / "q");
+    CHECK(fs::is_directory(dir.path / "p" / "q"));
+    tjepa::make_directories(dir.path / "p" / "q");  // already there: nothing to do
+    CHECK_THROWS_WITH_AS(tjepa::make_directories(dir.path / "a.csv", "the cache"),
+                         doctest::Contains("cannot create the cache '"), tjepa::FileError);
+    CHECK_THROWS_WITH_AS(tjepa::make_directories(too_long / "q"), doctest::Contains("File name too long"),
+                         tjepa::FileError);
+  }
+
   TEST_CASE("write_file_atomic: two threads writing one path never mix their files") {
     AtomicDir dir;
     const fs::path p = dir.path / "shared";

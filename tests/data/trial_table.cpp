@@ -70,11 +70,13 @@ TEST_CASE("read_trial_table: every bad table is a FileError naming the table / t
   bad("file,file\n", "t.csv:1: column 'file' appears twice");
   bad("file,split\na.csv,train\n", "t.csv:1: the header needs the columns file and label");
   bad("file,label\na.csv\n", "t.csv:2: 1 fields, the header has 2");
-  bad("file,label\nmissing.csv,x\n", "t.csv:2: no such recording");
+  bad("file,label\nmissing.csv,x\n", "t.csv:2: recording '" + (t / "missing.csv").string() + "': no such file");
+  bad("file,label\n" + std::string(300, 'x') + ",x\n", "': File name too long");  // the fuzzer's find
+  bad("file,label\n.,x\n", "': a directory, not a file");
   bad("file,label\na.csv,\n", "t.csv:2: no label for a.csv");
   bad("file,label,split\na.csv,x,training\n", "t.csv:2: split 'training', expected train, val or test");
   bad("file,label\na.csv,\"x\n", "t.csv:2: a quoted field is not closed");
-  bad("file,label\na.csv,nolabels.npy\n", "t.csv:2: no such label file");
+  bad("file,label\na.csv,nolabels.npy\n", "t.csv:2: label file '" + (t / "nolabels.npy").string() + "': no such file");
   bad("file,label\na.csv,x\na.csv,a_lab.csv\n", "t.csv:3: label 'a_lab.csv' is a label file, line 2's a value");
   CHECK_THROWS_WITH_AS(read_trial_table(t / "none.csv"), doctest::Contains("none.csv: cannot open the trial table"), FileError);
 }

@@ -132,7 +132,8 @@ TEST_CASE("probe head file: a missing or extra tensor / a non-finite value / not
   other.add("x", std::span<const float>(std::vector<float>{1.0f}), {1});
   save_safetensors(t / "other.safetensors", other);
   CHECK_THROWS_AS(load_probe_head<float>(t / "other.safetensors"), FileError);
-  CHECK_THROWS_WITH_AS(load_probe_head<float>(t / "none.safetensors"), doctest::Contains("no such head file"), FileError);
+  const std::string missing = "head file '" + (t / "none.safetensors").string() + "': no such file";
+  CHECK_THROWS_WITH_AS(load_probe_head<float>(t / "none.safetensors"), doctest::Contains(missing.c_str()), FileError);
 }
 
 TEST_CASE("sequence head file: the same head back bit for bit") {

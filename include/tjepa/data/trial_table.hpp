@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/files.hpp"
 
 namespace tjepa {
 
@@ -151,15 +152,14 @@ inline TrialTable read_trial_table(const std::filesystem::path& path) {
     const std::string& file = fields[static_cast<std::size_t>(col_file)];
     require<FileError>(!file.empty(), t.source, ":", lineno, ": no file");
     r.file = dir / file;
-    require<FileError>(std::filesystem::is_regular_file(r.file), t.source, ":", lineno, ": no such recording '",
-                       r.file.string(), "'");
+    require_input_file(r.file, "recording", t.source + ":" + std::to_string(lineno) + ": ");
     r.label = fields[static_cast<std::size_t>(col_label)];
     require<FileError>(!r.label.empty(), t.source, ":", lineno, ": no label for ", file);
     if (detail::is_label_file_name(r.label)) {
       r.label_file = dir / r.label;
-      require<FileError>(std::filesystem::is_regular_file(r.label_file), t.source, ":", lineno,
-                         ": no such label file '", r.label_file.string(), "' (a label ending in .npy, .csv or .txt ",
-                         "names a per-frame label file)");
+      const std::string problem = input_file_problem(r.label_file);
+      require<FileError>(problem.empty(), t.source, ":", lineno, ": label file '", r.label_file.string(), "': ",
+                         problem, " (a label ending in .npy, .csv or .txt names a per-frame label file)");
     }
     if (!t.trials.empty())
       require<FileError>(r.label_file.empty() == t.trials.front().label_file.empty(), t.source, ":", lineno,

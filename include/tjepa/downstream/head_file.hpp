@@ -28,6 +28,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/files.hpp"
 #include "tjepa/core/hash.hpp"
 #include "tjepa/core/json.hpp"
 #include "tjepa/core/param_set.hpp"
@@ -179,7 +180,7 @@ struct OpenedHead {
   std::string where;
 };
 inline OpenedHead open_head(const std::filesystem::path& path, std::string_view kind) {
-  require<FileError>(std::filesystem::exists(path), "no such head file '", path.string(), "'");
+  require_input_file(path, "head file");
   OpenedHead h{load_safetensors(path), {}, {}};
   h.json = head_json(h.file, kind);
   h.where = h.file.source() + ": metadata 'head'";

@@ -27,6 +27,7 @@
 #include "tjepa/core/threads.hpp"
 #include "tjepa/core/detail/vendor.hpp"
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/files.hpp"
 #include "tjepa/core/hash.hpp"
 #include "tjepa/core/param_set.hpp"
 #include "tjepa/io/checkpoint.hpp"
@@ -52,10 +53,7 @@ class PretrainCache {
   // key.
   PretrainCache(std::filesystem::path dir, nlohmann::json data) : dir_(std::move(dir)), data_(std::move(data)) {
     require<FileError>(!dir_.empty(), "PretrainCache: empty directory name");
-    std::error_code ec;
-    std::filesystem::create_directories(dir_, ec);
-    require<FileError>(!ec && std::filesystem::is_directory(dir_, ec), "pre-training cache ", dir_.string(),
-                       ": not a directory that can be created or used", ec ? " (" + ec.message() + ")" : "");
+    make_directories(dir_, "the pre-training cache");
   }
 
   bool enabled() const { return !dir_.empty(); }

@@ -20,6 +20,7 @@
 #include <nlohmann/json.hpp>
 
 #include "tjepa/core/error.hpp"
+#include "tjepa/core/files.hpp"
 #include "tjepa/core/json.hpp"
 #include "tjepa/data/drift_tracker.hpp"
 #include "tjepa/data/named_tensor.hpp"
@@ -87,7 +88,7 @@ struct TrainedModel {
 // Reads a checkpoint written by a Trainer. Malformed metadata (a missing key, a wrong type, a
 // value no run could have) throws FileError naming the file and the key; nothing else escapes.
 inline TrainedModel load_trained_model(const std::filesystem::path& path) {
-  require<FileError>(std::filesystem::exists(path), "no such checkpoint '", path.string(), "'");
+  require_input_file(path, "checkpoint");
   const SafetensorsFile file = load_safetensors(path);
   const auto it = file.metadata.find("config");
   require<FileError>(it != file.metadata.end(), path.string(), ": no 'config' metadata; not a tjepa checkpoint");
