@@ -43,4 +43,53 @@ BENCHMARK(BM_WeightGradient)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
+// One block's MLP backward (model/mlp.hpp: Mlp::backward) at the context encoder's size (M 1312,
+// d 192, hidden 768), whole (part 0) and part by part, at the thread count given last: 1 the
+// GELU and its derivative (gelu_forward_grad), 2 fc2's dW and db, 3 dh through fc2 and gelu'
+// (linear_backward_input_scaled), 4 fc1's dx, dW and db. The scale profile (bench/scale.sh) puts
+// this backward's 2-thread speed-up at 1.6x; these parts say which product holds it back.
+void BM_MlpBackward(benchmark::State& state) {
+  const tjepa_bench::Threads threads(state, 2);
+  if (threads.skipped()) return;
+  const int M = static_cast<int>(state.range(0)), part = static_cast<int>(state.range(1));
+  constexpr int d = 192, H = 768;
+  tjepa::ParamSet<float> ps;
+  const tjepa::Mlp mlp = tjepa::Mlp::add(ps, "mlp", d, H, true);
+  ps.allocate();
+  tjepa::Rng rng(1);
+  for (auto& v : ps.values()) v = static_cast<float>(0.02 * rng.normal());
+  const std::size_t mh = std::size_t(M) * H, md = std::size_t(M) * d;
+  std::vector<float> x(md), dy(md), dx(md), h_pre(mh), h(mh), dh(mh);
+  for (auto& v : x) v = static_cast<float>(rng.normal());
+  for (auto& v : dy) v = static_cast<float>(rng.normal());
+  for (auto& v : h_pre) v = static_cast<float>(rng.normal());
+  tjepa::kernels::gelu_forward_grad(h.data(), dh.data(), h_pre.data(), mh);
+  const auto run = [&] {
+    namespace k = tjepa::kernels;
+    switch (part) {
+      case 0: mlp.backward(ps, dy.data(), x.data(), h_pre.data(), h.data(), dh.data(), dx.data(), M); break;
+      case 1: k::gelu_forward_grad(h.data(), dh.data(), h_pre.data(), mh); break;
+      case 2: mlp.fc2.backward(ps, dy.data(), h.data(), static_cast<float*>(nullptr), M); break;
+      case 3:
+        k::linear_backward_input_scaled(h_pre.data(), dy.data(), ps.value(mlp.fc2.weight), dh.data(), M, H, d);
+        break;
+      default: mlp.fc1.backward(ps, h.data(), x.data(), dx.data(), M); break;
+    }
+  };
+  run();
+  for (auto _ : state) {
+    run();
+    benchmark::ClobberMemory();
+  }
+  const double flops[] = {4 * 2.0 * M * d * H, 0, 2.0 * M * d * H, 2.0 * M * d * H, 2 * 2.0 * M * d * H};
+  if (flops[part] > 0)
+    state.counters["GFLOP/s"] = benchmark::Counter(flops[part] / 1e9, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_MlpBackward)
+    ->ArgNames({"M", "part", "threads"})
+    ->ArgsProduct({{1312}, {0, 1, 2, 3, 4}, {1, 2}})
+    ->ComputeStatistics("min", [](const std::vector<double>& v) { return *std::min_element(v.begin(), v.end()); })
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
 }  // namespace
