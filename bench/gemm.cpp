@@ -46,8 +46,8 @@ BENCHMARK(BM_WeightGradient)
 // One block's MLP backward (model/mlp.hpp: Mlp::backward) at the context encoder's size (M 1312,
 // d 192, hidden 768), whole (part 0) and part by part, at the thread count given last: 1 the
 // GELU and its derivative (gelu_forward_grad), 2 fc2's dW and db, 3 dh through fc2 and gelu'
-// (linear_backward_input_scaled), 4 fc1's dx, dW and db. The scale profile (bench/scale.sh) puts
-// this backward's 2-thread speed-up at 1.6x; these parts say which product holds it back.
+// (linear_backward_input_scaled), 4 fc1's dx, dW and db. The scale profile (bench/scale.sh) reads
+// this backward's 2-thread speed-up at 1.5-1.9x from run to run; these parts say how each product splits.
 void BM_MlpBackward(benchmark::State& state) {
   const tjepa_bench::Threads threads(state, 2);
   if (threads.skipped()) return;
