@@ -2,11 +2,14 @@
 // which phases leave cores idle. Each phase is timed by the step's own StageClock marks
 // (JepaWorkspace::clock) and, within a phase, each block stage by the modules' own marks
 // (Workspace::clock: norm1, qkv, attention, ..., mlp backward, ...; summed over the blocks); mask
-// sampling, which the trainer runs before each step on the calling thread, is timed on its own. Thread counts take turns repetition by repetition, so that a slow
-// spell of the machine falls on all of them alike. Prints one JSON object per line:
+// sampling, which the trainer runs before each step on the calling thread, is timed on its own.
+// Thread counts take turns repetition by repetition, so that a slow spell of the machine falls on
+// all of them alike. Prints one JSON object per line:
 //   {"skin", "precision", "threads", "phase", "ms" (median over repetitions), "calls"} per phase,
 //   {..., "phase", "stage", "ms", "calls"} per stage of a phase,
-//   {"skin", "precision", "threads", "phase": "step", "ms", "gflops", ...} the whole step.
+//   {"skin", "precision", "threads", "phase": "step", "ms", "gflops", "paired_speedup" (the median
+//   over repetitions of the first thread count's step over this count's in the same repetition),
+//   "paired_speedup_quartiles", ...} the whole step.
 //   tjepa_scale [--skin allegro|deco] [--precision fp32|bf16] [--threads 1,2] [--reps 9]
 #include <algorithm>
 #include <chrono>
@@ -175,10 +178,24 @@ int run(int argc, char** argv) {
       std::cout << line.dump() << '\n';
     }
     const double step_ms = median(ms[t]["step"]);
-    std::cout << nlohmann::json{{"skin", skin},       {"precision", precision},
-                                {"threads", t},       {"phase", "step"},
-                                {"ms", step_ms},      {"gflops", flops / (step_ms * 1e6)},
-                                {"masks", label},     {"reps", reps}}
+    // The speed-up over the first count, repetition by repetition: the two steps of one repetition
+    // run a second apart, so a slow spell of the VM longer than that falls on both and cancels
+    // (the 1-thread step's median moved by 20 % between back-to-back runs on a 2-vCPU Zen 5).
+    const std::vector<double>& first = ms[threads.front()]["step"];
+    std::vector<double> paired;
+    for (std::size_t i = 0; i < first.size(); ++i) paired.push_back(first[i] / ms[t]["step"][i]);
+    std::sort(paired.begin(), paired.end());
+    const auto quartile = [&](double q) { return paired[std::size_t(q * double(paired.size() - 1) + 0.5)]; };
+    std::cout << nlohmann::json{{"skin", skin},
+                                {"precision", precision},
+                                {"threads", t},
+                                {"phase", "step"},
+                                {"ms", step_ms},
+                                {"gflops", flops / (step_ms * 1e6)},
+                                {"paired_speedup", median(paired)},
+                                {"paired_speedup_quartiles", {quartile(0.25), quartile(0.75)}},
+                                {"masks", label},
+                                {"reps", reps}}
                      .dump()
               << std::endl;
   }

@@ -75,20 +75,27 @@ print(f"`bench/scale.sh`, {day}, commit {measured}, "
       "variant (branches on 5 of 8 samples: less work) in the last column.\n")
 print("Serial fraction f from the measured speed-up S_t at t threads: f = (t/S_t − 1)/(t − 1) (Amdahl); "
       "the speed-ups f predicts at more threads beside it. % of peak: of t cores' BM_FmaPeak.\n")
-print("| skin (N) | precision | threads | step ms | GFLOP/s | % of peak | speed-up | f | "
+print("Paired: the median over repetitions of the 1-thread step over the t-thread step of the same repetition "
+      "(a second apart, so a slow spell of the machine longer than that cancels), with its quartiles; f and "
+      "the predictions are from it where the run has it, else from the ratio of the medians.\n")
+print("| skin (N) | precision | threads | step ms | GFLOP/s | % of peak | speed-up of the medians | "
+      "paired speed-up (quartiles) | f | "
       + " | ".join(f"predicted at {n}" for n in PREDICT)
       + " | PyTorch ms | tjepa speed-up over PyTorch | PyTorch ms, DINOv2 drop-path |")
-print("|---|---|---|---|---|---|---|---|" + "---|" * len(PREDICT) + "---|---|---|")
+print("|---|---|---|---|---|---|---|---|---|" + "---|" * len(PREDICT) + "---|---|---|")
 for (skin, precision), rows in runs.items():
     steps = {r["threads"]: r for r in rows if r["phase"] == "step"}
     t1 = steps[1]["ms"] if 1 in steps else None
     for t, r in sorted(steps.items()):
         s = t1 / r["ms"] if t1 else None
-        f = serial_fraction(t, s) if s and t > 1 else None
+        paired = r.get("paired_speedup") if t > 1 else None
+        f = serial_fraction(t, paired or s) if s and t > 1 else None
         pt = torch.get((N_OF[skin], "timm", t)) if precision == "fp32" else None
         pd = torch.get((N_OF[skin], "dinov2", t)) if precision == "fp32" else None
         cells = [f"{skin} ({N_OF[skin]})", precision, str(t), f"{r['ms']:.0f}", f"{r['gflops']:.0f}",
                  f"{100 * r['gflops'] / (peak * t):.0f}%", f"{s:.2f}×" if s else "",
+                 f"{paired:.2f}× ({r['paired_speedup_quartiles'][0]:.2f}-{r['paired_speedup_quartiles'][1]:.2f})"
+                 if paired else "",
                  f"{100 * f:.1f}%" if f is not None else ""]
         cells += [f"{predicted(f, n):.1f}×" if f is not None else "" for n in PREDICT]
         cells += [f"{pt:.0f}" if pt else "", f"{pt / r['ms']:.2f}×" if pt else "", f"{pd:.0f}" if pd else ""]
@@ -109,13 +116,14 @@ if ceiling:
           "count can give on this machine. f here is the serial fraction the threaded step's own speed-up "
           "would show if the ceiling were all of it.\n")
     print("| precision | 1 thread alone ms | each core's step, all at once, ms | together | f of the ceiling alone | "
-          "threaded step's speed-up (above) |")
+          "threaded step's speed-up (above; paired where measured) |")
     print("|---|---|---|---|---|---|")
     for precision, (alone, each) in ceiling.items():
         t = len(each)
         together = sum(alone / e for e in each)
-        steps = {r["threads"]: r["ms"] for r in runs.get(("allegro", precision), []) if r["phase"] == "step"}
-        threaded = f"{steps[1] / steps[t]:.2f}×" if 1 in steps and t in steps else ""
+        steps = {r["threads"]: r for r in runs.get(("allegro", precision), []) if r["phase"] == "step"}
+        s_t = (steps[t].get("paired_speedup") or steps[1]["ms"] / steps[t]["ms"]) if 1 in steps and t in steps else None
+        threaded = f"{s_t:.2f}×" if s_t else ""
         print(f"| {precision} | {alone:.0f} | {', '.join(f'{e:.0f}' for e in each)} | {together:.2f}× | "
               f"{100 * serial_fraction(t, together):.1f}% | {threaded} |")
 
