@@ -37,6 +37,15 @@ def predicted(f, n):
     return 1 / (f + (1 - f) / n)
 
 
+def step_speedup(steps, t):
+    """The t-thread step's speed-up over 1 thread, {threads: step row}: the paired one where the run
+    has it (tjepa_scale's repetition-by-repetition ratio), else the ratio of the medians; None
+    without both rows."""
+    if 1 not in steps or t not in steps:
+        return None
+    return steps[t].get("paired_speedup") or steps[1]["ms"] / steps[t]["ms"]
+
+
 peak = float((d / "peak.txt").read_text().strip())
 runs = {}  # (skin, precision) -> rows
 for path in sorted(d.glob("tjepa_*.jsonl"), key=lambda p: (p.name.split("_")[1], "bf16" in p.name)):  # fp32 first
@@ -89,7 +98,7 @@ for (skin, precision), rows in runs.items():
     for t, r in sorted(steps.items()):
         s = t1 / r["ms"] if t1 else None
         paired = r.get("paired_speedup") if t > 1 else None
-        f = serial_fraction(t, paired or s) if s and t > 1 else None
+        f = serial_fraction(t, step_speedup(steps, t)) if s and t > 1 else None
         pt = torch.get((N_OF[skin], "timm", t)) if precision == "fp32" else None
         pd = torch.get((N_OF[skin], "dinov2", t)) if precision == "fp32" else None
         cells = [f"{skin} ({N_OF[skin]})", precision, str(t), f"{r['ms']:.0f}", f"{r['gflops']:.0f}",
@@ -122,7 +131,7 @@ if ceiling:
         t = len(each)
         together = sum(alone / e for e in each)
         steps = {r["threads"]: r for r in runs.get(("allegro", precision), []) if r["phase"] == "step"}
-        s_t = (steps[t].get("paired_speedup") or steps[1]["ms"] / steps[t]["ms"]) if 1 in steps and t in steps else None
+        s_t = step_speedup(steps, t)
         threaded = f"{s_t:.2f}×" if s_t else ""
         print(f"| {precision} | {alone:.0f} | {', '.join(f'{e:.0f}' for e in each)} | {together:.2f}× | "
               f"{100 * serial_fraction(t, together):.1f}% | {threaded} |")
