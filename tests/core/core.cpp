@@ -334,4 +334,23 @@ TEST_SUITE("core") {
     CHECK(tjepa::hex_digits(0) == "0000000000000000");
     CHECK(tjepa::short_hash("a") == "af63dc4c8601ec8c");
   }
+
+  TEST_CASE("row_begin: n threads own consecutive rows in whole blocks / every row once / as even as blocks allow") {
+    using tjepa::detail::row_begin;
+    for (const int rows : {0, 1, 5, 6, 7, 53, 368, 529, 768})
+      for (const int n : {1, 2, 3, 4, 16})
+        for (const int block : {1, 6}) {
+          INFO("rows ", rows, ", threads ", n, ", block ", block);
+          CHECK(row_begin(rows, 0, n, block) == 0);
+          CHECK(row_begin(rows, n, n, block) == rows);
+          const int blocks = (rows + block - 1) / block;
+          for (int t = 0; t < n; ++t) {
+            const int r0 = row_begin(rows, t, n, block), r1 = row_begin(rows, t + 1, n, block);
+            CHECK(r0 <= r1);
+            CHECK(r0 % block == 0);
+            CHECK(r1 - r0 <= (blocks + n - 1) / n * block);  // never more than its share of whole blocks
+            if (blocks >= n) CHECK(r1 - r0 > (blocks / n - 1) * block);  // its share, the last block maybe partial
+          }
+        }
+  }
 }

@@ -435,17 +435,11 @@ TEST_SUITE("kernels") {
         INFO(precision_name(p));
         std::vector<std::vector<float>> runs;
         for (const int threads : {1, 2}) {
-#if defined(_OPENMP)
-          const int previous = omp_get_max_threads();
-          omp_set_num_threads(threads);
-#endif
+          const test::Threads scope(threads);
           std::vector<float> dW2(o.W.size(), -0.25f), db(std::size_t(N), 0.0f);
           kernels::linear_backward(static_cast<float*>(nullptr), dW2.data(), db.data(), o.g.data(), o.x.data(), o.W.data(),
                                    M, K, N, true, p);
           runs.push_back(dW2);
-#if defined(_OPENMP)
-          omp_set_num_threads(previous);
-#endif
         }
         CHECK(runs[0] == runs[1]);
         std::vector<float> want(dW.size());

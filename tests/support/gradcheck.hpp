@@ -98,14 +98,24 @@ void randomize(ParamSet<T>& ps, std::uint64_t seed, double std = 0.3) {
   }
 }
 
-// Runs a scope on one OpenMP thread: the tiny model's thousands of forward passes would spend
-// their time in thread barriers (results do not depend on the thread count).
-struct SingleThread {
+// Runs a scope on `threads` OpenMP threads (without OpenMP: on the one there is), then restores
+// the count: tests that results do not depend on it run a computation under Threads(1), Threads(2).
+struct Threads {
 #if defined(_OPENMP)
   int previous = omp_get_max_threads();
-  SingleThread() { omp_set_num_threads(1); }
-  ~SingleThread() { omp_set_num_threads(previous); }
+  explicit Threads(int threads) { omp_set_num_threads(threads); }
+  ~Threads() { omp_set_num_threads(previous); }
+#else
+  explicit Threads(int) {}
 #endif
+  Threads(const Threads&) = delete;
+  Threads& operator=(const Threads&) = delete;
+};
+
+// Runs a scope on one OpenMP thread: the tiny model's thousands of forward passes would spend
+// their time in thread barriers (results do not depend on the thread count).
+struct SingleThread : Threads {
+  SingleThread() : Threads(1) {}
 };
 
 }  // namespace tjepa::test

@@ -280,8 +280,7 @@ void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, cons
         detail::pack_weight_panel(base + size1, p, w2, N, H, task - panels1);
     }
   };
-  auto run_tile = [&](int t, T* h) {
-    const int i0 = t * mlp_tile_rows, r = std::min(mlp_tile_rows, M - i0);
+  auto run_tile = [&](int i0, int r, T* h) {
     const T* x = in + std::size_t(i0) * K;
     T* y = out + std::size_t(i0) * N;
     const T* res = residual ? residual + std::size_t(i0) * N : nullptr;
@@ -296,18 +295,30 @@ void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, cons
         linear_forward(y, h, w2, b2, r, H, N);
     }
   };
+  // Rows [i0, i1) in tiles.
+  auto run_rows = [&](int i0, int i1, T* h) {
+    for (; i0 < i1; i0 += mlp_tile_rows) run_tile(i0, std::min(mlp_tile_rows, i1 - i0), h);
+  };
   if (threads <= 1) {
     for (int task = 0; task < panels1 + panels2; ++task) pack_task(task);
-    for (int t = 0; t < tiles; ++t) run_tile(t, tile_base);
+    run_rows(0, M, tile_base);
     return;
   }
   TJEPA_OMP(omp parallel num_threads(threads)) {
-    TJEPA_OMP(omp for schedule(static))
-    for (int task = 0; task < panels1 + panels2; ++task) pack_task(task);
-    // Tiles to whichever thread is free (sgemm::run_product's reason): each tile's values do not
-    // depend on the thread that computes it.
-    TJEPA_OMP(omp for schedule(dynamic, 1))
-    for (int t = 0; t < tiles; ++t) run_tile(t, tile_base + std::size_t(detail::thread_id()) * tile_size);
+    if (panels1 + panels2 > 0) {
+      TJEPA_OMP(omp for schedule(static))
+      for (int task = 0; task < panels1 + panels2; ++task) pack_task(task);
+    }
+    const int id = detail::thread_id(), n = detail::team_size();
+    T* const h = tile_base + std::size_t(id) * tile_size;
+    // Each thread its own rows (detail::owns_rows), or tiles to whichever thread is free
+    // (sgemm::run_product's reason): a tile's values do not depend on the thread that computes it.
+    if (detail::owns_rows(M, n)) {
+      run_rows(detail::row_begin(M, id, n), detail::row_begin(M, id + 1, n), h);
+    } else {
+      TJEPA_OMP(omp for schedule(dynamic, 1))
+      for (int t = 0; t < tiles; ++t) run_tile(t * mlp_tile_rows, std::min(mlp_tile_rows, M - t * mlp_tile_rows), h);
+    }
   }
 }
 

@@ -111,24 +111,37 @@ struct SelfAttention {
     qkv.forward(ps, x, qkv_buf, B * L, ws.weights());
     ws.mark("qkv");
     // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
-    // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads).
+    // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads); at
+    // batch 1, thread t then takes query block t of every head, the rows the products around it
+    // give it (detail::owns_rows).
     const int pairs = B * heads, threads = detail::max_threads();
     const int chunks = pairs >= 2 * threads ? 1 : std::max(1, std::min((2 * threads + pairs - 1) / pairs, Lq / 32));
-    const int rows_per = (Lq + chunks - 1) / chunks;
+    const bool own = B == 1 && chunks > 1 && detail::owns_rows(Lq, threads);
     kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(head_shape(L, q_from));
-    TJEPA_OMP(omp parallel for schedule(dynamic) if (pairs * chunks > 1))
-    for (int task = 0; task < pairs * chunks; ++task) {
-      const int bh = task / chunks, b = bh / heads, h = bh % heads;
-      const int r0 = (task % chunks) * rows_per, r1 = std::min(Lq, r0 + rows_per);
-      if (r0 >= r1) continue;
+    auto run = [&](int b, int h, int r0, int r1) {
+      if (r0 >= r1) return;
       kernels::AttentionShape s = head_shape(L, q_from);
       s.Lq = r1 - r0;
       const T* k = qkv_buf + std::size_t(b) * L * 3 * d + d + std::size_t(h) * Dh;
       kernels::attention_forward(s, k - d + std::size_t(q_from + r0) * 3 * d, k, k + d,
                                  r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr,
                                  saved.att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
-                                 saved.lse ? saved.lse + std::size_t(bh) * L + r0 : nullptr, aws[detail::thread_id()],
-                                 ws.precision);  // its backward runs in the same precision
+                                 saved.lse ? saved.lse + std::size_t(b * heads + h) * L + r0 : nullptr,
+                                 aws[detail::thread_id()], ws.precision);  // its backward runs in the same precision
+    };
+    if (own) {
+      TJEPA_OMP(omp parallel for schedule(static) num_threads(threads))
+      for (int task = 0; task < threads * heads; ++task) {
+        const int c = task / heads;
+        run(0, task % heads, detail::row_begin(Lq, c, threads), detail::row_begin(Lq, c + 1, threads));
+      }
+    } else {
+      const int rows_per = (Lq + chunks - 1) / chunks;
+      TJEPA_OMP(omp parallel for schedule(dynamic) if (pairs * chunks > 1))
+      for (int task = 0; task < pairs * chunks; ++task) {
+        const int bh = task / chunks, r0 = (task % chunks) * rows_per;
+        run(bh / heads, bh % heads, r0, std::min(Lq, r0 + rows_per));
+      }
     }
     ws.mark("attention");
     if (residual)

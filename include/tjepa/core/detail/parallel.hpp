@@ -2,6 +2,7 @@
 // OpenMP helpers: the library builds and runs the same without OpenMP (pragmas vanish, one thread).
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #ifdef _OPENMP
@@ -21,6 +22,20 @@ namespace tjepa::detail {
 // ran 1.75x faster on a Zen 4 pair, a 2.4 MFLOP one 1.4x; 1.8 MFLOP gained nothing.
 inline constexpr std::size_t parallel_grain = std::size_t(1) << 17;  // elements of a row-wise kernel
 inline constexpr double parallel_min_flops = 2e6;                     // of a GEMM
+
+// Rows that stay with one thread from kernel to kernel. In a small product (batch-1 inference: a
+// few hundred rows) any thread could take any rows, and then the next kernel's thread reads rows
+// that the other core wrote: half of every activation crosses between the cores at every stage.
+// Up to affinity_rows rows a thread, the GEMMs, LayerNorm, the row-tiled MLP and the attention's
+// query rows give thread t of n the same rows, [row_begin(rows, t, n), row_begin(rows, t + 1, n)),
+// in whole blocks of `block` rows (the GEMM's MR). Above it, the products hand out chunks to
+// whichever thread is free (sgemm::run_product), which pays where a core is slowed for a while.
+inline constexpr int affinity_rows = 384;
+inline bool owns_rows(int rows, int threads) { return threads > 1 && rows <= affinity_rows * threads; }
+inline int row_begin(int rows, int t, int n, int block = 6) {
+  const int blocks = (rows + block - 1) / block;
+  return std::min(rows, int(std::int64_t(blocks) * t / n) * block);
+}
 
 inline int max_threads() {
 #ifdef _OPENMP

@@ -287,13 +287,20 @@ void run_product(int rows, int cols, int depth, int tasks, Pack&& pack, Compute&
     return;
   }
   TJEPA_OMP(omp parallel num_threads(threads)) {
-    TJEPA_OMP(omp for schedule(static))
-    for (int task = 0; task < tasks; ++task) pack(task);
-    const int blocks = (rows + MR - 1) / MR, chunks = std::min(blocks, 8 * team_size());
-    TJEPA_OMP(omp for schedule(dynamic, 1) nowait)
-    for (int c = 0; c < chunks; ++c) {
-      const int b0 = blocks * c / chunks, b1 = blocks * (c + 1) / chunks;
-      compute(std::min(rows, b0 * MR), std::min(rows, b1 * MR));
+    if (tasks > 0) {  // weights packed beforehand: no barrier to wait at
+      TJEPA_OMP(omp for schedule(static))
+      for (int task = 0; task < tasks; ++task) pack(task);
+    }
+    if (owns_rows(rows, team_size())) {
+      const int t = thread_id(), n = team_size();
+      compute(row_begin(rows, t, n, MR), row_begin(rows, t + 1, n, MR));
+    } else {
+      const int blocks = (rows + MR - 1) / MR, chunks = std::min(blocks, 8 * team_size());
+      TJEPA_OMP(omp for schedule(dynamic, 1) nowait)
+      for (int c = 0; c < chunks; ++c) {
+        const int b0 = blocks * c / chunks, b1 = blocks * (c + 1) / chunks;
+        compute(std::min(rows, b0 * MR), std::min(rows, b1 * MR));
+      }
     }
   }
 }
