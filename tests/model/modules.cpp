@@ -765,8 +765,9 @@ TEST_SUITE("model") {
   TEST_CASE("Inference at batch 1 on 2 threads: each thread keeps its rows (detail::owns_rows) - the bits of 1 thread") {
     // 368 tokens at batch 1 (the Allegro hand): the products, LayerNorm, the row-tiled MLP and the
     // attention's query blocks give each of 2 threads the same rows, in blocks that differ from the
-    // one-thread split; no value may depend on that, in fp32 or bf16, frozen weights or not, nor
-    // may the training forward's (cache kept) at batch 1.
+    // one-thread split, and with frozen weights the whole stack runs in one parallel region
+    // (BlockStack::forward_owned); no value may depend on that, in fp32 or bf16, nor may the
+    // training forward's (cache kept) at batch 1.
     ParamSet<float> ps;
     const int N = 368, d = 48;
     Encoder enc(ps, EncoderConfig{

@@ -242,6 +242,19 @@ void linear_bias_gelu_forward(T* out, T* pre, const T* in, const T* w, const T* 
 // in L2 next to both packed weights while fc2 reads it back.
 inline constexpr int mlp_tile_rows = 48;
 
+// Rows [i0, i1) of the row-tiled MLP below on the calling thread, from w1 and w2 packed in precision
+// p (p1, p2), through h, one [mlp_tile_rows, H] tile.
+inline void mlp_forward_rows(float* out, const float* residual, const float* in, Precision p, const void* p1,
+                             const float* b1, const void* p2, const float* b2, int i0, int i1, int K, int H, int N,
+                             float* h) {
+  for (; i0 < i1; i0 += mlp_tile_rows) {
+    const int r = std::min(mlp_tile_rows, i1 - i0);
+    detail::compute_rows(p, r, H, K, in + std::size_t(i0) * K, p1, h, {false, b1, h});
+    detail::compute_rows(p, r, N, H, h, p2, out + std::size_t(i0) * N,
+                         {false, b2, nullptr, nullptr, residual ? residual + std::size_t(i0) * N : nullptr});
+  }
+}
+
 // The MLP's inference forward, row-tiled: out[M, N] = (residual +) gelu(in · w1ᵀ + b1) · w2ᵀ + b2
 // with in [M, K], w1 [H, K], w2 [N, H]. Per tile of rows the activation h [tile, H] is computed and
 // consumed at once, so the [M, H] activation (the largest of a block) never goes to memory, and
@@ -281,13 +294,12 @@ void mlp_forward_tiled(T* out, const T* residual, const T* in, const T* w1, cons
     }
   };
   auto run_tile = [&](int i0, int r, T* h) {
-    const T* x = in + std::size_t(i0) * K;
-    T* y = out + std::size_t(i0) * N;
-    const T* res = residual ? residual + std::size_t(i0) * N : nullptr;
     if constexpr (std::is_same_v<T, float>) {
-      detail::compute_rows(p, r, H, K, x, p1, h, {false, b1, h});
-      detail::compute_rows(p, r, N, H, h, p2, y, {false, b2, nullptr, nullptr, res});
+      mlp_forward_rows(out, residual, in, p, p1, b1, p2, b2, i0, i0 + r, K, H, N, h);
     } else {
+      const T* x = in + std::size_t(i0) * K;
+      T* y = out + std::size_t(i0) * N;
+      const T* res = residual ? residual + std::size_t(i0) * N : nullptr;
       linear_bias_gelu_forward(h, h, x, w1, b1, r, K, H);
       if (res)
         linear_forward_residual(y, res, h, w2, b2, r, H, N);

@@ -100,15 +100,40 @@ struct SelfAttention {
     return {L - q_from, L, 1, d / heads, 3 * d, 3 * d, 3 * d, d};
   }
 
+  // Head h of sample b for its query rows [q_from + r0, q_from + r1) on the calling thread, from
+  // saved.qkv into saved.att (and saved.lse unless nullptr). precision: the products' (its
+  // backward runs in the same).
+  template <class T>
+  void head_forward(const AttentionRows& r, const AttentionSaved<T>& saved, int b, int h, int r0, int r1,
+                    kernels::AttentionWorkspace<T>& aws, Precision precision) const {
+    if (r0 >= r1) return;
+    const int d = dim(), Dh = d / heads, L = r.L, Lq = r.Lq();
+    kernels::AttentionShape s = head_shape(L, r.q_from);
+    s.Lq = r1 - r0;
+    const T* k = saved.qkv + std::size_t(b) * L * 3 * d + d + std::size_t(h) * Dh;
+    kernels::attention_forward(s, k - d + std::size_t(r.q_from + r0) * 3 * d, k, k + d,
+                               r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr,
+                               saved.att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
+                               saved.lse ? saved.lse + std::size_t(b * heads + h) * L + r0 : nullptr, aws, precision);
+  }
+  // Every head for the rows [m0, m1) of [B·Lq] (the samples they fall in) on the calling thread.
+  template <class T>
+  void rows_forward(const AttentionRows& r, const AttentionSaved<T>& saved, int m0, int m1,
+                    kernels::AttentionWorkspace<T>& aws, Precision precision) const {
+    const int Lq = r.Lq();
+    for (int b = m0 / Lq; b < r.B && b * Lq < m1; ++b)
+      for (int h = 0; h < heads; ++h)
+        head_forward(r, saved, b, h, std::max(m0 - b * Lq, 0), std::min(m1 - b * Lq, Lq), aws, precision);
+  }
+
   // x [B·L, d] → y [B·Lq, d], Lq = L − q_from: the outputs of the query rows [q_from, L) of each
   // sample (q_from = 0: every row; the predictor's last block keeps only its target rows).
   // saved.qkv and saved.att are filled; saved.lse may be nullptr (inference).
   template <class T>
   void forward(const ParamSet<T>& ps, const AttentionRows& r, const T* x, const AttentionSaved<T>& saved, T* y,
                Workspace<T>& ws, const T* residual = nullptr) const {
-    const int d = dim(), Dh = d / heads, B = r.B, L = r.L, q_from = r.q_from, Lq = r.Lq();
-    T* qkv_buf = saved.qkv;
-    qkv.forward(ps, x, qkv_buf, B * L, ws.weights());
+    const int B = r.B, L = r.L, q_from = r.q_from, Lq = r.Lq();
+    qkv.forward(ps, x, saved.qkv, B * L, ws.weights());
     ws.mark("qkv");
     // Tasks: (sample, head, block of query rows). Query blocks only split work when there are too
     // few (sample, head) pairs to keep every thread busy (batch 1 has 3 heads for 2+ threads); at
@@ -119,15 +144,7 @@ struct SelfAttention {
     const bool own = B == 1 && chunks > 1 && detail::owns_rows(Lq, threads);
     kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(head_shape(L, q_from));
     auto run = [&](int b, int h, int r0, int r1) {
-      if (r0 >= r1) return;
-      kernels::AttentionShape s = head_shape(L, q_from);
-      s.Lq = r1 - r0;
-      const T* k = qkv_buf + std::size_t(b) * L * 3 * d + d + std::size_t(h) * Dh;
-      kernels::attention_forward(s, k - d + std::size_t(q_from + r0) * 3 * d, k, k + d,
-                                 r.key_valid ? r.key_valid + std::size_t(b) * L : nullptr,
-                                 saved.att + (std::size_t(b) * Lq + r0) * d + std::size_t(h) * Dh,
-                                 saved.lse ? saved.lse + std::size_t(b * heads + h) * L + r0 : nullptr,
-                                 aws[detail::thread_id()], ws.precision);  // its backward runs in the same precision
+      head_forward(r, saved, b, h, r0, r1, aws[detail::thread_id()], ws.precision);
     };
     if (own) {
       TJEPA_OMP(omp parallel for schedule(static) num_threads(threads))

@@ -147,6 +147,7 @@ struct BlockStack {
       // until the last block writes the kept rows to x_out.
       T* x = keep_from == 0 ? x_out : detail::grow(ws.stream, Md);
       if (x != x_in) detail::parallel_copy(x_in, x_in + Md, x);
+      if (!drop && keep_from == 0 && forward_owned(ps, x, B, L, key_valid, ws)) return;
       for (int i = 0; i < D; ++i) {
         const bool last = i == D - 1;
         T* out = last ? x_out : x;
@@ -308,6 +309,62 @@ struct BlockStack {
       while (e < B && scale[e] != T(0)) ++e;
       f(b, e);
       b = e;
+    }
+  }
+
+  // Inference in place on x [B, L, d] on several threads when the rows are few (detail::owns_rows:
+  // batch 1 of a few hundred tokens) and the weights packed once (Workspace::frozen_weights): the
+  // whole stack in one parallel region, each thread on its own rows from the first LayerNorm to the
+  // last MLP. Only attention reads other threads' rows (every key and value of a sample), so a
+  // block waits once, after qkv; qkv alternates between two buffers so that a thread a block ahead
+  // never overwrites the keys another is still reading. The same kernels on the same rows as
+  // block_forward, so the same bits. Returns false, having done nothing, where it does not apply.
+  // Stage marks are thread 0's.
+  template <class T>
+  bool forward_owned(const ParamSet<T>& ps, T* x, int B, int L, const std::uint8_t* key_valid,
+                     Workspace<T>& ws) const {
+    if constexpr (!std::is_same_v<T, float>) {
+      return false;
+    } else {
+      const int threads = detail::max_threads(), M = B * L, d = config.dim, hid = config.hidden();
+      if (!ws.frozen_weights || !detail::owns_rows(M, threads)) return false;
+      kernels::PackedWeights<float>& cache = *ws.weights();
+      for (const Block& blk : blocks)  // packed here, once: the threads only read the cache
+        for (const LinearParams* lp : {&blk.attn.qkv, &blk.attn.proj, &blk.mlp.fc1, &blk.mlp.fc2}) lp->plan(ps, &cache);
+      const std::size_t Md = std::size_t(M) * d, tile = std::size_t(kernels::mlp_tile_rows) * hid;
+      float* ln = detail::grow(ws.ln, Md);
+      float* qkv2 = detail::grow(ws.qkv, 2 * 3 * Md);
+      float* att = detail::grow(ws.att, Md);
+      float* tiles = detail::grow(ws.mlp, std::size_t(threads) * tile);
+      kernels::AttentionWorkspace<float>* aws = ws.attention_per_thread(blocks.front().attn.head_shape(L, 0));
+      const AttentionRows rows{B, L, key_valid, 0};
+      TJEPA_OMP(omp parallel num_threads(threads))
+      {
+        const int t = detail::thread_id(), n = detail::team_size();
+        const int r0 = detail::row_begin(M, t, n), r1 = detail::row_begin(M, t + 1, n);
+        const auto mark = [&](const char* stage) {
+          if (t == 0) ws.mark(stage);
+        };
+        for (std::size_t i = 0; i < blocks.size(); ++i) {
+          const Block& blk = blocks[i];
+          float* qkv = qkv2 + (i % 2) * 3 * Md;
+          blk.norm1.forward_rows(ps, x, ln, r0, r1);
+          mark("norm1");
+          blk.attn.qkv.forward_rows(ps, ln, qkv, r0, r1, cache);
+          mark("qkv");
+          TJEPA_OMP(omp barrier)
+          blk.attn.rows_forward(rows, AttentionSaved<float>{.qkv = qkv, .att = att, .lse = nullptr}, r0, r1, aws[t],
+                                ws.precision);
+          mark("attention");
+          blk.attn.proj.forward_rows(ps, att, x, r0, r1, cache, x);
+          mark("proj");
+          blk.norm2.forward_rows(ps, x, ln, r0, r1);
+          mark("norm2");
+          blk.mlp.forward_rows(ps, ln, x, r0, r1, x, cache, tiles + std::size_t(t) * tile);
+          mark("mlp");
+        }
+      }
+      return true;
     }
   }
 

@@ -67,6 +67,15 @@ struct LinearParams {
   kernels::WeightPlan plan(const ParamSet<T>& ps, kernels::PackedWeights<T>* cache) const {
     return cache ? cache->get(ps.value(weight), out, in) : kernels::WeightPlan{};
   }
+  // Rows [m0, m1) of forward (of forward_residual with r: y = r + x · Wᵀ + b, r may equal y) on the
+  // calling thread, from the weight as `cache` packed it: cache.get() has packed it before, so
+  // that threads only read it here.
+  void forward_rows(const ParamSet<float>& ps, const float* x, float* y, int m0, int m1,
+                    kernels::PackedWeights<float>& cache, const float* r = nullptr) const {
+    const kernels::WeightPlan p = cache.get(ps.value(weight), out, in);
+    detail::compute_rows(p.precision, m1 - m0, out, in, x + std::size_t(m0) * in, p.packed, y + std::size_t(m0) * out,
+                         {false, b(ps), nullptr, nullptr, r ? r + std::size_t(m0) * out : nullptr});
+  }
   // out[M, out] = in[M, in] · Wᵀ + b. cache: Workspace::weights() (precision, frozen inference) or
   // nullptr (fp32).
   template <class T>
@@ -110,6 +119,12 @@ struct NormParams {
   template <class T>
   void forward(const ParamSet<T>& ps, const T* x, T* y, T* mean, T* rstd, int M) const {
     kernels::layer_norm_forward(y, mean, rstd, x, ps.value(weight), ps.value(bias), M, dim, T(eps));
+  }
+  // Rows [m0, m1) of an inference forward (no statistics) on the calling thread.
+  template <class T>
+  void forward_rows(const ParamSet<T>& ps, const T* x, T* y, int m0, int m1) const {
+    kernels::layer_norm_forward_rows(y, static_cast<T*>(nullptr), static_cast<T*>(nullptr), x, ps.value(weight),
+                                     ps.value(bias), m0, m1, dim, T(eps));
   }
   template <class T>
   void backward(ParamSet<T>& ps, const T* dy, const T* x, const T* mean, const T* rstd, T* dx, int M) const {

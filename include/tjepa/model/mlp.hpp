@@ -48,6 +48,15 @@ struct Mlp {
                       fc1.out, fc2.out, scratch, fc1.plan(ps, cache), fc2.plan(ps, cache));
   }
 
+  // Rows [m0, m1) of forward_tiled on the calling thread, from weights `cache` packed before (as
+  // LinearParams::forward_rows), through h, one [kernels::mlp_tile_rows, hidden] tile.
+  void forward_rows(const ParamSet<float>& ps, const float* x, float* y, int m0, int m1, const float* residual,
+                    kernels::PackedWeights<float>& cache, float* h) const {
+    const kernels::WeightPlan p1 = fc1.plan(ps, &cache), p2 = fc2.plan(ps, &cache);
+    kernels::mlp_forward_rows(y, residual, x, p1.precision, p1.packed, fc1.b(ps), p2.packed, fc2.b(ps), m0, m1, fc1.in,
+                              fc1.out, fc2.out, h);
+  }
+
   // dx [M, d] (may be nullptr) += ∂L/∂x given dy [M, out]; the parameters' gradients +=. h, dh
   // [M, hidden] are scratch (h is recomputed from h_pre rather than kept: the largest activation
   // of a block). precision: of the products.
