@@ -31,8 +31,10 @@ inline constexpr double parallel_min_flops = 2e6;                     // of a GE
 // in whole blocks of `block` rows (the GEMM's MR). Above it, the products hand out chunks to
 // whichever thread is free (sgemm::run_product), which pays where a core is slowed for a while.
 inline constexpr int affinity_rows = 384;
+// Rows come in blocks of the AVX-512 GEMMs' MR (sgemm.hpp, bgemm.hpp); any split is correct, whole blocks are faster.
+inline constexpr int row_block = 6;
 inline bool owns_rows(int rows, int threads) { return threads > 1 && rows <= affinity_rows * threads; }
-inline int row_begin(int rows, int t, int n, int block = 6) {
+inline int row_begin(int rows, int t, int n, int block = row_block) {
   const int blocks = (rows + block - 1) / block;
   return std::min(rows, int(std::int64_t(blocks) * t / n) * block);
 }

@@ -293,7 +293,7 @@ void run_product(int rows, int cols, int depth, int tasks, Pack&& pack, Compute&
     }
     if (owns_rows(rows, team_size())) {
       const int t = thread_id(), n = team_size();
-      compute(row_begin(rows, t, n, MR), row_begin(rows, t + 1, n, MR));
+      compute(row_begin(rows, t, n), row_begin(rows, t + 1, n));
     } else {
       const int blocks = (rows + MR - 1) / MR, chunks = std::min(blocks, 8 * team_size());
       TJEPA_OMP(omp for schedule(dynamic, 1) nowait)
