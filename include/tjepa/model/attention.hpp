@@ -143,21 +143,19 @@ struct SelfAttention {
     const int chunks = pairs >= 2 * threads ? 1 : std::max(1, std::min((2 * threads + pairs - 1) / pairs, Lq / 32));
     const bool own = B == 1 && chunks > 1 && detail::owns_rows(Lq, threads);
     kernels::AttentionWorkspace<T>* aws = ws.attention_per_thread(head_shape(L, q_from));
-    auto run = [&](int b, int h, int r0, int r1) {
-      head_forward(r, saved, b, h, r0, r1, aws[detail::thread_id()], ws.precision);
-    };
     if (own) {
-      TJEPA_OMP(omp parallel for schedule(static) num_threads(threads))
-      for (int task = 0; task < threads * heads; ++task) {
-        const int c = task / heads;
-        run(0, task % heads, detail::row_begin(Lq, c, threads), detail::row_begin(Lq, c + 1, threads));
+      TJEPA_OMP(omp parallel num_threads(threads))
+      {
+        const int t = detail::thread_id(), n = detail::team_size();
+        rows_forward(r, saved, detail::row_begin(Lq, t, n), detail::row_begin(Lq, t + 1, n), aws[t], ws.precision);
       }
     } else {
       const int rows_per = (Lq + chunks - 1) / chunks;
       TJEPA_OMP(omp parallel for schedule(dynamic) if (pairs * chunks > 1))
       for (int task = 0; task < pairs * chunks; ++task) {
         const int bh = task / chunks, r0 = (task % chunks) * rows_per;
-        run(bh / heads, bh % heads, r0, std::min(Lq, r0 + rows_per));
+        head_forward(r, saved, bh / heads, bh % heads, r0, std::min(Lq, r0 + rows_per), aws[detail::thread_id()],
+                     ws.precision);
       }
     }
     ws.mark("attention");
