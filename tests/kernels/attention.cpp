@@ -414,6 +414,51 @@ TEST_SUITE("kernels") {
     MESSAGE("bf16 attention: largest output error / max |v| ", worst);
   }
 
+  TEST_CASE("The bf16 forward's softmax tile writes the words that softmax then pairing gives") {
+    // online_softmax_tile with Pairs writes P^T straight into bf16 pairs of keys; the same tile
+    // through the fp32 softmax and pack_pairs_across_rows is its specification: the same words and
+    // the same running statistics, bit for bit, for odd and even key counts and short query blocks.
+#if TJEPA_BF16_NATIVE
+    namespace A = tjepa::detail::attn;
+    using Tl = A::Tiles<float>;
+    constexpr int BQ = Tl::BQ, BK = Tl::BK, w = A::W<float>, NB = BQ / w;
+    tjepa::Rng rng(77);
+    for (int kv : {1, 2, 7, BK - 1, BK})
+      for (int nb : {1, 3, NB}) {
+        CAPTURE(kv);
+        CAPTURE(nb);
+        tjepa::AlignedVector<float> st(std::size_t(BK) * BQ), m(BQ), l(BQ), alpha(BQ);
+        for (float& x : st) x = float(rng.normal() * 3);
+        for (int i = 0; i < BQ; ++i) {
+          m[i] = i % 5 == 0 ? -std::numeric_limits<float>::infinity() : float(rng.normal());
+          l[i] = float(1 + rng.uniform());
+        }
+        tjepa::AlignedVector<float> st2 = st, m2 = m, l2 = l, alpha2 = alpha;
+        tjepa::AlignedVector<std::uint32_t> pt(std::size_t(BK) / 2 * BQ, 0u), pt2 = pt;
+        const float c = 0.18f;
+        if (nb == NB) {
+          A::online_softmax_tile<float, NB, true, true>(st.data(), BQ, kv, nb, c, m.data(), l.data(), alpha.data(),
+                                                        pt.data());
+          A::online_softmax_tile<float, NB, true>(st2.data(), BQ, kv, nb, c, m2.data(), l2.data(), alpha2.data());
+        } else {
+          A::online_softmax_tile<float, NB, false, true>(st.data(), BQ, kv, nb, c, m.data(), l.data(), alpha.data(),
+                                                         pt.data());
+          A::online_softmax_tile<float, NB, false>(st2.data(), BQ, kv, nb, c, m2.data(), l2.data(), alpha2.data());
+        }
+        A::pack_pairs_across_rows(st2.data(), BQ, nullptr, kv, nb * w, pt2.data(), BQ);
+        for (int p = 0; p < (kv + 1) / 2; ++p)
+          for (int j = 0; j < nb * w; ++j) REQUIRE(pt[std::size_t(p) * BQ + j] == pt2[std::size_t(p) * BQ + j]);
+        for (int j = 0; j < nb * w; ++j) {
+          REQUIRE(m[j] == m2[j]);
+          REQUIRE(l[j] == l2[j]);
+          REQUIRE(alpha[j] == alpha2[j]);
+        }
+      }
+#else
+    MESSAGE("no AVX512-BF16 in this build: the paired softmax is not compiled");
+#endif
+  }
+
   TEST_CASE("bf16 attention backward against fp32 (awkward sizes / masks / cross)") {
     // Forward and backward in bf16 against both in fp32: every gradient within 2 % of the largest
     // fp32 gradient entry of its buffer (measured: 0.6 %). Without AVX512-BF16 they are equal.

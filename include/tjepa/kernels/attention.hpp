@@ -348,16 +348,16 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
 #endif
           A::gemm<T, A::Store::overwrite, A::MR_st<T>, A::NV_st<T>>(kv, nb * w, Dh, kp + kb * DhP, DhP, 1, qtb, BQ, st,
                                                                     BQ);
-        if (nb == NB)  // a full query block: the statistics stay in registers
-          A::online_softmax_tile<T, NB, true>(st, BQ, kv, nb, c, m, l, alpha);
-        else
-          A::online_softmax_tile<T, NB, false>(st, BQ, kv, nb, c, m, l, alpha);
-        // O [mq, DhP] = alpha O + P V_tile, P read transposed out of the P^T tile.
+        // O [mq, DhP] = alpha O + P V_tile, P read transposed out of the P^T tile (in bf16 its
+        // pairs, which the softmax writes).
 #if TJEPA_BF16_NATIVE
         if constexpr (can_bf16) {
           if (bf16) {
             std::uint32_t* pt = words(lay.pt16);
-            A::pack_pairs_across_rows(st, BQ, nullptr, kv, nb * w, pt, BQ);
+            if (nb == NB)
+              A::online_softmax_tile<T, NB, true, true>(st, BQ, kv, nb, c, m, l, alpha, pt);
+            else
+              A::online_softmax_tile<T, NB, false, true>(st, BQ, kv, nb, c, m, l, alpha, pt);
             const std::uint32_t* vt = words(lay.vp16) + kb / 2 * DhP;
             const int kv2 = (kv + 1) / 2;
             if (kb == 0)
@@ -369,6 +369,10 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
           }
         }
 #endif
+        if (nb == NB)  // a full query block: the statistics stay in registers
+          A::online_softmax_tile<T, NB, true>(st, BQ, kv, nb, c, m, l, alpha);
+        else
+          A::online_softmax_tile<T, NB, false>(st, BQ, kv, nb, c, m, l, alpha);
         if (kb == 0)
           A::gemm<T, A::Store::overwrite>(mq, static_cast<int>(DhP), kv, st, 1, BQ, vp, DhP, O, DhP);
         else

@@ -43,13 +43,23 @@ inline constexpr std::ptrdiff_t round_up(std::ptrdiff_t n, std::ptrdiff_t m) { r
 // exp2 on a batch: core/detail/simd.hpp's (the GELU's derivative uses it too).
 using detail::exp2;
 
+// 2^(c s - m) of the scores at s (one vector).
+template <class T>
+[[gnu::always_inline]] inline Vec<T> softmax_p(const T* s, Vec<T> c, Vec<T> m) {
+  return exp2(xsimd::fms(Vec<T>::load_aligned(s), c, m));
+}
+
 // One key tile of the forward's online softmax on transposed scores st [kv, ld] (key r in row r,
 // queries along the row, nb vectors of them): with mx = max over the tile's keys,
 //   m_new = max(m, c mx), alpha = 2^(m - m_new), P^T = 2^(c S^T - m_new), l = alpha l + sum_r P^T,
-// all in base 2 (c = scale * log2 e); P^T replaces S^T, alpha is left for rescaling the output.
+// all in base 2 (c = scale * log2 e); alpha is left for rescaling the output. P^T replaces S^T, or
+// with Pairs (the bf16 product P V) goes straight to pt [⌈kv/2⌉][ld] as bf16 pairs of keys 2p and
+// 2p+1 (pack_pairs_across_rows's words: the high half 0 past kv; query columns past nb vectors not
+// written), without a pass through memory in fp32; l sums the same fp32 P^T in the same order.
 // Full = true fixes nb = NBmax at compile time so the per-query vectors live in registers.
-template <class T, int NBmax, bool Full>
-inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* l, T* alpha) {
+template <class T, int NBmax, bool Full, bool Pairs = false>
+inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* l, T* alpha,
+                                [[maybe_unused]] std::uint32_t* pt = nullptr) {
   const int nb = Full ? NBmax : nb_rt;
   constexpr int w = W<T>;
   const Vec<T> cv(c);
@@ -67,13 +77,37 @@ inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* 
     mn[j].store_aligned(m + j * w);
     sum[j] = Vec<T>(T(0));
   }
-  for (int r = 0; r < kv; ++r) {
-    T* row = st + r * ld;
+#if TJEPA_BF16_NATIVE
+  if constexpr (Pairs) {
+    static_assert(std::is_same_v<T, float> && w == bgemm::L);
+    int r = 0;
+    for (; r + 1 < kv; r += 2)
 #pragma GCC unroll 8
-    for (int j = 0; j < nb; ++j) {
-      const Vec<T> p = exp2(xsimd::fms(Vec<T>::load_aligned(row + j * w), cv, mn[j]));
-      p.store_aligned(row + j * w);
-      sum[j] += p;
+      for (int j = 0; j < nb; ++j) {
+        const Vec<T> lo = softmax_p(st + r * ld + j * w, cv, mn[j]), hi = softmax_p(st + (r + 1) * ld + j * w, cv, mn[j]);
+        sum[j] += lo;
+        sum[j] += hi;
+        _mm512_store_si512(pt + r / 2 * ld + j * w, bgemm::interleave_pairs(_mm512_cvtne2ps_pbh(hi, lo)));
+      }
+    if (r < kv)
+#pragma GCC unroll 8
+      for (int j = 0; j < nb; ++j) {
+        const Vec<T> lo = softmax_p(st + r * ld + j * w, cv, mn[j]);
+        sum[j] += lo;
+        _mm512_store_si512(pt + r / 2 * ld + j * w, bgemm::interleave_pairs(_mm512_cvtne2ps_pbh(Vec<T>(T(0)), lo)));
+      }
+  } else
+#endif
+  {
+    static_assert(!Pairs, "bf16 pairs need AVX512-BF16");
+    for (int r = 0; r < kv; ++r) {
+      T* row = st + r * ld;
+#pragma GCC unroll 8
+      for (int j = 0; j < nb; ++j) {
+        const Vec<T> p = softmax_p(st + r * ld + j * w, cv, mn[j]);
+        p.store_aligned(row + j * w);
+        sum[j] += p;
+      }
     }
   }
 #pragma GCC unroll 8

@@ -96,15 +96,20 @@ static_assert(sgemm::NR == NR && sgemm::MR == MR, "bgemm shares sgemm's tile epi
 
 inline __mmask16 first_lanes(int n) { return n >= L ? __mmask16(0xffff) : n <= 0 ? __mmask16(0) : __mmask16((1u << n) - 1); }
 
-// The pairs (lo[j], hi[j]) of the first n < 17 lanes as 16 words (zero beyond n; hi = nullptr:
-// zero high halves): both rows converted by one vcvtne2ps2bf16, then interleaved by vpermw.
-inline __m512i pairs16(const float* lo, const float* hi, int n) {
+// _mm512_cvtne2ps_pbh(hi, lo) (lo's 16 bf16 in the low half, hi's in the high) as the 16 words
+// (lo[j], hi[j]), by vpermw.
+inline __m512i interleave_pairs(__m512bh hi_lo) {
   alignas(64) static constexpr std::uint16_t interleave[32] = {0, 16, 1, 17, 2,  18, 3,  19, 4,  20, 5,
                                                                 21, 6, 22, 7, 23, 8, 24, 9, 25, 10, 26,
                                                                 11, 27, 12, 28, 13, 29, 14, 30, 15, 31};
+  return _mm512_permutexvar_epi16(_mm512_load_si512(interleave), std::bit_cast<__m512i>(hi_lo));
+}
+// The pairs (lo[j], hi[j]) of the first n < 17 lanes as 16 words (zero beyond n; hi = nullptr:
+// zero high halves): both rows converted by one vcvtne2ps2bf16, then interleaved.
+inline __m512i pairs16(const float* lo, const float* hi, int n) {
   const __mmask16 m = first_lanes(n);
   const __m512 l = _mm512_maskz_loadu_ps(m, lo), h = hi ? _mm512_maskz_loadu_ps(m, hi) : _mm512_setzero_ps();
-  return _mm512_permutexvar_epi16(_mm512_load_si512(interleave), std::bit_cast<__m512i>(_mm512_cvtne2ps_pbh(h, l)));
+  return interleave_pairs(_mm512_cvtne2ps_pbh(h, l));
 }
 // The n < 33 consecutive values x[0, n) as ⌈n/2⌉ words, in order (zero beyond n).
 inline __m512i row_pairs(const float* x, int n) {
