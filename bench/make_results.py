@@ -416,7 +416,7 @@ _previous_text = _previous.read_text() if _previous.exists() else ""
 _kept = [m.group(0) for m in (re.search(rf"<!-- {n}:begin -->.*?<!-- {n}:end -->", _previous_text, flags=re.S)
                               for n in ("profile", "dist", "latency", "row_owned", "scale", "mlp_backward", "cnn", "notes")) if m]
 if any("85%" in name and ok != "met" for name, _, ok in goals22) and "<!-- profile:begin -->" in _previous_text:
-    print("\nWhere the fp32 goals of 85 % of the peak are not met, the section \"Where the fp32 time goes\" "
+    print("\nWhere the fp32 goals of 85 % of the peak are not met, the section \"Where the time goes\" "
           "(bench/profile.sh) shows where the rest of the time is: the products against the packing, epilogues "
           "and element-wise work around them.")
 print("\nAttention memory is O(L·d) by construction: the forward and backward run over query and key "

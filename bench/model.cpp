@@ -80,13 +80,18 @@ BENCHMARK(BM_EncoderForward)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->U
 void BM_EncoderForwardFrozen(benchmark::State& state) { encoder_forward(state, Precision::fp32, true); }
 BENCHMARK(BM_EncoderForwardFrozen)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
-// The same with bf16 products (AVX512-BF16, fp32 accumulation): qkv, proj and the MLP in bf16,
-// attention and norms fp32.
+// The same with bf16 products (AVX512-BF16, fp32 accumulation): qkv, proj, attention's two
+// products and the MLP in bf16; softmax, GELU and norms fp32. The Frozen one is bf16 inference.
 void BM_EncoderForwardBf16(benchmark::State& state) {
   if (!has_native_bf16()) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
   encoder_forward(state, Precision::bf16);
 }
 BENCHMARK(BM_EncoderForwardBf16)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+void BM_EncoderForwardFrozenBf16(benchmark::State& state) {
+  if (!has_native_bf16()) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
+  encoder_forward(state, Precision::bf16, true);
+}
+BENCHMARK(BM_EncoderForwardFrozenBf16)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Training-shaped encoder: forward with cache and backward to parameters and tokens, batch 8, at
 // drop-path rate arg 2 / 10: 0 is PyTorch's comparison model (bench/compare.sh), 3 the reference's

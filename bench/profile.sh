@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Where the fp32 time goes: sampling profiles (`perf record -e cpu-clock`, one thread pinned to
-# core 0) of the benchmarks below issue 22's fp32 goal of 85 % of the FMA peak, grouped into
+# Where the time goes: sampling profiles (`perf record -e cpu-clock`, one thread pinned to core 0)
+# of the benchmarks below issue 22's fp32 goal of 85 % of the FMA peak, and of bf16 inference
+# against issue 61's 12 ms a window (its products against twice the peak), grouped into
 # products, packing, epilogues and element-wise work, and the products' own rates implied by the
 # FLOPs they do. Writes the section between the "profile" markers of bench/RESULTS.md
 # (bench/make_results.py keeps it when compare.sh rewrites the file).
@@ -11,8 +12,9 @@ cd "$(dirname "$0")/.."
 source tools/deps.sh
 tjepa_ensure_packages "${TJEPA_BUILD_PACKAGES[@]}" linux-perf
 # Two builds of the benchmarks: the release preset's (what compare.sh times), and the same with
-# TJEPA_PROFILE_SYMBOLS, which keeps attention's micro-kernels out of line so that the profile
-# can tell its products from its softmax (inlined, their samples carry the caller's name).
+# TJEPA_PROFILE_SYMBOLS, which keeps attention's micro-kernels, the GEMM epilogue, its GELU and
+# bf16's conversion of A out of line so that the profile can tell them from the products and the
+# softmax (inlined, their samples carry the caller's name).
 cmake --preset release -DTJEPA_BUILD_BENCHMARKS=ON -DTJEPA_BUILD_TESTS=OFF -DTJEPA_BUILD_EXAMPLES=ON >/dev/null
 cmake --build --preset release --target tjepa_bench -j "$(nproc)"
 cmake -S . -B build/profile-bin -G Ninja -DCMAKE_BUILD_TYPE=Release -DTJEPA_NATIVE=ON -DTJEPA_BUILD_BENCHMARKS=ON \
@@ -26,7 +28,7 @@ mkdir -p "$out"
 git rev-parse --short HEAD >"$out/commit.txt"
 one() { OMP_NUM_THREADS=1 OMP_PROC_BIND=false taskset -c 0 "$@"; }
 
-timed='BM_FmaPeak|BM_EncoderForward(Frozen)?/368/|BM_EncoderForwardBackward/368/8/0/|BM_AttentionForwardBackward(OneSample)?/L:368/'
+timed='BM_FmaPeak|BM_EncoderForward(Frozen)?/368/|BM_EncoderForwardFrozenBf16/368/|BM_EncoderForwardBackward/368/8/0/|BM_AttentionForwardBackward(OneSample)?/L:368/'
 for b in release profile; do
   echo "timings, $b build" >&2
   exe=$bench
@@ -43,6 +45,8 @@ profiles=(
   "attention_b8|BM_AttentionForwardBackward/L:368/batch:8/|5"
   "encoder_train|BM_EncoderForwardBackward/368/8/0/|10"
 )
+# bf16 where the build has AVX512-BF16 (without it the benchmark skips).
+grep -qw avx512_bf16 /proc/cpuinfo && profiles+=("encoder_frozen_bf16|BM_EncoderForwardFrozenBf16/368/1/|5")
 for p in "${profiles[@]}"; do
   IFS='|' read -r name filter seconds <<<"$p"
   echo "profile $name" >&2

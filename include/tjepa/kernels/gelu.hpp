@@ -50,7 +50,7 @@ simd<T> erf(simd<T> a) {
   }
 }
 template <class T>
-simd<T> gelu(simd<T> x) {
+TJEPA_PROFILE_INLINE simd<T> gelu(simd<T> x) {
   return T(0.5) * x * (T(1) + erf<T>(x * simd<T>(inv_sqrt2<T>)));
 }
 // φ(x)·√(2π) = e^(-x²/2) = 2^(-x²/2 · log2 e), by the softmax's exp2 (half xsimd::exp's time:

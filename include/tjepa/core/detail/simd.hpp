@@ -9,6 +9,15 @@
 
 #include "tjepa/core/detail/vendor.hpp"
 
+// Functions marked TJEPA_PROFILE_INLINE are inline; a build with TJEPA_PROFILE_SYMBOLS defined
+// keeps them out of line, so that a sampling profile names them (bench/profile.sh: attention's
+// products, the GEMM epilogue, its GELU and its bf16 conversion of A apart from the products).
+#ifdef TJEPA_PROFILE_SYMBOLS
+#define TJEPA_PROFILE_INLINE [[gnu::noinline]] inline
+#else
+#define TJEPA_PROFILE_INLINE inline
+#endif
+
 namespace tjepa::detail {
 
 template <class T>

@@ -143,15 +143,9 @@ struct Bf16Dot {
 };
 #endif
 
-// Inlined into the kernels; a build with TJEPA_PROFILE_SYMBOLS defined keeps it out of line, so
-// that a sampling profile shows the products under their own name (bench/profile.sh).
+// Inlined into the kernels (out of line in a profiling build: TJEPA_PROFILE_INLINE).
 template <class T, int MR_, int NV_, Store S, class D = FloatDot<T>>
-#ifdef TJEPA_PROFILE_SYMBOLS
-[[gnu::noinline]]
-#else
-inline
-#endif
-void micro_kernel(int K, const typename D::Elem* __restrict A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+TJEPA_PROFILE_INLINE void micro_kernel(int K, const typename D::Elem* __restrict A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
                   const typename D::Elem* __restrict B, std::ptrdiff_t ldb, T* __restrict C, std::ptrdiff_t ldc,
                   const T* __restrict alpha) {
   constexpr int w = W<T>;

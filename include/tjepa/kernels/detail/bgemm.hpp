@@ -176,7 +176,7 @@ inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, O
 
 // Row-major A's rows [0, R) × depths [0, kc) as bf16 pairs for the micro-kernel, a(i, k) =
 // a[i·ars + k] → dst [R][kc/2] (32 depths of a row per conversion). Zero high halves after an odd kc.
-inline void pack_a(std::uint32_t* dst, int R, int kc, const float* a, std::ptrdiff_t ars) {
+TJEPA_PROFILE_INLINE void pack_a(std::uint32_t* dst, int R, int kc, const float* a, std::ptrdiff_t ars) {
   const int kc2 = depth_pairs(kc);
   for (int i = 0; i < R; ++i)
     for (int k = 0; k < kc; k += 2 * L)

@@ -123,7 +123,7 @@ inline void prefetch_tile(const float* c, std::ptrdiff_t ldc, const float* c_in,
     }
 }
 template <int R, int NK>
-inline void finish_tile(const float* tile, float* c, std::ptrdiff_t ldc, int cols, const float* c_in,
+TJEPA_PROFILE_INLINE void finish_tile(const float* tile, float* c, std::ptrdiff_t ldc, int cols, const float* c_in,
                         const float* bias, float* g, const float* gg) {
   if (cols == NK * W) {
 #pragma GCC unroll 8
