@@ -19,7 +19,7 @@ import statistics
 import subprocess
 import sys
 
-STAGES = ["norm1", "qkv", "attention", "proj", "norm2", "mlp"]
+STAGES = ["norm1", "qkv", "barrier", "attention", "proj", "norm2", "mlp"]  # barrier: 2+ threads only
 
 
 def run(binary, args):

@@ -319,7 +319,7 @@ struct BlockStack {
   // block waits once, after qkv; qkv alternates between two buffers so that a thread a block ahead
   // never overwrites the keys another is still reading. The same kernels on the same rows as
   // block_forward, so the same bits. Returns false, having done nothing, where it does not apply.
-  // Stage marks are thread 0's.
+  // Stage marks are thread 0's; "barrier" is its wait there for the other threads' qkv.
   template <class T>
   bool forward_owned(const ParamSet<T>& ps, T* x, int B, int L, const std::uint8_t* key_valid,
                      Workspace<T>& ws) const {
@@ -353,6 +353,7 @@ struct BlockStack {
           blk.attn.qkv.forward_rows(ps, ln, qkv, r0, r1, cache);
           mark("qkv");
           TJEPA_OMP(omp barrier)
+          mark("barrier");
           blk.attn.rows_forward(rows, AttentionSaved<float>{.qkv = qkv, .att = att, .lse = nullptr}, r0, r1, aws[t],
                                 ws.precision);
           mark("attention");

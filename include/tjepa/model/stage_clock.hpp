@@ -7,7 +7,8 @@
 //
 //   ws.clock = &clock;  clock.start();  encoder.forward(..., ws);
 //   clock.count() marks; stage i took clock.elapsed_ns(i) and ends with clock.name(i)
-// Per block the forward's marks are norm1, qkv, attention, proj, norm2, mlp; the backward's mlp
+// Per block the forward's marks are norm1, qkv, attention, proj, norm2, mlp (batch-1 inference on
+// several threads, BlockStack::forward_owned: norm1, qkv, barrier, attention, ...); the backward's mlp
 // backward, norm2 backward, proj backward, attention backward, qkv backward, norm1 backward.
 #include <array>
 #include <chrono>
