@@ -96,10 +96,11 @@ BENCHMARK(BM_EncoderForwardFrozenBf16)->Args({368, 1})->Args({528, 1})->Args({21
 // Training-shaped encoder: forward with cache and backward to parameters and tokens, batch 8, at
 // drop-path rate arg 2 / 10: 0 is PyTorch's comparison model (bench/compare.sh), 3 the reference's
 // 0.3 (dropped branches are skipped, so the FLOP count overstates that work by ~30%).
-void BM_EncoderForwardBackward(benchmark::State& state) {
+void encoder_forward_backward(benchmark::State& state, Precision precision) {
   const int L = int(state.range(0)), B = int(state.range(1));
   const double rate = double(state.range(2)) / 10.0;
   EncoderSetup e(B, L);
+  e.ws.precision = precision;
   auto dout = random_floats(e.tokens.size(), 3);
   std::vector<float> dtokens(e.tokens.size());
   EncoderCache<float> cache;
@@ -117,6 +118,13 @@ void BM_EncoderForwardBackward(benchmark::State& state) {
   state.counters["GFLOP/s"] =
       benchmark::Counter(encoder_train_flops(B, L) * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
 }
+void BM_EncoderForwardBackward(benchmark::State& state) { encoder_forward_backward(state, Precision::fp32); }
+// The same with bf16 products (forward and backward; fp32 master weights and gradients).
+void BM_EncoderForwardBackwardBf16(benchmark::State& state) {
+  if (!has_native_bf16()) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
+  encoder_forward_backward(state, Precision::bf16);
+}
+BENCHMARK(BM_EncoderForwardBackwardBf16)->Args({368, 8, 0})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_EncoderForwardBackward)->Args({368, 8, 0})->Args({368, 8, 3})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Predictor at training shape: batch 8, 4 targets tiled (32 rows), context 258 of 368 tokens

@@ -28,7 +28,7 @@ mkdir -p "$out"
 git rev-parse --short HEAD >"$out/commit.txt"
 one() { OMP_NUM_THREADS=1 OMP_PROC_BIND=false taskset -c 0 "$@"; }
 
-timed='BM_FmaPeak|BM_EncoderForward(Frozen)?/368/|BM_EncoderForwardFrozenBf16/368/|BM_EncoderForwardBackward/368/8/0/|BM_AttentionForwardBackward(OneSample)?/L:368/'
+timed='BM_FmaPeak|BM_EncoderForward(Frozen)?/368/|BM_EncoderForwardFrozenBf16/368/|BM_EncoderForwardBackwardBf16/|BM_EncoderForwardBackward/368/8/0/|BM_AttentionForwardBackward(OneSample)?/L:368/'
 for b in release profile; do
   echo "timings, $b build" >&2
   exe=$bench
@@ -46,7 +46,8 @@ profiles=(
   "encoder_train|BM_EncoderForwardBackward/368/8/0/|10"
 )
 # bf16 where the build has AVX512-BF16 (without it the benchmark skips).
-grep -qw avx512_bf16 /proc/cpuinfo && profiles+=("encoder_frozen_bf16|BM_EncoderForwardFrozenBf16/368/1/|5")
+grep -qw avx512_bf16 /proc/cpuinfo &&
+  profiles+=("encoder_frozen_bf16|BM_EncoderForwardFrozenBf16/368/1/|5" "encoder_train_bf16|BM_EncoderForwardBackwardBf16/368/8/0/|10")
 for p in "${profiles[@]}"; do
   IFS='|' read -r name filter seconds <<<"$p"
   echo "profile $name" >&2
