@@ -84,7 +84,8 @@ inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* 
     for (; r + 1 < kv; r += 2)
 #pragma GCC unroll 8
       for (int j = 0; j < nb; ++j) {
-        const Vec<T> lo = softmax_p(st + r * ld + j * w, cv, mn[j]), hi = softmax_p(st + (r + 1) * ld + j * w, cv, mn[j]);
+        const Vec<T> lo = softmax_p(st + r * ld + j * w, cv, mn[j]);
+        const Vec<T> hi = softmax_p(st + (r + 1) * ld + j * w, cv, mn[j]);
         sum[j] += lo;
         sum[j] += hi;
         _mm512_store_si512(pt + r / 2 * ld + j * w, bgemm::interleave_pairs(_mm512_cvtne2ps_pbh(hi, lo)));
@@ -104,7 +105,7 @@ inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* 
       T* row = st + r * ld;
 #pragma GCC unroll 8
       for (int j = 0; j < nb; ++j) {
-        const Vec<T> p = softmax_p(st + r * ld + j * w, cv, mn[j]);
+        const Vec<T> p = softmax_p(row + j * w, cv, mn[j]);
         p.store_aligned(row + j * w);
         sum[j] += p;
       }
@@ -145,9 +146,9 @@ struct Bf16Dot {
 
 // Inlined into the kernels (out of line in a profiling build: TJEPA_PROFILE_INLINE).
 template <class T, int MR_, int NV_, Store S, class D = FloatDot<T>>
-TJEPA_PROFILE_INLINE void micro_kernel(int K, const typename D::Elem* __restrict A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
-                  const typename D::Elem* __restrict B, std::ptrdiff_t ldb, T* __restrict C, std::ptrdiff_t ldc,
-                  const T* __restrict alpha) {
+TJEPA_PROFILE_INLINE void micro_kernel(int K, const typename D::Elem* __restrict A, std::ptrdiff_t a_rs,
+                                       std::ptrdiff_t a_cs, const typename D::Elem* __restrict B, std::ptrdiff_t ldb,
+                                       T* __restrict C, std::ptrdiff_t ldc, const T* __restrict alpha) {
   constexpr int w = W<T>;
   Vec<T> acc[MR_][NV_];
 #pragma GCC unroll 8

@@ -188,7 +188,7 @@ TJEPA_PROFILE_INLINE void pack_a(std::uint32_t* dst, int R, int kc, const float*
 // depth → dst [kc/2][ld] (ld ≥ R, a multiple of 16; dst 64-byte aligned): two depths × 16 rows
 // per conversion, zero past R and in the high halves after an odd kc. Converted for CH rows at
 // once: per 6-row block, as row-major A is, a conversion would fill 6 of its 16 lanes.
-inline void pack_a_cols(std::uint32_t* dst, std::ptrdiff_t ld, int R, int kc, const float* a, std::ptrdiff_t acs) {
+TJEPA_PROFILE_INLINE void pack_a_cols(std::uint32_t* dst, std::ptrdiff_t ld, int R, int kc, const float* a, std::ptrdiff_t acs) {
   for (int q = 0; q < depth_pairs(kc); ++q) {
     const float* lo = a + std::ptrdiff_t(2 * q) * acs;
     const float* hi = 2 * q + 1 < kc ? lo + acs : nullptr;

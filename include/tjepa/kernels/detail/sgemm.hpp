@@ -20,6 +20,7 @@
 
 #include "tjepa/core/aligned.hpp"
 #include "tjepa/core/detail/parallel.hpp"
+#include "tjepa/core/detail/simd.hpp"
 #include "tjepa/core/detail/transpose.hpp"
 #include "tjepa/kernels/gelu.hpp"
 
@@ -124,7 +125,7 @@ inline void prefetch_tile(const float* c, std::ptrdiff_t ldc, const float* c_in,
 }
 template <int R, int NK>
 TJEPA_PROFILE_INLINE void finish_tile(const float* tile, float* c, std::ptrdiff_t ldc, int cols, const float* c_in,
-                        const float* bias, float* g, const float* gg) {
+                                      const float* bias, float* g, const float* gg) {
   if (cols == NK * W) {
 #pragma GCC unroll 8
     for (int i = 0; i < R; ++i) {
