@@ -459,6 +459,58 @@ TEST_SUITE("kernels") {
 #endif
   }
 
+  TEST_CASE("The bf16 backward's tile writes the words that the fp32 pass then the three packs give") {
+    // backward_tile_pairs writes P^T and dS^T straight into their three bf16 operands; the fp32
+    // exp pass followed by pack_row_pairs (twice) and pack_pairs_across_rows is its specification:
+    // the same words, bit for bit, for odd and even key counts and every query count's tail,
+    // padding queries included (lse2 = inf, D = 0, as attention_backward sets them).
+#if TJEPA_BF16_NATIVE
+    namespace A = tjepa::detail::attn;
+    using Tl = A::Tiles<float>;
+    constexpr int BQB = Tl::BQB, BKB = Tl::BKB, w = A::W<float>;
+    const float c = 0.18f;
+    tjepa::Rng rng(78);
+    for (int mk : {1, 2, 7, BKB - 1, BKB})
+      for (int nq : {1, 2, 15, 16, 17, 33, 47, BQB - 1, BQB}) {
+        CAPTURE(mk);
+        CAPTURE(nq);
+        const int nv = int(A::round_up(nq, w)), nq2 = (nq + 1) / 2;
+        tjepa::AlignedVector<float> st(std::size_t(BKB) * BQB), dpt(st.size()), lse2(BQB), dd(BQB);
+        for (float& x : st) x = float(rng.normal() * 3);
+        for (float& x : dpt) x = float(rng.normal());
+        for (int i = 0; i < BQB; ++i) {
+          lse2[i] = i < nq ? float(rng.normal() + 2) : std::numeric_limits<float>::infinity();
+          dd[i] = i < nq ? float(rng.normal()) : 0.0f;
+        }
+        const std::uint32_t stale = 0xdeadbeefu;
+        tjepa::AlignedVector<std::uint32_t> pt(std::size_t(BKB) * BQB, stale), dst = pt, ds = pt;
+        tjepa::AlignedVector<std::uint32_t> pt2 = pt, dst2 = pt, ds2 = pt;
+        A::backward_tile_pairs(st.data(), dpt.data(), BQB, mk, nq, c, lse2.data(), dd.data(), pt.data(), dst.data(),
+                               ds.data());
+        using V = A::Vec<float>;
+        for (int r = 0; r < mk; ++r)  // attention_backward's fp32 exp pass
+          for (int j = 0; j < nv; j += w) {
+            float *s = st.data() + r * BQB + j, *dp = dpt.data() + r * BQB + j;
+            const V p = A::exp2(xsimd::fms(V::load_aligned(s), V(c), V::load_aligned(lse2.data() + j)));
+            p.store_aligned(s);
+            (p * (V::load_aligned(dp) - V::load_aligned(dd.data() + j))).store_aligned(dp);
+          }
+        A::pack_row_pairs(st.data(), BQB, nullptr, mk, nq, pt2.data(), mk, 0, false);
+        A::pack_row_pairs(dpt.data(), BQB, nullptr, mk, nq, dst2.data(), mk, 0, false);
+        A::pack_pairs_across_rows(dpt.data(), BQB, nullptr, mk, nv, ds2.data(), BQB);
+        for (std::size_t i = 0; i < pt.size(); ++i) {
+          CAPTURE(i);
+          REQUIRE(pt[i] == pt2[i]);
+          REQUIRE(dst[i] == dst2[i]);
+          REQUIRE(ds[i] == ds2[i]);
+        }
+        CHECK(pt[std::size_t(mk) * nq2] == stale);  // nothing past the last row's words
+      }
+#else
+    MESSAGE("no AVX512-BF16 in this build: the paired backward tile is not compiled");
+#endif
+  }
+
   TEST_CASE("bf16 attention backward against fp32 (awkward sizes / masks / cross)") {
     // Forward and backward in bf16 against both in fp32: every gradient within 2 % of the largest
     // fp32 gradient entry of its buffer (measured: 0.6 %). Without AVX512-BF16 they are equal.

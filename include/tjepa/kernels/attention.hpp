@@ -492,24 +492,14 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
           A::gemm<T, A::Store::overwrite>(mk, nv, Dh, kblk, DhP, 1, qt + qb * Dh, Tl::BQB, st, Tl::BQB);   // S^T
           A::gemm<T, A::Store::overwrite>(mk, nv, Dh, vblk, DhP, 1, dot + qb * Dh, Tl::BQB, dpt, Tl::BQB);  // dP^T
         }
-        const V cv(c);
-        for (int r = 0; r < mk; ++r) {
-          T* srow = st + r * Tl::BQB;
-          T* dprow = dpt + r * Tl::BQB;
-          for (int j = 0; j < nv; j += w) {
-            const V p = A::exp2(xsimd::fms(V::load_aligned(srow + j), cv, V::load_aligned(lse2 + qb + j)));
-            p.store_aligned(srow + j);
-            (p * (V::load_aligned(dprow + j) - V::load_aligned(dd + qb + j))).store_aligned(dprow + j);
-          }
-        }
 #if TJEPA_BF16_NATIVE
         if constexpr (can_bf16) {
           if (bf16) {
-            // dV += P^T dO, dK += dS^T Q (A paired along queries), dQ += dS K (A paired across keys).
+            // P^T and dS^T straight into bf16 words: dV += P^T dO, dK += dS^T Q (A paired along
+            // queries), dQ += dS K (A paired across keys).
             const int nq2 = (nq + 1) / 2, mk2 = (mk + 1) / 2;
-            A::pack_row_pairs(st, BQB, nullptr, mk, nq, words(lay.pt16), mk, 0, false);
-            A::pack_row_pairs(dpt, BQB, nullptr, mk, nq, words(lay.dst16), mk, 0, false);
-            A::pack_pairs_across_rows(dpt, BQB, nullptr, mk, nv, words(lay.ds16), BQB);
+            A::backward_tile_pairs(st, dpt, BQB, mk, nq, c, lse2 + qb, dd + qb, words(lay.pt16), words(lay.dst16),
+                                   words(lay.ds16));
             const std::uint32_t* dob = words(lay.do16) + qb / 2 * DhP;
             const std::uint32_t* qpb = words(lay.q16) + qb / 2 * DhP;
             using Bd = A::Bf16Dot;
@@ -530,6 +520,16 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
           }
         }
 #endif
+        const V cv(c);
+        for (int r = 0; r < mk; ++r) {
+          T* srow = st + r * Tl::BQB;
+          T* dprow = dpt + r * Tl::BQB;
+          for (int j = 0; j < nv; j += w) {
+            const V p = A::exp2(xsimd::fms(V::load_aligned(srow + j), cv, V::load_aligned(lse2 + qb + j)));
+            p.store_aligned(srow + j);
+            (p * (V::load_aligned(dprow + j) - V::load_aligned(dd + qb + j))).store_aligned(dprow + j);
+          }
+        }
         if (qb == 0) {
           A::gemm<T, A::Store::overwrite>(mk, static_cast<int>(DhP), nq, st, Tl::BQB, 1, dop, DhP, dva, DhP);
           A::gemm<T, A::Store::overwrite>(mk, static_cast<int>(DhP), nq, dpt, Tl::BQB, 1, qp, DhP, dka, DhP);

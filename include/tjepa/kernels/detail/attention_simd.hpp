@@ -116,6 +116,73 @@ inline void online_softmax_tile(T* st, int ld, int kv, int nb_rt, T c, T* m, T* 
     xsimd::fma(Vec<T>::load_aligned(l + j * w), Vec<T>::load_aligned(alpha + j * w), sum[j]).store_aligned(l + j * w);
 }
 
+#if TJEPA_BF16_NATIVE
+// P^T and dS^T of one vector of queries of the backward's tile: P^T = 2^(c S^T - lse2),
+// dS^T = P^T (dP^T - D).
+struct ProbGrad {
+  Vec<float> p, ds;
+};
+[[gnu::always_inline]] inline ProbGrad backward_p_ds(const float* s, const float* dp, Vec<float> c, Vec<float> lse2,
+                                                     Vec<float> dd) {
+  const Vec<float> p = softmax_p(s, c, lse2);
+  return {p, p * (Vec<float>::load_aligned(dp) - dd)};
+}
+
+// One tile of the bf16 backward's exp pass, straight into its three bf16 operands: from S^T st
+// and dP^T dpt [mk][ld] (key r in row r; nv = ⌈nq/16⌉·16 query columns, nq of them real) and the
+// tile's lse2 and D, P^T and dS^T as
+//   pt, dst [mk][⌈nq/2⌉]: rows paired along the queries (pack_row_pairs's words, the high half 0
+//     past nq), the A operands of dV += P^T dO and dK += dS^T Q;
+//   ds [⌈mk/2⌉][ld]: pairs of keys 2p and 2p+1 (pack_pairs_across_rows's words over nv columns,
+//     the high half 0 past mk, columns [nv, ld) 0), the transposed A operand of dQ += dS K.
+// The same fp32 values and roundings as the fp32 pass followed by the three packs, without the
+// fp32 tiles' pass through memory.
+inline void backward_tile_pairs(const float* st, const float* dpt, int ld, int mk, int nq, float c,
+                                const float* lse2, const float* dd, std::uint32_t* pt, std::uint32_t* dst,
+                                std::uint32_t* ds) {
+  namespace bg = bgemm;
+  constexpr int w = bg::L;
+  using V = Vec<float>;
+  static_assert(W<float> == w);
+  const int nv = static_cast<int>(round_up(nq, w)), nq2 = (nq + 1) / 2;
+  const V cv(c);
+  const ProbGrad zero{V(0.0f), V(0.0f)};
+  auto row_words = [](V hi, V lo) { return std::bit_cast<__m512i>(_mm512_cvtne2ps_pbh(hi, lo)); };
+  for (int r = 0; r < mk; r += 2) {
+    const bool two = r + 1 < mk;
+    const float *s0 = st + r * ld, *d0 = dpt + r * ld;
+    for (int j = 0; j < nv; j += 2 * w) {
+      // Queries [j, j + 32) of keys r and r + 1 (a: the first 16, b: the second, when in the tile).
+      const bool second = j + w < nv;
+      const V la(V::load_aligned(lse2 + j)), da(V::load_aligned(dd + j));
+      const V lb = second ? V::load_aligned(lse2 + j + w) : V(0.0f);
+      const V db = second ? V::load_aligned(dd + j + w) : V(0.0f);
+      const ProbGrad a0 = backward_p_ds(s0 + j, d0 + j, cv, la, da);
+      const ProbGrad b0 = second ? backward_p_ds(s0 + j + w, d0 + j + w, cv, lb, db) : zero;
+      const ProbGrad a1 = two ? backward_p_ds(s0 + ld + j, d0 + ld + j, cv, la, da) : zero;
+      const ProbGrad b1 = two && second ? backward_p_ds(s0 + ld + j + w, d0 + ld + j + w, cv, lb, db) : zero;
+      // Pairs along the queries: the queries past nq read as 0, the words past ⌈nq/2⌉ not written.
+      const __mmask16 ma = bg::first_lanes(nq - j), mb = bg::first_lanes(nq - j - w), mw = bg::first_lanes(nq2 - j / 2);
+      auto along = [&](std::uint32_t* out, V hi, V lo) {
+        _mm512_mask_storeu_epi32(out + j / 2, mw,
+                                 row_words(_mm512_maskz_mov_ps(mb, hi), _mm512_maskz_mov_ps(ma, lo)));
+      };
+      along(pt + r * nq2, b0.p, a0.p);
+      along(dst + r * nq2, b0.ds, a0.ds);
+      if (two) {
+        along(pt + (r + 1) * nq2, b1.p, a1.p);
+        along(dst + (r + 1) * nq2, b1.ds, a1.ds);
+      }
+      // Pairs across the keys.
+      std::uint32_t* dsr = ds + r / 2 * ld + j;
+      _mm512_store_si512(dsr, bg::interleave_pairs(_mm512_cvtne2ps_pbh(a1.ds, a0.ds)));
+      if (second) _mm512_store_si512(dsr + w, bg::interleave_pairs(_mm512_cvtne2ps_pbh(b1.ds, b0.ds)));
+    }
+    for (int j = nv; j < ld; j += w) _mm512_store_si512(ds + r / 2 * ld + j, _mm512_setzero_si512());
+  }
+}
+#endif
+
 // ---------------------------------------------------------------------------------------------
 // Micro-kernel: C[MR_, NV_*W] (op)= A[MR_, K] B[K, NV_*W], over K steps of the dot product D:
 // FloatDot (one FMA per step and element), or Bf16Dot (operands bf16 pairs in 32-bit words, one
