@@ -21,6 +21,8 @@
 #include <tjepa/model/predictor.hpp>
 #include <tjepa/model/tokenizer.hpp>
 
+#include "bf16.hpp"
+
 namespace {
 
 using namespace tjepa;
@@ -83,12 +85,12 @@ BENCHMARK(BM_EncoderForwardFrozen)->Args({368, 1})->Args({528, 1})->Args({2124, 
 // The same with bf16 products (AVX512-BF16, fp32 accumulation): qkv, proj, attention's two
 // products and the MLP in bf16; softmax, GELU and norms fp32. The Frozen one is bf16 inference.
 void BM_EncoderForwardBf16(benchmark::State& state) {
-  if (!has_native_bf16()) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
+  if (tjepa_bench::skipped_without_bf16(state, Precision::bf16)) return;
   encoder_forward(state, Precision::bf16);
 }
 BENCHMARK(BM_EncoderForwardBf16)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
 void BM_EncoderForwardFrozenBf16(benchmark::State& state) {
-  if (!has_native_bf16()) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
+  if (tjepa_bench::skipped_without_bf16(state, Precision::bf16)) return;
   encoder_forward(state, Precision::bf16, true);
 }
 BENCHMARK(BM_EncoderForwardFrozenBf16)->Args({368, 1})->Args({528, 1})->Args({2124, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
@@ -121,7 +123,7 @@ void encoder_forward_backward(benchmark::State& state, Precision precision) {
 void BM_EncoderForwardBackward(benchmark::State& state) { encoder_forward_backward(state, Precision::fp32); }
 // The same with bf16 products (forward and backward; fp32 master weights and gradients).
 void BM_EncoderForwardBackwardBf16(benchmark::State& state) {
-  if (!has_native_bf16()) return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
+  if (tjepa_bench::skipped_without_bf16(state, Precision::bf16)) return;
   encoder_forward_backward(state, Precision::bf16);
 }
 BENCHMARK(BM_EncoderForwardBackwardBf16)->Args({368, 8, 0})->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -13,14 +13,14 @@
 
 #include <tjepa/tjepa.hpp>
 
+#include "bf16.hpp"
 #include "jepa_setup.hpp"
 #include "threads.hpp"
 
 namespace {
 
 void run_jepa_step(benchmark::State& state, std::string_view skin, tjepa::Precision precision) {
-  if (precision == tjepa::Precision::bf16 && !tjepa::has_native_bf16())
-    return state.SkipWithError("built without AVX512-BF16: bf16 runs fp32");
+  if (tjepa_bench::skipped_without_bf16(state, precision)) return;
   const tjepa_bench::Threads threads(state);
   if (threads.skipped()) return;
   const auto setup = tjepa_bench::jepa_setup(skin);
