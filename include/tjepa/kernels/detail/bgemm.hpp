@@ -192,6 +192,13 @@ TJEPA_PROFILE_INLINE void pack_a_cols(std::uint32_t* dst, std::ptrdiff_t ld, int
   for (int q = 0; q < depth_pairs(kc); ++q) {
     const float* lo = a + std::ptrdiff_t(2 * q) * acs;
     const float* hi = 2 * q + 1 < kc ? lo + acs : nullptr;
+    // The first chunk of a call comes cold (the others were prefetched by the products before
+    // them): the depths 8 pairs ahead.
+    if (2 * q + 17 < kc)
+      for (int i = 0; i < R; i += L) {
+        __builtin_prefetch(lo + 16 * acs + i);
+        __builtin_prefetch(lo + 17 * acs + i);
+      }
     for (int i = 0; i < R; i += L)
       _mm512_store_si512(dst + q * ld + i, pairs16(lo + i, hi ? hi + i : nullptr, std::min(L, R - i)));
   }
@@ -201,16 +208,35 @@ TJEPA_PROFILE_INLINE void pack_a_cols(std::uint32_t* dst, std::ptrdiff_t ld, int
 inline __m512bh as_bf16(__m512i v) { return std::bit_cast<__m512bh>(v); }
 
 // acc[R][NV·16] = Σ over kc2 depth pairs of A's packed pairs (QMajor: [kc2][ald], else [R][ald])
-// against b [kc2][NR].
+// against b [kc2][NR]. pf: fp32 A that the next conversion reads, prefetched while this block
+// computes (sgemm's depth loop does the same for the A it reads in place); nullptr: none.
+// Row-major (QMajor false): the next row block's MR rows at stride pfs, one line of each per
+// 8 pairs. Column-major: pfn depths at stride pfs of the next chunk of CH rows, one depth (CH
+// values: three lines, four when unaligned) per pair while q < pfn.
 template <int R, bool QMajor>
 [[gnu::noinline]] void depth_loop(int kc2, const std::uint32_t* a, std::ptrdiff_t ald, const std::uint32_t* b,
-                                  float* acc_out) {
+                                  const float* pf, std::ptrdiff_t pfs, int pfn, float* acc_out) {
   __m512 acc[R][NV];
 #pragma GCC unroll 8
   for (int i = 0; i < R; ++i)
 #pragma GCC unroll 4
     for (int j = 0; j < NV; ++j) acc[i][j] = _mm512_setzero_ps();
   for (int q = 0; q < kc2; ++q) {
+    if (pf) {
+      if constexpr (QMajor) {
+        if (q < pfn) {
+          const float* d = pf + std::ptrdiff_t(q) * pfs;
+          static_assert(CH == 3 * L);
+          __builtin_prefetch(d);
+          __builtin_prefetch(d + L);
+          __builtin_prefetch(d + 2 * L);
+          __builtin_prefetch(d + CH - 1);
+        }
+      } else if (q % (L / 2) == 0) {
+#pragma GCC unroll 8
+        for (int i = 0; i < MR; ++i) __builtin_prefetch(pf + i * pfs + 2 * q);
+      }
+    }
     __m512i bv[NV];
 #pragma GCC unroll 4
     for (int j = 0; j < NV; ++j) bv[j] = _mm512_load_si512(b + std::ptrdiff_t(q) * NR + j * L);
@@ -229,15 +255,16 @@ template <int R, bool QMajor>
 
 template <int R, bool QMajor>
 void micro_kernel(int kc2, const std::uint32_t* a, std::ptrdiff_t ald, const std::uint32_t* b, float* c,
-                  std::ptrdiff_t ldc, int cols, const float* c_in, const float* bias, float* g, const float* gg) {
+                  std::ptrdiff_t ldc, int cols, const float* c_in, const float* bias, float* g, const float* gg,
+                  const float* pf, std::ptrdiff_t pfs, int pfn) {
   sgemm::prefetch_tile<R, NV>(c, ldc, c_in, gg);
   alignas(64) float tile[R * NR];
-  depth_loop<R, QMajor>(kc2, a, ald, b, tile);
+  depth_loop<R, QMajor>(kc2, a, ald, b, pf, pfs, pfn, tile);
   sgemm::finish_tile<R, NV>(tile, c, ldc, cols, c_in, bias, g, gg);
 }
 
 using Kernel = void (*)(int, const std::uint32_t*, std::ptrdiff_t, const std::uint32_t*, float*, std::ptrdiff_t, int,
-                        const float*, const float*, float*, const float*);
+                        const float*, const float*, float*, const float*, const float*, std::ptrdiff_t, int);
 template <bool QMajor, int... R>
 constexpr auto kernel_table(std::integer_sequence<int, R...>) {
   return std::array<Kernel, sizeof...(R)>{&micro_kernel<R + 1, QMajor>...};
@@ -269,12 +296,24 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
       const std::uint32_t* a = col_major ? abuf + (i0 - c0) : apack;
       const std::ptrdiff_t ald = col_major ? CH : kc2;
       const Kernel kern = kernels[col_major][std::size_t(R - 1)];
+      // The next conversion's input, prefetched during this block's first panel: row-major, the
+      // next row block; column-major, this block's share of the depths of the next chunk.
+      const float* next = nullptr;
+      int next_depths = 0;
+      if (!col_major && i0 + MR < r1) {
+        next = A + (i0 + MR) * lda + k0;
+      } else if (col_major && c0 + CH < r1) {
+        const int blocks = (std::min(CH, r1 - c0) + MR - 1) / MR, b = (i0 - c0) / MR;
+        const int d0 = kc * b / blocks, d1 = kc * (b + 1) / blocks;
+        next = A + c0 + CH + std::ptrdiff_t(k0 + d0) * lda;
+        next_depths = d1 - d0;
+      }
       for (int p = 0; p < panels; ++p) {
         const int n0 = p * NR;
         const std::uint32_t* b = packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR;
         kern(kc2, a, ald, b, C + i0 * ldc + n0, ldc, std::min(NR, cols - n0), c_in ? c_in + i0 * ldc + n0 : nullptr,
              first && e.bias ? e.bias + n0 : nullptr, last && e.gelu ? e.gelu + i0 * ldc + n0 : nullptr,
-             last && e.scale ? e.scale + i0 * ldc + n0 : nullptr);
+             last && e.scale ? e.scale + i0 * ldc + n0 : nullptr, p == 0 ? next : nullptr, lda, next_depths);
       }
     }
   }
