@@ -20,7 +20,7 @@ import statistics
 import subprocess
 import sys
 
-from pair_streaming import quartiles
+from pair_streaming import parse_builds, quartiles
 
 
 def run(binary, args):
@@ -54,12 +54,7 @@ def main():
     parser.add_argument("--ratio", nargs=2, metavar=("A", "B"))
     parser.add_argument("builds", nargs="+", metavar="NAME=BINARY")
     args = parser.parse_args()
-    builds = []
-    for b in args.builds:
-        name, sep, binary = b.partition("=")
-        if not sep or not os.access(binary, os.X_OK):
-            sys.exit(f"pair_bench: '{b}': expected NAME=BINARY with an executable BINARY")
-        builds.append((name, binary))
+    builds = parse_builds(args.builds, "pair_bench")
     runs = {n: [] for n, _ in builds}
     for r in range(args.rounds):
         for name, binary in builds if r % 2 == 0 else builds[::-1]:

@@ -39,6 +39,17 @@ def quartiles(values):
     return q[0], q[2]
 
 
+def parse_builds(specs, tool):
+    """NAME=BINARY arguments as (name, binary) pairs; an error naming the argument otherwise."""
+    builds = []
+    for b in specs:
+        name, sep, binary = b.partition("=")
+        if not sep or not os.access(binary, os.X_OK):
+            sys.exit(f"{tool}: '{b}': expected NAME=BINARY with an executable BINARY")
+        builds.append((name, binary))
+    return builds
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rounds", type=int, default=8)
@@ -47,12 +58,7 @@ def main():
     parser.add_argument("--args", default="--reference-size --precision bf16")
     parser.add_argument("builds", nargs="+", metavar="NAME=BINARY")
     args = parser.parse_args()
-    builds = []
-    for b in args.builds:
-        name, sep, binary = b.partition("=")
-        if not sep or not os.access(binary, os.X_OK):
-            sys.exit(f"pair_streaming: '{b}': expected NAME=BINARY with an executable BINARY")
-        builds.append((name, binary))
+    builds = parse_builds(args.builds, "pair_streaming")
     p50 = {n: [] for n, _ in builds}
     stages = {n: {s: [] for s in STAGES} for n, _ in builds}
     for _ in range(args.rounds):
