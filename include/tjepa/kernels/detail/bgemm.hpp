@@ -192,8 +192,8 @@ TJEPA_PROFILE_INLINE void pack_a_cols(std::uint32_t* dst, std::ptrdiff_t ld, int
   for (int q = 0; q < depth_pairs(kc); ++q) {
     const float* lo = a + std::ptrdiff_t(2 * q) * acs;
     const float* hi = 2 * q + 1 < kc ? lo + acs : nullptr;
-    // The first chunk of a call comes cold (the others were prefetched by the products before
-    // them): the depths 8 pairs ahead.
+    // The depths 8 pairs ahead: a call's first chunk comes cold (the products before each later
+    // chunk prefetched it, and these prefetches then hit the cache).
     if (2 * q + 17 < kc)
       for (int i = 0; i < R; i += L) {
         __builtin_prefetch(lo + 16 * acs + i);

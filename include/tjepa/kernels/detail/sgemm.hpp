@@ -34,10 +34,11 @@ inline constexpr int MR = W >= 16 ? 6 : 4;
 inline constexpr int NV = W >= 16 ? 4 : 2;
 inline constexpr int NR = NV * W;
 // Depths per block: the products of depth 768 (fc2's forward, fc1's dX) and the weight gradients'
-// slabs of 512 run as one block, so that each C tile goes through the epilogue once. A's 6 rows
-// of 768 floats (18 KiB) stay in L1, a B panel (192 KiB) in L2. 256 (until 2026-12-07) put
-// three read-modify-write passes over C in those products: the fp32 JEPA step ran 1.025x faster
-// at 768 (Zen 5, paired, 8 rounds, quartiles 1.023-1.036).
+// slabs of 512 run as one block, so that each C tile goes through the epilogue once (256 made
+// two or three read-modify-write passes over C). Row-major A's 6 rows of 768 floats (18 KiB)
+// stay in L1, a B panel (192 KiB) in L2; column-major A (dYᵀ) touches one line a depth, 32 KiB
+// for a slab of 512. bench/RESULTS.md ("fp32's depth blocks of 768"): the fp32 JEPA step 1.02x
+// faster on one Zen 5 core, 1.08x on two; the AVX2 code 1.02x; no Zen 4 (32 KiB L1) timing.
 inline constexpr int KC = 768;
 // Depths per packing task: B's panels are packed by the threads in tasks of one panel × this many
 // depths, so that a product with few panels still splits its packing evenly.
