@@ -383,7 +383,7 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
         const T inv = T(1) / l[i];
         T* orow = out + static_cast<std::ptrdiff_t>(q0 + i) * s.ldo + c0;
         const T* src = O + i * DhP;
-        for (int p = 0; p < Dh; ++p) orow[p] = src[p] * inv;
+        detail::simd_scale(inv, src, orow, std::size_t(Dh));
         if (lse != nullptr) lse[static_cast<std::ptrdiff_t>(h) * Lq + q0 + i] = (m[i] + std::log2(l[i])) * T(A::ln2);
       }
     }
@@ -546,16 +546,14 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
         T* dvj = dv + j * s.ldv + c0;
         const T* dkr = dka + r * DhP;
         const T* dvr = dva + r * DhP;
-        for (int p = 0; p < Dh; ++p) {
-          dkj[p] += scale * dkr[p];
-          dvj[p] += dvr[p];
-        }
+        detail::simd_axpy(scale, dkr, dkj, std::size_t(Dh));
+        detail::simd_add(dvr, dvj, std::size_t(Dh));
       }
     }
     for (int i = 0; i < Lq; ++i) {
       T* dqi = dq + static_cast<std::ptrdiff_t>(i) * s.ldq + c0;
       const T* src = dqa + static_cast<std::ptrdiff_t>(i) * DhP;
-      for (int p = 0; p < Dh; ++p) dqi[p] += scale * src[p];
+      detail::simd_axpy(scale, src, dqi, std::size_t(Dh));
     }
   }
 }

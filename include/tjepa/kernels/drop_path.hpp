@@ -48,7 +48,7 @@ void drop_path_forward(T* x, const T* branch, const T* scale, int B, std::size_t
     T* xb = x + std::size_t(b) * per_sample;
     const T* yb = branch + std::size_t(b) * per_sample;
     const T s = scale[b];
-    for (std::size_t i = 0; i < per_sample; ++i) xb[i] += s * yb[i];
+    detail::simd_axpy(s, yb, xb, per_sample);
   }
 }
 

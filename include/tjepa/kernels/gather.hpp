@@ -27,7 +27,7 @@ void gather_add_rows(T* out, const T* src, std::size_t src_batch, const int* idx
     for (int k = 0; k < K; ++k) {
       const T* s = src + b * src_batch + std::size_t(idx[std::size_t(b) * K + k]) * C;
       T* o = out + (std::size_t(b) * K + k) * C;
-      for (int c = 0; c < C; ++c) o[c] += s[c];
+      detail::simd_add(s, o, std::size_t(C));
     }
 }
 

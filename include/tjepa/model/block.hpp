@@ -288,7 +288,7 @@ struct BlockStack {
     for (int b = 0; b < B; ++b) {
       T* o = dst + (std::size_t(b) * L + keep_from) * d;
       const T* s = src + std::size_t(b) * n;
-      for (std::size_t i = 0; i < n; ++i) o[i] += s[i];
+      detail::simd_add(s, o, n);
     }
   }
 

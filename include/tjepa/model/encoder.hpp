@@ -161,7 +161,7 @@ struct Encoder {
       T* gk = detail::grow(ws.drows, M * d);
       for (int b = 0; b < B; ++b) {
         const T* gb = g + std::size_t(b) * (R + K) * d;
-        for (std::size_t i = 0; i < std::size_t(R) * d; ++i) dreg[i] += gb[i];
+        detail::simd_add(gb, dreg, std::size_t(R) * d);
         std::copy(gb + std::size_t(R) * d, gb + std::size_t(R + K) * d, gk + std::size_t(b) * K * d);
       }
       g = gk;

@@ -175,10 +175,10 @@ struct Predictor {
     for (int b = 0; b < B; ++b)
       for (int j = 0; j < t; ++j) {
         const T* gr = g + (std::size_t(b) * L + K + j) * pd;
-        for (int ch = 0; ch < pd; ++ch) du[ch] += gr[ch];
+        detail::simd_add(gr, du, std::size_t(pd));
         if (dpos) {
           T* dp = dpos + std::size_t(c.targets[std::size_t(b) * t + j]) * pd;
-          for (int ch = 0; ch < pd; ++ch) dp[ch] += gr[ch];
+          detail::simd_add(gr, dp, std::size_t(pd));
         }
       }
     // x[b, :K] = e[b mod Bc]: the R tiles of a context add up.
@@ -187,7 +187,7 @@ struct Predictor {
     for (int b = 0; b < B; ++b) {
       const T* gb = g + std::size_t(b) * L * pd;
       T* d = de + std::size_t(b % Bc) * K * pd;
-      for (std::size_t i = 0; i < std::size_t(K) * pd; ++i) d[i] += gb[i];
+      detail::simd_add(gb, d, std::size_t(K) * pd);
     }
     input_projection.backward(ps, de, c.ctx.data(), dctx, Bc * K);
   }

@@ -36,9 +36,8 @@ double grad_norm(std::span<const PrefixedParams<T>> parts) {
 template <class T>
 void scale_grads(ParamSet<T>& params, T factor) {
   T* g = params.grads().data();
-  const auto n = static_cast<std::ptrdiff_t>(params.flat_size());
-  TJEPA_OMP(omp parallel for schedule(static) if (params.flat_size() > detail::parallel_grain))
-  for (std::ptrdiff_t i = 0; i < n; ++i) g[i] *= factor;
+  detail::parallel_split(params.flat_size(),
+                         [&](std::size_t b, std::size_t e) { detail::simd_scale(factor, g + b, g + b, e - b); });
 }
 
 // Clips the joint gradient norm of `parts` to max_norm; returns the norm before clipping (what

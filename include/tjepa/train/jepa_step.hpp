@@ -234,7 +234,7 @@ class JepaStep {
                                std::span<T>(dpred + off, n));
         // L = mean_j L_j: each target's gradient is scaled by 1 / num_targets.
         const T scale = static_cast<T>(1.0 / num_targets);
-        for (std::size_t i = 0; i < n; ++i) dpred[off + i] *= scale;
+        detail::simd_scale(scale, dpred + off, dpred + off, n);
         result.target_losses[static_cast<std::size_t>(g.targets[static_cast<std::size_t>(r)])] = l;
       }
       w_.mark("loss");

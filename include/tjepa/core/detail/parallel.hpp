@@ -13,6 +13,7 @@
 #endif
 
 #include "tjepa/core/aligned.hpp"
+#include "tjepa/core/detail/simd.hpp"
 
 namespace tjepa::detail {
 
@@ -88,8 +89,7 @@ void parallel_split(std::size_t n, F&& f) {
 // of a training step are tens of MB, too much to leave to one thread.
 template <class T>
 void parallel_fill(T* first, T* last, T value) {
-  parallel_split(std::size_t(last - first),
-                 [&](std::size_t b, std::size_t e) { std::fill(first + b, first + e, value); });
+  parallel_split(std::size_t(last - first), [&](std::size_t b, std::size_t e) { simd_fill(first + b, e - b, value); });
 }
 template <class T>
 void parallel_copy(const T* first, const T* last, T* out) {
@@ -113,11 +113,8 @@ void add_column_sums(T* db, const T* x, int M, int N) {
     for (int n0 = std::min(N, groups * t / n * G); n0 < c1; n0 += C) {
       const int nc = std::min(C, c1 - n0);
       alignas(64) T acc[C] = {};
-      for (int m = 0; m < M; ++m) {
-        const T* r = x + std::size_t(m) * std::size_t(N) + n0;
-        for (int j = 0; j < nc; ++j) acc[j] += r[j];
-      }
-      for (int j = 0; j < nc; ++j) db[n0 + j] += acc[j];
+      for (int m = 0; m < M; ++m) simd_add(x + std::size_t(m) * std::size_t(N) + n0, acc, std::size_t(nc));
+      simd_add(acc, db + n0, std::size_t(nc));
     }
   }
 }

@@ -3,6 +3,12 @@
 // row reductions and updates of the row-wise kernels (LayerNorm, GELU, softmax, the shared-query
 // cross-attention); the attention kernels (kernels/detail/attention_simd.hpp) use the same
 // vector type. Every loop runs whole vectors, then a scalar tail, so any length works.
+//
+// The element-wise loops of the hot paths are written with these rather than left to the
+// auto-vectorizer: g++ 12 at -O2 (CMake's RelWithDebInfo, Debian's default flags) vectorizes only
+// loops whose trip count it knows, and a user's -O2 build of the JEPA step ran 12-14 % slower than
+// -O3 while they were plain loops (bench/RESULTS.md, "The user's -O2"). Each gives the bits of the
+// plain loop (element-wise, a·x + y fused as g++ contracts it).
 #include <cstddef>
 #include <cstdint>
 #include <type_traits>
@@ -40,7 +46,7 @@ struct Exp2Traits<float> {
   static constexpr float magic = 0x1.8p23f;  // adding it rounds to an integer in the low bits
   static constexpr Int bias = 127;
   static constexpr int mant = 23;
-  static simd<float> poly(simd<float> f) {
+  [[gnu::always_inline]] static simd<float> poly(simd<float> f) {
     simd<float> p(1.535336188319500e-4f);
     p = xsimd::fma(p, f, simd<float>(1.339887440266574e-3f));
     p = xsimd::fma(p, f, simd<float>(9.618437357674640e-3f));
@@ -59,7 +65,7 @@ struct Exp2Traits<double> {
   static constexpr double magic = 0x1.8p52;
   static constexpr Int bias = 1023;
   static constexpr int mant = 52;
-  static simd<double> poly(simd<double> f) {
+  [[gnu::always_inline]] static simd<double> poly(simd<double> f) {
     // sum_k (ln 2)^k / k! f^k, k = 0..13: truncation error < 1e-17 on |f| <= 1/2.
     constexpr double c[14] = {1.0,
                               0.6931471805599453094,
@@ -81,8 +87,9 @@ struct Exp2Traits<double> {
   }
 };
 
+// Always inlined: at -O2 g++ kept it out of line in the softmax loops.
 template <class T>
-inline simd<T> exp2(simd<T> x) {
+[[gnu::always_inline]] inline simd<T> exp2(simd<T> x) {
   using Tr = Exp2Traits<T>;
 #if defined(__AVX512F__)
   if constexpr (sizeof(simd<T>) == 64) {
@@ -131,7 +138,7 @@ T hmax(simd<T> v) {
 
 // Σ x[i]
 template <class T>
-T simd_sum(const T* x, std::size_t n) {
+[[gnu::always_inline]] inline T simd_sum(const T* x, std::size_t n) {
   constexpr std::size_t W = simd_width<T>;
   simd<T> acc(T(0));
   std::size_t i = 0;
@@ -143,7 +150,7 @@ T simd_sum(const T* x, std::size_t n) {
 
 // Σ x[i]·y[i]
 template <class T>
-T simd_dot(const T* x, const T* y, std::size_t n) {
+[[gnu::always_inline]] inline T simd_dot(const T* x, const T* y, std::size_t n) {
   constexpr std::size_t W = simd_width<T>;
   simd<T> acc(T(0));
   std::size_t i = 0;
@@ -155,13 +162,51 @@ T simd_dot(const T* x, const T* y, std::size_t n) {
 
 // y[i] += a·x[i]
 template <class T>
-void simd_axpy(T a, const T* x, T* y, std::size_t n) {
+[[gnu::always_inline]] inline void simd_axpy(T a, const T* x, T* y, std::size_t n) {
   constexpr std::size_t W = simd_width<T>;
   const simd<T> va(a);
   std::size_t i = 0;
   for (; i + W <= n; i += W)
     xsimd::fma(va, xsimd::load_unaligned(x + i), xsimd::load_unaligned(y + i)).store_unaligned(y + i);
   for (; i < n; ++i) y[i] += a * x[i];
+}
+
+// y[i] += x[i]
+template <class T>
+[[gnu::always_inline]] inline void simd_add(const T* x, T* y, std::size_t n) {
+  constexpr std::size_t W = simd_width<T>;
+  std::size_t i = 0;
+  for (; i + W <= n; i += W) (xsimd::load_unaligned(y + i) + xsimd::load_unaligned(x + i)).store_unaligned(y + i);
+  for (; i < n; ++i) y[i] += x[i];
+}
+
+// y[i] = a·x[i] (y may be x)
+template <class T>
+[[gnu::always_inline]] inline void simd_scale(T a, const T* x, T* y, std::size_t n) {
+  constexpr std::size_t W = simd_width<T>;
+  const simd<T> va(a);
+  std::size_t i = 0;
+  for (; i + W <= n; i += W) (xsimd::load_unaligned(x + i) * va).store_unaligned(y + i);
+  for (; i < n; ++i) y[i] = x[i] * a;
+}
+
+// y[i] = x[i]
+template <class T>
+[[gnu::always_inline]] inline void simd_copy(const T* x, T* y, std::size_t n) {
+  constexpr std::size_t W = simd_width<T>;
+  std::size_t i = 0;
+  for (; i + W <= n; i += W) xsimd::load_unaligned(x + i).store_unaligned(y + i);
+  for (; i < n; ++i) y[i] = x[i];
+}
+
+// y[i] = v
+template <class T>
+[[gnu::always_inline]] inline void simd_fill(T* y, std::size_t n, T v) {
+  constexpr std::size_t W = simd_width<T>;
+  const simd<T> vv(v);
+  std::size_t i = 0;
+  for (; i + W <= n; i += W) vv.store_unaligned(y + i);
+  for (; i < n; ++i) y[i] = v;
 }
 
 }  // namespace tjepa::detail

@@ -342,9 +342,10 @@ inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, 
     if (r < n) {
       prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
       const T* sr = src + (rows == nullptr ? r : rows[r]) * lds;
-      for (; p < Dh; ++p) d[p] = sr[p];
+      simd_copy(sr, d, std::size_t(Dh));
+      p = Dh;
     }
-    for (; p < DhP; ++p) d[p] = T(0);
+    std::fill(d + p, d + DhP, T(0));
   }
 }
 

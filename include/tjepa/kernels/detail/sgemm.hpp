@@ -356,13 +356,10 @@ void run_split_depth(int rows, int cols, int depth, int tasks_per_slab, Pack&& p
       float* c = C + std::ptrdiff_t(i) * ldc;
       const float* p0 = P + std::size_t(i) * std::size_t(cols);
       if (accumulate)
-        for (int j = 0; j < cols; ++j) c[j] += p0[j];
+        simd_add(p0, c, std::size_t(cols));
       else
         std::copy(p0, p0 + cols, c);
-      for (int slab = 1; slab < slabs; ++slab) {
-        const float* ps = p0 + std::size_t(slab) * part;
-        for (int j = 0; j < cols; ++j) c[j] += ps[j];
-      }
+      for (int slab = 1; slab < slabs; ++slab) simd_add(p0 + std::size_t(slab) * part, c, std::size_t(cols));
     }
   }
 }
