@@ -97,12 +97,29 @@ void parallel_copy(const T* first, const T* last, T* out) {
                  [&](std::size_t b, std::size_t e) { std::copy(first + b, first + e, out + b); });
 }
 
+// db[n0, n0 + NV·W) += Σ_m x[m, n0 + ...], NV vectors of columns summed row by row in registers.
+template <int NV, class T>
+void column_sums_chunk(T* db, const T* x, int M, int N, int n0) {
+  constexpr int W = int(simd_width<T>);
+  simd<T> acc[NV];
+#pragma GCC unroll 8
+  for (int v = 0; v < NV; ++v) acc[v] = simd<T>(T(0));
+  for (int m = 0; m < M; ++m) {
+    const T* r = x + std::size_t(m) * std::size_t(N) + n0;
+#pragma GCC unroll 8
+    for (int v = 0; v < NV; ++v) acc[v] += xsimd::load_unaligned(r + v * W);
+  }
+#pragma GCC unroll 8
+  for (int v = 0; v < NV; ++v) (xsimd::load_unaligned(db + n0 + v * W) + acc[v]).store_unaligned(db + n0 + v * W);
+}
+
 // db[N] += Σ_m x[m, :] for x [M, N]: columns split over the threads above the grain, each column
 // summed on its own first so that adding twice gives exactly twice. A thread walks its columns in
-// chunks of up to 128 that it sums row by row: contiguous, vectorized reads of x.
+// chunks of 8, 4, 2 and 1 vectors, each summed row by row in registers (contiguous, vectorized
+// reads of x), then single columns.
 template <class T>
 void add_column_sums(T* db, const T* x, int M, int N) {
-  constexpr int G = 16, C = 128;
+  constexpr int G = 16, W = int(simd_width<T>);
   const int groups = (N + G - 1) / G;
   [[maybe_unused]] const int threads =
       std::size_t(M) * std::size_t(N) > parallel_grain ? std::min(max_threads(), groups) : 1;
@@ -110,11 +127,15 @@ void add_column_sums(T* db, const T* x, int M, int N) {
   {
     const int t = thread_id(), n = team_size();
     const int c1 = std::min(N, groups * (t + 1) / n * G);
-    for (int n0 = std::min(N, groups * t / n * G); n0 < c1; n0 += C) {
-      const int nc = std::min(C, c1 - n0);
-      alignas(64) T acc[C] = {};
-      for (int m = 0; m < M; ++m) simd_add(x + std::size_t(m) * std::size_t(N) + n0, acc, std::size_t(nc));
-      simd_add(acc, db + n0, std::size_t(nc));
+    int n0 = std::min(N, groups * t / n * G);
+    for (; n0 + 8 * W <= c1; n0 += 8 * W) column_sums_chunk<8>(db, x, M, N, n0);
+    if (n0 + 4 * W <= c1) column_sums_chunk<4>(db, x, M, N, n0), n0 += 4 * W;
+    if (n0 + 2 * W <= c1) column_sums_chunk<2>(db, x, M, N, n0), n0 += 2 * W;
+    if (n0 + W <= c1) column_sums_chunk<1>(db, x, M, N, n0), n0 += W;
+    for (; n0 < c1; ++n0) {
+      T acc = T(0);
+      for (int m = 0; m < M; ++m) acc += x[std::size_t(m) * std::size_t(N) + n0];
+      db[n0] += acc;
     }
   }
 }
