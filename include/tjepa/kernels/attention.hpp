@@ -456,18 +456,14 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
       A::pack_rows(v + c0, s.ldv, keys, nk, Dh, vp, DhP, nk);
     }
     std::fill(dqa, dqa + NqP * DhP, T(0));
+    A::row_dots(dout + c0, out + c0, s.ldo, Lq, Dh, dd);  // D_i = dO_i · O_i
     for (std::ptrdiff_t i = 0; i < NqP; ++i) {
       if (i >= Lq) {
         lse2[i] = std::numeric_limits<T>::infinity();  // P = 0 on padding queries
         dd[i] = T(0);
         continue;
       }
-      const T* doi = dout + i * s.ldo + c0;
-      const T* oi = out + i * s.ldo + c0;
-      T D = T(0);
-      for (int p = 0; p < Dh; ++p) D += doi[p] * oi[p];
       lse2[i] = lse[static_cast<std::ptrdiff_t>(h) * Lq + i] * T(A::log2e);
-      dd[i] = D;
     }
 
     for (int kb = 0; kb < nk; kb += Tl::BKB) {

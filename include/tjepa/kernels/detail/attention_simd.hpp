@@ -332,6 +332,27 @@ inline void pack_transposed(const T* src, std::ptrdiff_t lds, const int* rows, i
   }
 }
 
+// d[i] = x_i · y_i for the rows x_i = x + i·ld, y_i = y + i·ld, i < n, each summed in order over
+// its n_cols columns (the plain loop's bits), 8 rows at a time: 8 independent sums keep the FMA
+// pipes busy where one row's sum waits on its own latency at every column.
+template <class T>
+inline void row_dots(const T* x, const T* y, std::ptrdiff_t ld, int n, int n_cols, T* d) {
+  constexpr int RB = 8;
+  int i = 0;
+  for (; i + RB <= n; i += RB) {
+    T acc[RB] = {};
+    for (int p = 0; p < n_cols; ++p)
+#pragma GCC unroll 8
+      for (int r = 0; r < RB; ++r) acc[r] += x[(i + r) * ld + p] * y[(i + r) * ld + p];
+    for (int r = 0; r < RB; ++r) d[i + r] = acc[r];
+  }
+  for (; i < n; ++i) {
+    T acc = T(0);
+    for (int p = 0; p < n_cols; ++p) acc += x[i * ld + p] * y[i * ld + p];
+    d[i] = acc;
+  }
+}
+
 // dst [n_pad, DhP] = the rows, columns [Dh, DhP) and rows [n, n_pad) zero.
 template <class T>
 inline void pack_rows(const T* src, std::ptrdiff_t lds, const int* rows, int n, int Dh, T* dst,
