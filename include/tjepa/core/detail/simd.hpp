@@ -5,10 +5,10 @@
 // vector type. Every loop runs whole vectors, then a scalar tail, so any length works.
 //
 // The element-wise loops of the hot paths are written with these rather than left to the
-// auto-vectorizer: g++ 12 at -O2 (CMake's RelWithDebInfo, Debian's default flags) vectorizes only
-// loops whose trip count it knows, and a user's -O2 build of the JEPA step ran 12-14 % slower than
-// -O3 while they were plain loops (bench/RESULTS.md, "The user's -O2"). Each gives the bits of the
-// plain loop (element-wise, a·x + y fused as g++ contracts it).
+// auto-vectorizer, whose reach depends on the including program's flags: g++ 12 at -O2 (CMake's
+// RelWithDebInfo, Debian's default) vectorizes only loops whose trip count it knows at compile
+// time (bench/RESULTS.md, "The user's -O2"). Each gives the bits of the plain loop (element-wise;
+// a·x + y fused, as g++ contracts it).
 #include <cstddef>
 #include <cstdint>
 #include <type_traits>
