@@ -401,13 +401,12 @@ inline void pack_row_pairs(const float* src, std::ptrdiff_t lds, const int* rows
     }
     prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
     const float* sr = source(r);
+    if (!transposed) {  // a row's words in place, as the GEMM converts a row of A
+      bg::pack_a(d, 1, Dh, sr, 0);
+      continue;
+    }
     for (int k = 0; k < Dh; k += 2 * bg::L) {
-      const int nk = std::min(2 * bg::L, Dh - k);
-      if (!transposed) {  // a row's words in place: no store to reload word by word (at -O2 a stall)
-        _mm512_mask_storeu_epi32(d + k / 2, bg::first_lanes((nk + 1) / 2), bg::row_pairs(sr + k, nk));
-        continue;
-      }
-      _mm512_store_si512(words, bg::row_pairs(sr + k, nk));
+      _mm512_store_si512(words, bg::row_pairs(sr + k, std::min(2 * bg::L, Dh - k)));
       for (int p = k / 2; p < std::min(Dh2, k / 2 + bg::L); ++p) d[p * step] = words[p - k / 2];
     }
   }
