@@ -24,6 +24,7 @@
 
 #include <tjepa/core/random.hpp>
 #include <tjepa/kernels/attention.hpp>
+#include <tjepa/kernels/peaks.hpp>
 
 namespace {
 
@@ -176,31 +177,33 @@ void batch8(benchmark::internal::Benchmark* bm) {
   for (int L : {368, 528, 2124}) bm->Args({L, 8});
 }
 
-// This machine's fp32 FMA peak on one core, measured: 12 independent chains of native-width xsimd
-// FMAs (more than latency x ports on current x86 cores), all in registers. Its GFLOP/s counter is
-// the peak bench/make_results.py uses for "% of peak" (hosts differ: an AVX-512 core with two
-// 512-bit FMA units gives ~233 GFLOP/s at 3.6 GHz, one that runs AVX-512 on 256-bit units half).
-void BM_FmaPeak(benchmark::State& state) {
-  using B = xsimd::batch<float>;
-  const B m(0.9999999f), c(1e-7f);
-  B a0(1.0f), a1(1.1f), a2(1.2f), a3(1.3f), a4(1.4f), a5(1.5f), a6(1.6f), a7(1.7f), a8(1.8f), a9(1.9f), a10(2.0f),
-      a11(2.1f);
+// One core's peak rate of an instruction: chains(n) runs 12 independent chains of it n times in
+// registers (kernels/peaks.hpp), flops a time round.
+void time_chains(benchmark::State& state, float (*chains)(std::int64_t), double flops) {
   constexpr std::int64_t inner = 1 << 16;
   for (auto _ : state) {
-    for (std::int64_t k = 0; k < inner; ++k) {
-      a0 = xsimd::fma(a0, m, c); a1 = xsimd::fma(a1, m, c); a2 = xsimd::fma(a2, m, c);
-      a3 = xsimd::fma(a3, m, c); a4 = xsimd::fma(a4, m, c); a5 = xsimd::fma(a5, m, c);
-      a6 = xsimd::fma(a6, m, c); a7 = xsimd::fma(a7, m, c); a8 = xsimd::fma(a8, m, c);
-      a9 = xsimd::fma(a9, m, c); a10 = xsimd::fma(a10, m, c); a11 = xsimd::fma(a11, m, c);
-    }
-    const B sum = ((a0 + a1) + (a2 + a3)) + ((a4 + a5) + (a6 + a7)) + ((a8 + a9) + (a10 + a11));
-    float out = xsimd::hadd(sum);
+    float out = chains(inner);
     benchmark::DoNotOptimize(out);
   }
-  const double flops = 12.0 * 2.0 * static_cast<double>(B::size) * static_cast<double>(inner);
-  state.counters["GFLOP/s"] = benchmark::Counter(flops / 1e9, benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["GFLOP/s"] = benchmark::Counter(flops * double(inner) / 1e9, benchmark::Counter::kIsIterationInvariantRate);
+}
+
+// This machine's fp32 FMA peak on one core: native-width FMAs. Its GFLOP/s counter is the peak
+// bench/make_results.py uses for "% of peak" (hosts differ: an AVX-512 core with two 512-bit FMA
+// units gives ~233 GFLOP/s at 3.6 GHz, one that runs AVX-512 on 256-bit units half).
+void BM_FmaPeak(benchmark::State& state) {
+  time_chains(state, tjepa::detail::fma_chains, tjepa::detail::fma_chain_flops);
 }
 BENCHMARK(BM_FmaPeak)->Unit(benchmark::kMillisecond);
+
+#if TJEPA_BF16_NATIVE
+// The bf16 dot-product peak: vdpbf16ps, 64 FLOPs each (twice an fp32 FMA's). The bf16 products'
+// ceiling, which on some CPUs is below the FMA's (kernels/peaks.hpp).
+void BM_Bf16DotPeak(benchmark::State& state) {
+  time_chains(state, tjepa::detail::bf16_dot_chains, tjepa::detail::bf16_dot_chain_flops);
+}
+BENCHMARK(BM_Bf16DotPeak)->Unit(benchmark::kMillisecond);
+#endif
 
 BENCHMARK(BM_AttentionForward)->Apply(batch1);
 BENCHMARK(BM_AttentionForwardBackward)->Apply(batch1);

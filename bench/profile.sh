@@ -28,7 +28,7 @@ mkdir -p "$out"
 git rev-parse --short HEAD >"$out/commit.txt"
 one() { OMP_NUM_THREADS=1 OMP_PROC_BIND=false taskset -c 0 "$@"; }
 
-timed='BM_FmaPeak|BM_EncoderForward(Frozen)?/368/|BM_EncoderForwardFrozenBf16/368/|BM_EncoderForwardBackwardBf16/|BM_EncoderForwardBackward/368/8/0/|BM_AttentionForwardBackward(OneSample)?/L:368/'
+timed='BM_FmaPeak|BM_Bf16DotPeak|BM_EncoderForward(Frozen)?/368/|BM_EncoderForwardFrozenBf16/368/|BM_EncoderForwardBackwardBf16/|BM_EncoderForwardBackward/368/8/0/|BM_AttentionForwardBackward(OneSample)?/L:368/'
 for b in release profile; do
   echo "timings, $b build" >&2
   exe=$bench

@@ -22,10 +22,17 @@ threads=$(seq -s, 1 "$cores")
 # What was measured, for the report: the commit (and whether the tree differed from it) and the day.
 echo "$(git rev-parse --short HEAD)$(git status --porcelain --untracked-files=no include bench | grep -q . && echo ' with uncommitted changes')" >"$out/commit.txt"
 date -u +%Y-%m-%d >"$out/date.txt"
-OMP_NUM_THREADS=1 taskset -c 0 build/release/bench/tjepa_bench --benchmark_filter='^BM_FmaPeak$' \
-  --benchmark_repetitions=3 --benchmark_report_aggregates_only=true --benchmark_format=json |
-  /usr/bin/python3 -c 'import json,sys; b=[x for x in json.load(sys.stdin)["benchmarks"] if x.get("aggregate_name")=="median"][0]; print("%.1f" % (b["GFLOP/s"] if "GFLOP/s" in b else b["FLOPS"]/1e9))' \
-  >"$out/peak.txt"
+# One core's peaks: fp32 FMAs, and vdpbf16ps where the build has AVX512-BF16 (the bf16 products'
+# ceiling: on some CPUs below the FMA's).
+peak() {  # peak BENCHMARK FILE: the median GFLOP/s of 3 repetitions, 1 thread, core 0
+  OMP_NUM_THREADS=1 taskset -c 0 build/release/bench/tjepa_bench --benchmark_filter="^$1\$" \
+    --benchmark_repetitions=3 --benchmark_report_aggregates_only=true --benchmark_format=json |
+    /usr/bin/python3 -c 'import json,sys; b=[x for x in json.load(sys.stdin)["benchmarks"] if x.get("aggregate_name")=="median"]; b and print("%.1f" % b[0]["GFLOP/s"])' \
+    >"$2"
+  [ -s "$2" ] || rm -f "$2"
+}
+peak BM_FmaPeak "$out/peak.txt"
+peak BM_Bf16DotPeak "$out/bf16_peak.txt"
 for skin in allegro deco; do
   for precision in fp32 bf16; do
     echo "tjepa_scale --skin $skin --precision $precision --threads $threads" >&2
@@ -38,20 +45,24 @@ for skin in allegro deco; do
   done
 done
 # The machine's own ceiling: one 1-thread step alone on core 0, then one on every core at once
-# (independent processes: nothing shared, nothing serial). What the cores give together there,
-# Σ alone/each, is the most any thread count can give on this machine: on a VM the cores share
-# caches, memory and power with each other and with other tenants.
-one() {  # one() CORE PRECISION: the step's line of a 1-thread run on CORE
-  OMP_NUM_THREADS=1 taskset -c "$1" build/release/bench/tjepa_scale --skin allegro --precision "$2" --threads 1 \
+# (independent processes: nothing shared, nothing serial), per skin and precision. What the cores
+# give together there, Σ alone/each, is the most any thread count can give on this machine: on a
+# VM the cores share caches, memory and power with each other and with other tenants.
+one() {  # one() CORE SKIN PRECISION: the step's line of a 1-thread run on CORE
+  OMP_NUM_THREADS=1 taskset -c "$1" build/release/bench/tjepa_scale --skin "$2" --precision "$3" --threads 1 \
     --reps "$reps" | grep '"phase":"step"'
 }
 if [ "$cores" -gt 1 ]; then
-  for precision in fp32 bf16; do
-    [ -f "$out/tjepa_allegro_$precision.jsonl" ] || continue
-    echo "the ceiling: $precision, one step alone, then one on each of $cores cores at once" >&2
-    one 0 "$precision" >"$out/ceiling_${precision}_alone.jsonl"
-    for c in $(seq 0 $((cores - 1))); do one "$c" "$precision" >"$out/ceiling_${precision}_core$c.jsonl" & done
-    wait
+  for skin in allegro deco; do
+    for precision in fp32 bf16; do
+      [ -f "$out/tjepa_${skin}_$precision.jsonl" ] || continue
+      echo "the ceiling: $skin $precision, one step alone, then one on each of $cores cores at once" >&2
+      one 0 "$skin" "$precision" >"$out/ceiling_${skin}_${precision}_alone.jsonl"
+      for c in $(seq 0 $((cores - 1))); do
+        one "$c" "$skin" "$precision" >"$out/ceiling_${skin}_${precision}_core$c.jsonl" &
+      done
+      wait
+    done
   done
 fi
 source bench/torch_env.sh

@@ -47,6 +47,8 @@ def step_speedup(steps, t):
 
 
 peak = float((d / "peak.txt").read_text().strip())
+bf16_file = d / "bf16_peak.txt"
+bf16_peak = float(bf16_file.read_text().strip()) if bf16_file.exists() else None
 runs = {}  # (skin, precision) -> rows
 for path in sorted(d.glob("tjepa_*.jsonl"), key=lambda p: (p.name.split("_")[1], "bf16" in p.name)):  # fp32 first
     rows = load_jsonl(path)
@@ -74,7 +76,9 @@ measured = (d / "commit.txt").read_text().strip() if (d / "commit.txt").exists()
 day = (d / "date.txt").read_text().strip() if (d / "date.txt").exists() else datetime.date.today().isoformat()
 print(f"`bench/scale.sh`, {day}, commit {measured}, "
       f"{cpu} (family {family}, model {model}, {amx}), {sh('nproc')} cores; `BM_FmaPeak` in the same run: "
-      f"{peak:.0f} GFLOP/s on one core. `build/release/bench/tjepa_scale --skin <skin> --precision <p> "
+      f"{peak:.0f} GFLOP/s on one core"
+      + (f", `BM_Bf16DotPeak` (vdpbf16ps) {bf16_peak:.0f} ({bf16_peak / peak:.2f}× the FMA's)" if bf16_peak else "")
+      + ". `build/release/bench/tjepa_scale --skin <skin> --precision <p> "
       f"--threads 1,...,{sh('nproc')} --reps {reps}`: one JEPA step (bench/jepa_setup.hpp: ViT-Tiny, batch 8, "
       "no drop-path) timed phase by phase by its own StageClock marks, the thread counts taking turns "
       f"repetition by repetition, the thread team woken before each step's clock starts (a trainer's threads "
@@ -83,7 +87,9 @@ print(f"`bench/scale.sh`, {day}, commit {measured}, "
       "(timm-style drop-path 0.3, every branch computed: the same work), and its DINOv2 drop-path "
       "variant (branches on 5 of 8 samples: less work) in the last column.\n")
 print("Serial fraction f from the measured speed-up S_t at t threads: f = (t/S_t − 1)/(t − 1) (Amdahl); "
-      "the speed-ups f predicts at more threads beside it. % of peak: of t cores' BM_FmaPeak.\n")
+      "the speed-ups f predicts at more threads beside it. % of peak: of t cores' BM_FmaPeak"
+      + (" (bf16 rows: of t cores' BM_Bf16DotPeak, the bf16 products' ceiling; the step's GFLOP/s count "
+         "its products in fp32 and bf16 alike)" if bf16_peak else "") + ".\n")
 print("Paired: the median over repetitions of the 1-thread step over the t-thread step of the same repetition "
       "(a second apart, so a slow spell of the machine longer than that cancels), with its quartiles; f and "
       "the predictions are from it where the run has it, else from the ratio of the medians.\n")
@@ -102,7 +108,7 @@ for (skin, precision), rows in runs.items():
         pt = torch.get((N_OF[skin], "timm", t)) if precision == "fp32" else None
         pd = torch.get((N_OF[skin], "dinov2", t)) if precision == "fp32" else None
         cells = [f"{skin} ({N_OF[skin]})", precision, str(t), f"{r['ms']:.0f}", f"{r['gflops']:.0f}",
-                 f"{100 * r['gflops'] / (peak * t):.0f}%", f"{s:.2f}×" if s else "",
+                 f"{100 * r['gflops'] / ((bf16_peak if precision == 'bf16' and bf16_peak else peak) * t):.0f}%", f"{s:.2f}×" if s else "",
                  f"{paired:.2f}× ({r['paired_speedup_quartiles'][0]:.2f}-{r['paired_speedup_quartiles'][1]:.2f})"
                  if paired else "",
                  f"{100 * f:.1f}%" if f is not None else ""]
@@ -110,31 +116,31 @@ for (skin, precision), rows in runs.items():
         cells += [f"{pt:.0f}" if pt else "", f"{pt / r['ms']:.2f}×" if pt else "", f"{pd:.0f}" if pd else ""]
         print("| " + " | ".join(cells) + " |")
 
-ceiling = {}  # precision -> (alone ms, [each core's ms at once])
-for precision in ("fp32", "bf16"):
-    alone = d / f"ceiling_{precision}_alone.jsonl"
-    each = [load_jsonl(c) for c in sorted(d.glob(f"ceiling_{precision}_core*.jsonl"))]
+ceiling = {}  # (skin, precision) -> (alone ms, [each core's ms at once])
+for skin, precision in runs:
+    alone = d / f"ceiling_{skin}_{precision}_alone.jsonl"
+    each = [load_jsonl(c) for c in sorted(d.glob(f"ceiling_{skin}_{precision}_core*.jsonl"))]
     first = load_jsonl(alone) if alone.exists() else []
     if first and each and all(each):
-        ceiling[precision] = (first[0]["ms"], [c[0]["ms"] for c in each])
+        ceiling[(skin, precision)] = (first[0]["ms"], [c[0]["ms"] for c in each])
 if ceiling:
     print("\n### The machine's own ceiling\n")
-    print("The allegro step on 1 thread alone (core 0), then one such step on every core at once, as "
+    print("Each skin's step on 1 thread alone (core 0), then one such step on every core at once, as "
           "independent processes (`taskset -c <core> tjepa_scale --threads 1`): they share no work and "
           "nothing in them is serial, so what the cores give together, Σ alone/each, is the most any thread "
           "count can give on this machine. f here is the serial fraction the threaded step's own speed-up "
           "would show if the ceiling were all of it.\n")
-    print("| precision | 1 thread alone ms | each core's step, all at once, ms | together | f of the ceiling alone | "
-          "threaded step's speed-up (above; paired where measured) |")
-    print("|---|---|---|---|---|---|")
-    for precision, (alone, each) in ceiling.items():
+    print("| skin (N) | precision | 1 thread alone ms | each core's step, all at once, ms | together | "
+          "f of the ceiling alone | threaded step's speed-up (above; paired where measured) |")
+    print("|---|---|---|---|---|---|---|")
+    for (skin, precision), (alone, each) in ceiling.items():
         t = len(each)
         together = sum(alone / e for e in each)
-        steps = {r["threads"]: r for r in runs.get(("allegro", precision), []) if r["phase"] == "step"}
+        steps = {r["threads"]: r for r in runs[(skin, precision)] if r["phase"] == "step"}
         s_t = step_speedup(steps, t)
         threaded = f"{s_t:.2f}×" if s_t else ""
-        print(f"| {precision} | {alone:.0f} | {', '.join(f'{e:.0f}' for e in each)} | {together:.2f}× | "
-              f"{100 * serial_fraction(t, together):.1f}% | {threaded} |")
+        print(f"| {skin} ({N_OF[skin]}) | {precision} | {alone:.0f} | {', '.join(f'{e:.0f}' for e in each)} | "
+              f"{together:.2f}× | {100 * serial_fraction(t, together):.1f}% | {threaded} |")
 
 for (skin, precision), rows in runs.items():
     by = {(r["phase"], r.get("stage"), r["threads"]): r for r in rows}

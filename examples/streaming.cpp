@@ -52,6 +52,7 @@
 #include <allocation_counter.hpp>
 #include <tjepa/downstream/pipeline.hpp>
 #include <tjepa/downstream/probe_labels.hpp>
+#include <tjepa/kernels/peaks.hpp>
 #include <tjepa/sim.hpp>
 
 namespace {
@@ -338,9 +339,12 @@ int main(int argc, char** argv) {
     std::sort(sorted.begin(), sorted.end());
     auto pct = [&](double p) { return quantile(sorted, p); };
     const JepaConfig& mc = pipe.model().model->config;
+    std::string bf16_note;  // where bf16 is not the faster choice on this build and core, why
+    if (precision == "bf16")
+      if (const std::string why = bf16_slower_reason(measure_product_peaks()); !why.empty()) bf16_note = " (" + why + ")";
     std::printf("streaming: %d taxels x %d axes, window of %d frames, encoder d=%d, %d blocks, %d heads%s, %s products%s\n",
                 N, m, tau, d, mc.encoder.depth, mc.encoder.heads, checkpoint.empty() ? " (random weights)" : "",
- precision.c_str(), precision == "bf16" && !has_native_bf16() ? " (no AVX512-BF16: computed in fp32)" : "");
+ precision.c_str(), bf16_note.c_str());
     std::printf("head: %s\n", pipe.head()->info.task.c_str());
     std::printf("%d ticks after %d warm-up ticks, %d thread%s%s%s\n", ticks, warmup, threads, threads > 1 ? "s" : "",
                 rate > 0 ? (spin ? ", busy-waiting between ticks" : ", sleeping between ticks") : ", back to back",

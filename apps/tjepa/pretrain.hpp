@@ -255,6 +255,9 @@ inline int run_pretrain(const PretrainOptions& o, std::ostream& out_lead) {
       << model.context.numel() << " encoder + " << model.predictor_params.numel() << " predictor parameters, "
       << run.schedule.steps << " steps of " << run.batch
       << (o.parallel.active() ? " on " + std::to_string(o.parallel.ranks) + " MPI ranks" : std::string()) << "\n";
+  if (run.step.precision == Precision::bf16 && lead)
+    if (const std::string why = bf16_slower_reason(measure_product_peaks()); !why.empty())
+      out << "note: --precision bf16: " << why << "\n";
   const std::string masks = mask_size_note(trainer.objective().collator(), run);
   if (!masks.empty() && lead) out << masks;
   if (init_only) {

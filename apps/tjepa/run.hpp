@@ -134,6 +134,9 @@ inline int run_live(const RunOptions& o, std::ostream& out) {
     out << ", head: " << (info->task.empty() ? std::string("probe") : info->task) << " ("
         << (C > 0 ? std::to_string(C) + " classes" : std::to_string(R) + " outputs") << ")";
   out << "\n";
+  if (pc.precision == Precision::bf16)
+    if (const std::string why = bf16_slower_reason(measure_product_peaks()); !why.empty())
+      out << "note: --precision bf16: " << why << "\n";
 
   std::vector<float> frame(static_cast<std::size_t>(N) * axes);
   std::vector<double> latency_us;

@@ -8,5 +8,6 @@
 #include "tjepa/kernels/gelu.hpp"
 #include "tjepa/kernels/layer_norm.hpp"
 #include "tjepa/kernels/linear.hpp"
+#include "tjepa/kernels/peaks.hpp"
 #include "tjepa/kernels/softmax.hpp"
 #include "tjepa/kernels/conv2d.hpp"

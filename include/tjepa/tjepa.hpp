@@ -71,6 +71,7 @@
 #include "tjepa/masks/uniform_masking.hpp"
 #include "tjepa/masks/workspace.hpp"
 
+#include "tjepa/kernels/peaks.hpp"
 #include "tjepa/kernels/precision.hpp"
 
 #include "tjepa/model/attention.hpp"

@@ -290,6 +290,22 @@ TEST_CASE("pretrain / probe and embed on a tiny simulated skin") {
   }
 }
 
+TEST_CASE("pretrain --precision bf16 notes why where bf16 would not be faster on this build and core") {
+  TempDir t;
+  std::ostringstream out;
+  PretrainOptions po;
+  po.overrides = tiny_run("grid");
+  po.overrides["precision"] = "bf16";
+  po.simulate_frames = 300;
+  po.out = (t.path / "run").string();
+  po.quiet = true;
+  REQUIRE(run_pretrain(po, out) == 0);
+  const std::string why = bf16_slower_reason(measure_product_peaks());
+  CAPTURE(out.str());
+  CHECK((out.str().find("note: --precision bf16: ") != std::string::npos) == !why.empty());
+  if (!has_native_bf16()) CHECK(out.str().find("no AVX512-BF16, so bf16 computes in fp32") != std::string::npos);
+}
+
 TEST_CASE("resume across programs: tjepa pretrain to a user Trainer and back give the uninterrupted loss curve bitwise") {
   TempDir t;
   std::ostringstream out;

@@ -38,7 +38,8 @@ inline constexpr int NR = NV * W;
 // two or three read-modify-write passes over C). Row-major A's 6 rows of 768 floats (18 KiB)
 // stay in L1, a B panel (192 KiB) in L2; column-major A (dYᵀ) touches one line a depth, 32 KiB
 // for a slab of 512. bench/RESULTS.md ("fp32's depth blocks of 768"): the fp32 JEPA step 1.02x
-// faster on one Zen 5 core, 1.08x on two; the AVX2 code 1.02x; no Zen 4 (32 KiB L1) timing.
+// faster on one Zen 5 core, 1.08x on two; the AVX2 code 1.02x; on an Intel Xeon (48 KiB L1,
+// 2 MiB L2) 1.02x on one core, 1.01x on two; no Zen 4 (32 KiB L1) timing.
 inline constexpr int KC = 768;
 // Depths per packing task: B's panels are packed by the threads in tasks of one panel × this many
 // depths, so that a product with few panels still splits its packing evenly.

@@ -1,0 +1,130 @@
+#pragma once
+// The peak rates of this core's two product instructions, measured: fp32 FMAs at the build's
+// native width, and vdpbf16ps (two bf16 multiply-adds into each fp32 lane) where the build has
+// AVX512-BF16. Each runs as twelve independent chains in registers, more than latency × issue
+// ports on current x86 cores, so a loop runs at its instruction's issue rate.
+//
+// Precision::bf16 is faster only where the second rate is well above the first. On AMD Zen 4 and
+// Zen 5 the bf16 JEPA step ran 1.5-1.7x faster than fp32. On an Intel Xeon (family 6, model 207)
+// without AMX, vdpbf16ps issued at a quarter of the FMA's rate, so bf16 products peaked at half of
+// fp32's and the bf16 step ran at 0.6-0.7x (bench/RESULTS.md). bench/attention.cpp's BM_FmaPeak and
+// BM_Bf16DotPeak time these loops; the command-line tools note a bf16 run that would be slower.
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+
+#include <xsimd/xsimd.hpp>
+
+#include "tjepa/kernels/precision.hpp"
+
+#if TJEPA_BF16_NATIVE
+#include <immintrin.h>
+#endif
+
+namespace tjepa {
+
+namespace detail {
+
+// FLOPs of one iteration of fma_chains and bf16_dot_chains (a multiply-add counts two).
+inline constexpr double fma_chain_flops = 12.0 * 2.0 * double(xsimd::batch<float>::size);
+inline constexpr double bf16_dot_chain_flops = 12.0 * 64.0;
+
+// 12 chains of a ← a·m + c, `iterations` times each; the chains' sum, so that none is dropped. No
+// start value is a fixed point of the step (a compiler drops a chain whose first step returns
+// its start: with m = 1 - 2⁻²³ and c = 1e-7, g++ kept 7 of the 12), and the chains stay near 1-10.
+inline float fma_chains(std::int64_t iterations) {
+  using B = xsimd::batch<float>;
+  const B m(0.9999f), c(1e-3f);
+  B a0(1.0f), a1(1.1f), a2(1.2f), a3(1.3f), a4(1.4f), a5(1.5f), a6(1.6f), a7(1.7f), a8(1.8f), a9(1.9f), a10(2.0f),
+      a11(2.1f);
+  for (std::int64_t k = 0; k < iterations; ++k) {
+    a0 = xsimd::fma(a0, m, c); a1 = xsimd::fma(a1, m, c); a2 = xsimd::fma(a2, m, c);
+    a3 = xsimd::fma(a3, m, c); a4 = xsimd::fma(a4, m, c); a5 = xsimd::fma(a5, m, c);
+    a6 = xsimd::fma(a6, m, c); a7 = xsimd::fma(a7, m, c); a8 = xsimd::fma(a8, m, c);
+    a9 = xsimd::fma(a9, m, c); a10 = xsimd::fma(a10, m, c); a11 = xsimd::fma(a11, m, c);
+  }
+  return xsimd::hadd(((a0 + a1) + (a2 + a3)) + ((a4 + a5) + (a6 + a7)) + ((a8 + a9) + (a10 + a11)));
+}
+
+#if TJEPA_BF16_NATIVE
+// 12 chains of a ← a + m₀·c₀ + m₁·c₁ (vdpbf16ps; m = (1, 1), c = (2⁻¹⁰, 2⁻¹⁰) in bf16): each
+// grows by 2⁻⁹ a step (less only the rounding of the start's low bits), so no step is a no-op.
+inline float bf16_dot_chains(std::int64_t iterations) {
+  const auto m = std::bit_cast<__m512bh>(_mm512_set1_epi32(0x3f803f80));
+  const auto c = std::bit_cast<__m512bh>(_mm512_set1_epi32(0x3a803a80));
+  __m512 a0 = _mm512_set1_ps(1.0f), a1 = _mm512_set1_ps(1.1f), a2 = _mm512_set1_ps(1.2f), a3 = _mm512_set1_ps(1.3f),
+         a4 = _mm512_set1_ps(1.4f), a5 = _mm512_set1_ps(1.5f), a6 = _mm512_set1_ps(1.6f), a7 = _mm512_set1_ps(1.7f),
+         a8 = _mm512_set1_ps(1.8f), a9 = _mm512_set1_ps(1.9f), a10 = _mm512_set1_ps(2.0f), a11 = _mm512_set1_ps(2.1f);
+  for (std::int64_t k = 0; k < iterations; ++k) {
+    a0 = _mm512_dpbf16_ps(a0, m, c); a1 = _mm512_dpbf16_ps(a1, m, c); a2 = _mm512_dpbf16_ps(a2, m, c);
+    a3 = _mm512_dpbf16_ps(a3, m, c); a4 = _mm512_dpbf16_ps(a4, m, c); a5 = _mm512_dpbf16_ps(a5, m, c);
+    a6 = _mm512_dpbf16_ps(a6, m, c); a7 = _mm512_dpbf16_ps(a7, m, c); a8 = _mm512_dpbf16_ps(a8, m, c);
+    a9 = _mm512_dpbf16_ps(a9, m, c); a10 = _mm512_dpbf16_ps(a10, m, c); a11 = _mm512_dpbf16_ps(a11, m, c);
+  }
+  const __m512 sum = _mm512_add_ps(
+      _mm512_add_ps(_mm512_add_ps(_mm512_add_ps(a0, a1), _mm512_add_ps(a2, a3)),
+                    _mm512_add_ps(_mm512_add_ps(a4, a5), _mm512_add_ps(a6, a7))),
+      _mm512_add_ps(_mm512_add_ps(a8, a9), _mm512_add_ps(a10, a11)));
+  return xsimd::hadd(xsimd::batch<float>(sum));
+}
+#endif
+
+// The best rate, in GFLOP/s, of chunks of `chains` run for `seconds`: the best, not the mean, so
+// that a chunk another process interrupted does not count.
+template <class Chains>
+double best_rate(Chains chains, double flops_per_iteration, double seconds) {
+  using Clock = std::chrono::steady_clock;
+  constexpr std::int64_t chunk = 4096;  // 49152 instructions: 10-40 µs
+  double best = 0;
+  volatile float sink = 0;
+  const auto end = Clock::now() + std::chrono::duration<double>(seconds);
+  for (int n = 0; n < 3 || Clock::now() < end; ++n) {
+    const auto t0 = Clock::now();
+    sink = sink + chains(chunk);
+    const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+    if (s > 0) best = std::max(best, flops_per_iteration * double(chunk) / s / 1e9);
+  }
+  return best;
+}
+
+}  // namespace detail
+
+// This core's product peaks in GFLOP/s: fp32 FMAs, and bf16 dot products (0 where the build has
+// no AVX512-BF16: Precision::bf16 then computes in fp32).
+struct ProductPeaks {
+  double fp32_gflops = 0;
+  double bf16_gflops = 0;
+
+  // Whether Precision::bf16's products can be faster than fp32's here: the bf16 peak at least
+  // 1.2x the FMA's (about 2x on CPUs where it pays, 0.5x on one where it does not).
+  bool bf16_faster() const { return bf16_gflops >= 1.2 * fp32_gflops; }
+};
+
+// Measures both on the calling thread, `seconds` each (a few milliseconds give the peaks to a few
+// per cent: each chunk is tens of microseconds).
+inline ProductPeaks measure_product_peaks(double seconds = 0.005) {
+  ProductPeaks p;
+  p.fp32_gflops = detail::best_rate(detail::fma_chains, detail::fma_chain_flops, seconds);
+#if TJEPA_BF16_NATIVE
+  p.bf16_gflops = detail::best_rate(detail::bf16_dot_chains, detail::bf16_dot_chain_flops, seconds);
+#endif
+  return p;
+}
+
+// Why Precision::bf16 would not run faster than fp32 on this build and core, in words; empty
+// where it would. The command-line tools print it as a note when bf16 is asked for.
+inline std::string bf16_slower_reason(const ProductPeaks& p) {
+  if (!has_native_bf16()) return "this build has no AVX512-BF16, so bf16 computes in fp32";
+  if (p.bf16_faster()) return {};
+  char line[200];
+  std::snprintf(line, sizeof line,
+                "bf16 products peak at %.0f GFLOP/s on this core against fp32's %.0f (vdpbf16ps at %.2fx an FMA's "
+                "FLOP rate), so fp32 runs faster here",
+                p.bf16_gflops, p.fp32_gflops, p.bf16_gflops / p.fp32_gflops);
+  return line;
+}
+
+}  // namespace tjepa

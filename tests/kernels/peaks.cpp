@@ -1,0 +1,66 @@
+// kernels/peaks.hpp: the FMA and vdpbf16ps chains compute what they say (so the peaks time real
+// work), the measured peaks, and when a bf16 run is noted as slower.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <string>
+
+#include <xsimd/xsimd.hpp>
+
+#include "tjepa/kernels/peaks.hpp"
+
+TEST_SUITE("kernels") {
+  TEST_CASE("the FMA chains equal a scalar std::fma reference (all 12 run: none is a fixed point)") {
+    for (const std::int64_t n : {0, 1, 7, 1000}) {
+      const float m = 0.9999f, c = 1e-3f;
+      double ref = 0;
+      for (float a : {1.0f, 1.1f, 1.2f, 1.3f, 1.4f, 1.5f, 1.6f, 1.7f, 1.8f, 1.9f, 2.0f, 2.1f}) {
+        CHECK(std::fma(a, m, c) != a);
+        for (std::int64_t k = 0; k < n; ++k) a = std::fma(a, m, c);
+        ref += double(a);
+      }
+      ref *= double(xsimd::batch<float>::size);
+      CAPTURE(n);
+      CHECK(double(tjepa::detail::fma_chains(n)) == doctest::Approx(ref).epsilon(1e-6));
+    }
+  }
+
+#if TJEPA_BF16_NATIVE
+  TEST_CASE("the vdpbf16ps chains start at their sum and grow by two products of 2^-10 a step") {
+    const double start = 16.0 * (1.0 + 1.1 + 1.2 + 1.3 + 1.4 + 1.5 + 1.6 + 1.7 + 1.8 + 1.9 + 2.0 + 2.1);
+    CHECK(double(tjepa::detail::bf16_dot_chains(0)) == doctest::Approx(start).epsilon(1e-6));
+    for (const std::int64_t n : {1, 1000}) {
+      CAPTURE(n);
+      const double moved = double(tjepa::detail::bf16_dot_chains(n)) - start;
+      CHECK(moved == doctest::Approx(16.0 * 12.0 * double(n) * 2.0 / 1024.0).epsilon(1e-3));
+    }
+  }
+#endif
+
+  TEST_CASE("the measured peaks: fp32 always / bf16 only where the build has AVX512-BF16") {
+    const tjepa::ProductPeaks p = tjepa::measure_product_peaks(0.001);
+    CHECK(std::isfinite(p.fp32_gflops));
+    CHECK(p.fp32_gflops > 0.1);
+    if (tjepa::has_native_bf16()) {
+      CHECK(std::isfinite(p.bf16_gflops));
+      CHECK(p.bf16_gflops > 0.1);
+    } else {
+      CHECK(p.bf16_gflops == 0);
+    }
+  }
+
+  TEST_CASE("a bf16 run is noted as slower where the bf16 peak is under 1.2x the FMA peak or the build has no bf16") {
+    const std::string slower = tjepa::bf16_slower_reason({.fp32_gflops = 172, .bf16_gflops = 83});
+    const std::string faster = tjepa::bf16_slower_reason({.fp32_gflops = 210, .bf16_gflops = 420});
+    if (tjepa::has_native_bf16()) {
+      CHECK(faster.empty());
+      CHECK(slower == "bf16 products peak at 83 GFLOP/s on this core against fp32's 172 (vdpbf16ps at 0.48x an "
+                      "FMA's FLOP rate), so fp32 runs faster here");
+      CHECK(!tjepa::bf16_slower_reason({.fp32_gflops = 100, .bf16_gflops = 119}).empty());
+      CHECK(tjepa::bf16_slower_reason({.fp32_gflops = 100, .bf16_gflops = 120}).empty());
+    } else {
+      CHECK(slower == "this build has no AVX512-BF16, so bf16 computes in fp32");
+      CHECK(faster == slower);
+    }
+  }
+}
