@@ -10,18 +10,26 @@
 #include "tjepa/kernels/peaks.hpp"
 
 TEST_SUITE("kernels") {
-  TEST_CASE("the FMA chains equal a scalar std::fma reference (all 12 run: none is a fixed point)") {
+  TEST_CASE("the FMA chains equal a scalar reference (all 12 run: none is a fixed point)") {
+    // Fused where the target has FMA, a product then a sum where it has not (SSE2 alone): the
+    // chains match the one reference or the other.
     for (const std::int64_t n : {0, 1, 7, 1000}) {
       const float m = 0.9999f, c = 1e-3f;
-      double ref = 0;
-      for (float a : {1.0f, 1.1f, 1.2f, 1.3f, 1.4f, 1.5f, 1.6f, 1.7f, 1.8f, 1.9f, 2.0f, 2.1f}) {
-        CHECK(std::fma(a, m, c) != a);
-        for (std::int64_t k = 0; k < n; ++k) a = std::fma(a, m, c);
-        ref += double(a);
+      double fused = 0, unfused = 0;
+      for (const float a0 : {1.0f, 1.1f, 1.2f, 1.3f, 1.4f, 1.5f, 1.6f, 1.7f, 1.8f, 1.9f, 2.0f, 2.1f}) {
+        CHECK(std::fma(a0, m, c) != a0);
+        float a = a0, b = a0;
+        for (std::int64_t k = 0; k < n; ++k) {
+          a = std::fma(a, m, c);
+          b = static_cast<float>(double(b) * double(m)) + c;  // the product rounded (exact in double), then the sum
+        }
+        fused += double(a);
+        unfused += double(b);
       }
-      ref *= double(xsimd::batch<float>::size);
+      const double lanes = double(xsimd::batch<float>::size), got = double(tjepa::detail::fma_chains(n));
       CAPTURE(n);
-      CHECK(double(tjepa::detail::fma_chains(n)) == doctest::Approx(ref).epsilon(1e-6));
+      CAPTURE(got);
+      CHECK((got == doctest::Approx(lanes * fused).epsilon(1e-6) || got == doctest::Approx(lanes * unfused).epsilon(1e-6)));
     }
   }
 
