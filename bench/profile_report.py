@@ -10,8 +10,9 @@ left out of the shares. The products' implied rate is the benchmark's counted FL
 only, as every table of RESULTS.md) over the time its product kernels take: what the product
 micro-kernels run at, with everything else removed. bf16 profiles (products on AVX512-BF16's
 vdpbf16ps, two multiply-adds per fp32 lane) are measured against the bf16 peak: BM_Bf16DotPeak,
-measured in the same run (twice the FMA peak where the build has no such benchmark); their goals are issue 61's (12 ms a window for inference on one core,
-1.8x the fp32 encoder's speed for training) rather than a share of the peak."""
+measured in the same run (twice the FMA peak where the build has no such benchmark); their goals
+are issue 61's (12 ms a window for inference on one core, 1.8x the fp32 encoder's speed for
+training) rather than a share of the peak."""
 import datetime
 import json
 import pathlib

@@ -42,43 +42,35 @@ inline xsimd::batch<float> fused_multiply_add(xsimd::batch<float> a, xsimd::batc
 #endif
 }
 
-// 12 chains of a ← a·m + c, `iterations` times each; the chains' sum, so that none is dropped. No
-// start value is a fixed point of the step (a compiler drops a chain whose first step returns
-// its start: with m = 1 - 2⁻²³ and c = 1e-7, g++ kept 7 of the 12), and the chains stay near 1-10.
-inline float fma_chains(std::int64_t iterations) {
+// 12 chains a ← step(a), started at 1.0, 1.1, ..., 2.1 and run `iterations` times each in
+// registers; their sum, so that none is dropped. No start may be a fixed point of the step: a
+// compiler drops a chain whose first step returns its start (with a·m + c, m = 1 - 2⁻²³ and
+// c = 1e-7, g++ kept 7 of the 12).
+template <class Step>
+[[gnu::always_inline]] inline float twelve_chains(std::int64_t iterations, Step step) {
   using B = xsimd::batch<float>;
-  const B m(0.9999f), c(1e-3f);
   B a0(1.0f), a1(1.1f), a2(1.2f), a3(1.3f), a4(1.4f), a5(1.5f), a6(1.6f), a7(1.7f), a8(1.8f), a9(1.9f), a10(2.0f),
       a11(2.1f);
   for (std::int64_t k = 0; k < iterations; ++k) {
-    a0 = fused_multiply_add(a0, m, c); a1 = fused_multiply_add(a1, m, c); a2 = fused_multiply_add(a2, m, c);
-    a3 = fused_multiply_add(a3, m, c); a4 = fused_multiply_add(a4, m, c); a5 = fused_multiply_add(a5, m, c);
-    a6 = fused_multiply_add(a6, m, c); a7 = fused_multiply_add(a7, m, c); a8 = fused_multiply_add(a8, m, c);
-    a9 = fused_multiply_add(a9, m, c); a10 = fused_multiply_add(a10, m, c); a11 = fused_multiply_add(a11, m, c);
+    a0 = step(a0); a1 = step(a1); a2 = step(a2); a3 = step(a3); a4 = step(a4); a5 = step(a5);
+    a6 = step(a6); a7 = step(a7); a8 = step(a8); a9 = step(a9); a10 = step(a10); a11 = step(a11);
   }
   return xsimd::hadd(((a0 + a1) + (a2 + a3)) + ((a4 + a5) + (a6 + a7)) + ((a8 + a9) + (a10 + a11)));
 }
 
+// FMA chains: a ← a·m + c with m = 0.9999 and c = 1e-3 (the chains stay near 1-10).
+inline float fma_chains(std::int64_t iterations) {
+  const xsimd::batch<float> m(0.9999f), c(1e-3f);
+  return twelve_chains(iterations, [m, c](xsimd::batch<float> a) { return fused_multiply_add(a, m, c); });
+}
+
 #if TJEPA_BF16_NATIVE
-// 12 chains of a ← a + m₀·c₀ + m₁·c₁ (vdpbf16ps; m = (1, 1), c = (2⁻¹⁰, 2⁻¹⁰) in bf16): each
-// grows by 2⁻⁹ a step (less only the rounding of the start's low bits), so no step is a no-op.
+// vdpbf16ps chains: a ← a + m₀·c₀ + m₁·c₁ with m = (1, 1) and c = (2⁻¹⁰, 2⁻¹⁰) in bf16: each grows
+// by 2⁻⁹ a step (less only the rounding of the start's low bits), so no step is a no-op.
 inline float bf16_dot_chains(std::int64_t iterations) {
   const auto m = std::bit_cast<__m512bh>(_mm512_set1_epi32(0x3f803f80));
   const auto c = std::bit_cast<__m512bh>(_mm512_set1_epi32(0x3a803a80));
-  __m512 a0 = _mm512_set1_ps(1.0f), a1 = _mm512_set1_ps(1.1f), a2 = _mm512_set1_ps(1.2f), a3 = _mm512_set1_ps(1.3f),
-         a4 = _mm512_set1_ps(1.4f), a5 = _mm512_set1_ps(1.5f), a6 = _mm512_set1_ps(1.6f), a7 = _mm512_set1_ps(1.7f),
-         a8 = _mm512_set1_ps(1.8f), a9 = _mm512_set1_ps(1.9f), a10 = _mm512_set1_ps(2.0f), a11 = _mm512_set1_ps(2.1f);
-  for (std::int64_t k = 0; k < iterations; ++k) {
-    a0 = _mm512_dpbf16_ps(a0, m, c); a1 = _mm512_dpbf16_ps(a1, m, c); a2 = _mm512_dpbf16_ps(a2, m, c);
-    a3 = _mm512_dpbf16_ps(a3, m, c); a4 = _mm512_dpbf16_ps(a4, m, c); a5 = _mm512_dpbf16_ps(a5, m, c);
-    a6 = _mm512_dpbf16_ps(a6, m, c); a7 = _mm512_dpbf16_ps(a7, m, c); a8 = _mm512_dpbf16_ps(a8, m, c);
-    a9 = _mm512_dpbf16_ps(a9, m, c); a10 = _mm512_dpbf16_ps(a10, m, c); a11 = _mm512_dpbf16_ps(a11, m, c);
-  }
-  const __m512 sum = _mm512_add_ps(
-      _mm512_add_ps(_mm512_add_ps(_mm512_add_ps(a0, a1), _mm512_add_ps(a2, a3)),
-                    _mm512_add_ps(_mm512_add_ps(a4, a5), _mm512_add_ps(a6, a7))),
-      _mm512_add_ps(_mm512_add_ps(a8, a9), _mm512_add_ps(a10, a11)));
-  return xsimd::hadd(xsimd::batch<float>(sum));
+  return twelve_chains(iterations, [m, c](xsimd::batch<float> a) { return xsimd::batch<float>(_mm512_dpbf16_ps(a, m, c)); });
 }
 #endif
 
