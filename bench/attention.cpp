@@ -205,6 +205,20 @@ void BM_Bf16DotPeak(benchmark::State& state) {
 BENCHMARK(BM_Bf16DotPeak)->Unit(benchmark::kMillisecond);
 #endif
 
+#if TJEPA_AMX_NATIVE
+// The AMX peak: TDPBF16PS into four C tiles, 16384 FLOPs each (kernels/detail/amx.hpp). The
+// linear layers' bf16 products' ceiling where AMX is enabled; skipped where it is not (TJEPA_AMX=off,
+// or a CPU or kernel without the tiles).
+void BM_AmxPeak(benchmark::State& state) {
+  if (!tjepa::amx_enabled()) {
+    state.SkipWithError("AMX is not enabled here (amx_available() false, or TJEPA_AMX=off)");
+    return;
+  }
+  time_chains(state, tjepa::detail::amx::peak_chains, tjepa::detail::amx::peak_chain_flops);
+}
+BENCHMARK(BM_AmxPeak)->Unit(benchmark::kMillisecond);
+#endif
+
 BENCHMARK(BM_AttentionForward)->Apply(batch1);
 BENCHMARK(BM_AttentionForwardBackward)->Apply(batch1);
 BENCHMARK(BM_AttentionForward)->Apply(batch8);

@@ -385,7 +385,7 @@ TEST_SUITE("kernels") {
     row[4] = 1.0f + 0x1p-8f;
     row[5] = -std::numeric_limits<float>::infinity();
     alignas(64) std::uint32_t packed[40] = {};
-    detail::bgemm::pack_a(packed, 1, 77, row.data(), 77);
+    detail::bgemm::pack_a(packed, 1, 77, row.data(), 77, 39);
     for (int q = 0; q < 39; ++q)
       CHECK(packed[q] == detail::bgemm::pair(row[std::size_t(2 * q)], 2 * q + 1 < 77 ? row[std::size_t(2 * q + 1)] : 0.0f));
     // Column-major A ([kc/2][ld] pairs, 16 rows per conversion: 37 rows are two whole conversions
@@ -431,8 +431,10 @@ TEST_SUITE("kernels") {
       for (int m = 0; m < M; ++m)
         for (int n = 0; n < N; ++n)
           for (int k = 0; k < K; ++k) dW[std::size_t(n) * K + k] += double(o.g[std::size_t(m) * N + n]) * o.x[std::size_t(m) * K + k];
-      for (const Precision p : {Precision::fp32, Precision::bf16}) {
-        INFO(precision_name(p));
+      for (const auto& [p, amx] : {std::pair{Precision::fp32, false}, std::pair{Precision::bf16, false},
+                                   std::pair{Precision::bf16, amx_available()}}) {
+        INFO(precision_name(p), ", AMX ", amx);
+        const test::Amx engine(amx);
         std::vector<std::vector<float>> runs;
         for (const int threads : {1, 2}) {
           const test::Threads scope(threads);
@@ -496,41 +498,47 @@ TEST_SUITE("kernels") {
           return e;
         };
         const double tol = 1e-6;
-        // C = r + x·Wᵀ + b; then C = x·Wᵀ + b with GELU into h
-        std::vector<double> want(y.size()), mag(y.size());
-        for (std::size_t i = 0; i < y.size(); ++i) {
-          want[i] = y[i] + b[i % std::size_t(N)] + r[i];
-          mag[i] = ya[i] + std::abs(b[i % std::size_t(N)]) + std::abs(r[i]);
+        // On vdpbf16ps, and on AMX tiles where the machine has them.
+        for (const bool amx : test::amx_modes()) {
+          INFO("AMX ", amx);
+          const test::Amx engine(amx);
+          // C = r + x·Wᵀ + b; then C = x·Wᵀ + b with GELU into h
+          std::vector<double> want(y.size()), mag(y.size());
+          for (std::size_t i = 0; i < y.size(); ++i) {
+            want[i] = y[i] + b[i % std::size_t(N)] + r[i];
+            mag[i] = ya[i] + std::abs(b[i % std::size_t(N)]) + std::abs(r[i]);
+          }
+          bg::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c1.data(), N,
+                   {false, b.data(), nullptr, nullptr, r.data()});
+          CHECK(err(c1, want, mag) < tol);
+          std::vector<float> h(y.size());
+          bg::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c1.data(), N,
+                   {false, b.data(), h.data()});
+          for (std::size_t i = 0; i < y.size(); ++i) {
+            want[i] = y[i] + b[i % std::size_t(N)];
+            mag[i] = ya[i] + std::abs(b[i % std::size_t(N)]);
+          }
+          CHECK(err(c1, want, mag) < tol);
+          std::vector<float> hr(c1.size());
+          kernels::ref::gelu_forward(hr.data(), c1.data(), hr.size());
+          CHECK(max_scaled_diff(h, hr) < 1e-6);
+          // The weight packed once (gemm_packed) gives the per-call product bit for bit.
+          AlignedVector<std::uint32_t> packed(bg::packed_size(N, K));
+          bg::pack(packed.data(), W.data(), K, Order::col_major, K, N);
+          bg::gemm_packed(M, N, K, x.data(), K, Order::row_major, packed.data(), c2.data(), N, {false, b.data(), h.data()});
+          CHECK(c2 == c1);
+          // dx += g·W (B row-major), dW += gᵀ·x (A column-major), onto starting values
+          std::vector<float> dx2(x.size(), 0.5f), dW2(W.size(), -0.25f);
+          bg::gemm(M, K, N, g.data(), N, Order::row_major, W.data(), K, Order::row_major, dx2.data(), K, {true});
+          bg::gemm(N, K, M, g.data(), N, Order::col_major, x.data(), K, Order::row_major, dW2.data(), K, {true});
+          std::vector<double> dx_want = dx, dx_mag = dxa, dW_want = dW, dW_mag = dWa;
+          for (auto& v : dx_want) v += 0.5;
+          for (auto& v : dx_mag) v += 0.5;
+          for (auto& v : dW_want) v -= 0.25;
+          for (auto& v : dW_mag) v += 0.25;
+          CHECK(err(dx2, dx_want, dx_mag) < tol);
+          CHECK(err(dW2, dW_want, dW_mag) < tol);
         }
-        bg::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c1.data(), N,
-                 {false, b.data(), nullptr, nullptr, r.data()});
-        CHECK(err(c1, want, mag) < tol);
-        std::vector<float> h(y.size());
-        bg::gemm(M, N, K, x.data(), K, Order::row_major, W.data(), K, Order::col_major, c1.data(), N,
-                 {false, b.data(), h.data()});
-        for (std::size_t i = 0; i < y.size(); ++i) {
-          want[i] = y[i] + b[i % std::size_t(N)];
-          mag[i] = ya[i] + std::abs(b[i % std::size_t(N)]);
-        }
-        CHECK(err(c1, want, mag) < tol);
-        std::vector<float> hr(c1.size());
-        kernels::ref::gelu_forward(hr.data(), c1.data(), hr.size());
-        CHECK(max_scaled_diff(h, hr) < 1e-6);
-        // The weight packed once (gemm_packed) gives the per-call product bit for bit.
-        AlignedVector<std::uint32_t> packed(bg::packed_size(N, K));
-        bg::pack(packed.data(), W.data(), K, Order::col_major, K, N);
-        bg::gemm_packed(M, N, K, x.data(), K, Order::row_major, packed.data(), c2.data(), N, {false, b.data(), h.data()});
-        CHECK(c2 == c1);
-        // dx += g·W (B row-major), dW += gᵀ·x (A column-major), onto starting values
-        std::vector<float> dx2(x.size(), 0.5f), dW2(W.size(), -0.25f);
-        bg::gemm(M, K, N, g.data(), N, Order::row_major, W.data(), K, Order::row_major, dx2.data(), K, {true});
-        bg::gemm(N, K, M, g.data(), N, Order::col_major, x.data(), K, Order::row_major, dW2.data(), K, {true});
-        for (auto& v : dx) v += 0.5;
-        for (auto& v : dxa) v += 0.5;
-        for (auto& v : dW) v -= 0.25;
-        for (auto& v : dWa) v += 0.25;
-        CHECK(err(dx2, dx, dxa) < tol);
-        CHECK(err(dW2, dW, dWa) < tol);
       }
     }
   }

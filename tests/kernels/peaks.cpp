@@ -3,6 +3,8 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <stdexcept>
 #include <string>
 
 #include <xsimd/xsimd.hpp>
@@ -45,6 +47,62 @@ TEST_SUITE("kernels") {
   }
 #endif
 
+#if TJEPA_AMX_NATIVE
+  TEST_CASE("the AMX chains: four C tiles of ones times ones grow by 32 a step") {
+    if (!tjepa::amx_available()) return;
+    for (const std::int64_t n : {0, 1, 1000}) {
+      CAPTURE(n);
+      CHECK(double(tjepa::detail::amx::peak_chains(n)) == 4.0 * 32.0 * double(n));
+    }
+  }
+#endif
+
+  TEST_CASE("the AMX switch: TJEPA_AMX is on or off / set_amx(true) without tiles is an error") {
+    const char* saved = std::getenv("TJEPA_AMX");
+    const std::string before = saved ? saved : "";
+    unsetenv("TJEPA_AMX");
+    CHECK(tjepa::detail::amx::wanted_by_environment());
+    setenv("TJEPA_AMX", "on", 1);
+    CHECK(tjepa::detail::amx::wanted_by_environment());
+    setenv("TJEPA_AMX", "off", 1);
+    CHECK_FALSE(tjepa::detail::amx::wanted_by_environment());
+    setenv("TJEPA_AMX", "1", 1);
+    CHECK_THROWS_WITH_AS(tjepa::detail::amx::wanted_by_environment(), "TJEPA_AMX=1: expected on or off",
+                         std::invalid_argument);
+    if (saved)
+      setenv("TJEPA_AMX", before.c_str(), 1);
+    else
+      unsetenv("TJEPA_AMX");
+    const bool was = tjepa::amx_enabled();
+    if (tjepa::amx_available()) {
+      tjepa::set_amx(false);
+      CHECK_FALSE(tjepa::amx_enabled());
+      tjepa::set_amx(true);
+      CHECK(tjepa::amx_enabled());
+    } else {
+      CHECK_FALSE(tjepa::amx_enabled());
+      CHECK_THROWS_WITH_AS(tjepa::set_amx(true), "set_amx: this build or CPU has no AMX tiles", std::invalid_argument);
+      tjepa::set_amx(false);
+    }
+    tjepa::set_amx(was);
+  }
+
+  TEST_CASE("the measured peaks: fp32 always / bf16 only where the build has AVX512-BF16 / AMX only where enabled") {
+    const bool was = tjepa::amx_enabled();
+    for (const bool amx : {false, tjepa::amx_available()}) {
+      tjepa::set_amx(amx);
+      const tjepa::ProductPeaks p = tjepa::measure_product_peaks(0.001);
+      CAPTURE(amx);
+      if (amx) {
+        CHECK(p.amx_gflops > 4 * p.fp32_gflops);  // 16x the FMA's work per cycle on such cores
+        CHECK(p.bf16_faster());
+      } else {
+        CHECK(p.amx_gflops == 0);
+      }
+    }
+    tjepa::set_amx(was);
+  }
+
   TEST_CASE("the measured peaks: fp32 always / bf16 only where the build has AVX512-BF16") {
     const tjepa::ProductPeaks p = tjepa::measure_product_peaks(0.001);
     CHECK(std::isfinite(p.fp32_gflops));
@@ -58,10 +116,19 @@ TEST_SUITE("kernels") {
   }
 
   TEST_CASE("a bf16 run is noted as slower where the bf16 peak is under 1.2x the FMA peak or the build has no bf16") {
+    const bool was = tjepa::amx_enabled();
+    if (tjepa::amx_available()) tjepa::set_amx(true);  // the note's text without its AMX remark
     const std::string slower = tjepa::bf16_slower_reason({.fp32_gflops = 172, .bf16_gflops = 83});
     const std::string faster = tjepa::bf16_slower_reason({.fp32_gflops = 210, .bf16_gflops = 420});
     if (tjepa::has_native_bf16()) {
       CHECK(faster.empty());
+      CHECK(tjepa::bf16_slower_reason({.fp32_gflops = 172, .bf16_gflops = 83, .amx_gflops = 2700}).empty());
+      if (tjepa::amx_available()) {
+        tjepa::set_amx(false);
+        CHECK(tjepa::bf16_slower_reason({.fp32_gflops = 172, .bf16_gflops = 83}) ==
+              slower + " (AMX is here but switched off: TJEPA_AMX=off or set_amx(false))");
+        tjepa::set_amx(true);
+      }
       CHECK(slower == "bf16 products peak at 83 GFLOP/s on this core against fp32's 172 (vdpbf16ps at 0.48x an "
                       "FMA's FLOP rate), so fp32 runs faster here");
       CHECK(!tjepa::bf16_slower_reason({.fp32_gflops = 100, .bf16_gflops = 119}).empty());
@@ -70,5 +137,6 @@ TEST_SUITE("kernels") {
       CHECK(slower == "this build has no AVX512-BF16, so bf16 computes in fp32");
       CHECK(faster == slower);
     }
+    tjepa::set_amx(was);
   }
 }

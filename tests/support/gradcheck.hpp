@@ -17,6 +17,7 @@
 
 #include <tjepa/core/random.hpp>
 #include <tjepa/core/param_set.hpp>
+#include <tjepa/kernels/precision.hpp>
 
 namespace tjepa::test {
 
@@ -110,6 +111,17 @@ struct Threads {
 #endif
   Threads(const Threads&) = delete;
   Threads& operator=(const Threads&) = delete;
+};
+
+// The bf16 product engines this machine can run: vdpbf16ps (AMX off), then AMX tiles where
+// amx_available(). Amx(on) runs a scope with AMX switched on or off, then restores the switch.
+inline std::vector<bool> amx_modes() { return amx_available() ? std::vector<bool>{false, true} : std::vector<bool>{false}; }
+struct Amx {
+  bool previous = amx_enabled();
+  explicit Amx(bool on) { set_amx(on); }
+  ~Amx() { set_amx(previous); }
+  Amx(const Amx&) = delete;
+  Amx& operator=(const Amx&) = delete;
 };
 
 // Runs a scope on one OpenMP thread: the tiny model's thousands of forward passes would spend

@@ -4,7 +4,10 @@
 // AVX512-BF16. Each runs as twelve independent chains in registers, more than latency × issue
 // ports on current x86 cores, so a loop runs at its instruction's issue rate.
 //
-// Precision::bf16 is faster only where the second rate is well above the first. On AMD Zen 4 and
+// Where the build has AMX and amx_enabled(), the linear layers' bf16 products run on AMX tiles
+// (kernels/detail/amx.hpp), whose peak is measured as a third rate.
+//
+// Precision::bf16 is faster only where the second (or third) rate is well above the first. On AMD Zen 4 and
 // Zen 5 the bf16 JEPA step ran 1.5-1.7x faster than fp32. On an Intel Xeon (family 6, model 207)
 // without AMX, vdpbf16ps issued at a quarter of the FMA's rate, so bf16 products peaked at half of
 // fp32's and the bf16 step ran at 0.6-0.7x (bench/RESULTS.md). bench/attention.cpp's BM_FmaPeak and
@@ -18,6 +21,7 @@
 
 #include <xsimd/xsimd.hpp>
 
+#include "tjepa/kernels/detail/amx.hpp"
 #include "tjepa/kernels/precision.hpp"
 
 #if TJEPA_BF16_NATIVE || defined(__AVX512F__)
@@ -94,15 +98,19 @@ double best_rate(Chains chains, double flops_per_iteration, double seconds) {
 
 }  // namespace detail
 
-// This core's product peaks in GFLOP/s: fp32 FMAs, and bf16 dot products (0 where the build has
-// no AVX512-BF16: Precision::bf16 then computes in fp32).
+// This core's product peaks in GFLOP/s: fp32 FMAs, bf16 dot products (0 where the build has
+// no AVX512-BF16: Precision::bf16 then computes in fp32), and AMX tiles (0 where amx_enabled() is
+// false: the linear layers' bf16 products then run on vdpbf16ps).
 struct ProductPeaks {
   double fp32_gflops = 0;
   double bf16_gflops = 0;
+  double amx_gflops = 0;
 
-  // Whether Precision::bf16's products can be faster than fp32's here: the bf16 peak at least
-  // 1.2x the FMA's (about 2x on CPUs where it pays, 0.5x on one where it does not).
-  bool bf16_faster() const { return bf16_gflops >= 1.2 * fp32_gflops; }
+  // Whether Precision::bf16's products can be faster than fp32's here: the peak of the
+  // instruction that runs the linear layers' bf16 products (AMX's where enabled, else
+  // vdpbf16ps's) at least 1.2x the FMA's: about 2x on CPUs where vdpbf16ps pays, 0.5x on one where
+  // it does not, about 15x with AMX.
+  bool bf16_faster() const { return std::max(bf16_gflops, amx_gflops) >= 1.2 * fp32_gflops; }
 };
 
 // Measures both on the calling thread, `seconds` each (a few milliseconds give the peaks to a few
@@ -112,6 +120,9 @@ inline ProductPeaks measure_product_peaks(double seconds = 0.005) {
   p.fp32_gflops = detail::best_rate(detail::fma_chains, detail::fma_chain_flops, seconds);
 #if TJEPA_BF16_NATIVE
   p.bf16_gflops = detail::best_rate(detail::bf16_dot_chains, detail::bf16_dot_chain_flops, seconds);
+#endif
+#if TJEPA_AMX_NATIVE
+  if (amx_enabled()) p.amx_gflops = detail::best_rate(detail::amx::peak_chains, detail::amx::peak_chain_flops, seconds);
 #endif
   return p;
 }
@@ -126,7 +137,9 @@ inline std::string bf16_slower_reason(const ProductPeaks& p) {
                 "bf16 products peak at %.0f GFLOP/s on this core against fp32's %.0f (vdpbf16ps at %.2fx an FMA's "
                 "FLOP rate), so fp32 runs faster here",
                 p.bf16_gflops, p.fp32_gflops, p.bf16_gflops / p.fp32_gflops);
-  return line;
+  std::string why = line;
+  if (amx_available() && !amx_enabled()) why += " (AMX is here but switched off: TJEPA_AMX=off or set_amx(false))";
+  return why;
 }
 
 }  // namespace tjepa

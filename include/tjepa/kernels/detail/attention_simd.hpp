@@ -402,7 +402,7 @@ inline void pack_row_pairs(const float* src, std::ptrdiff_t lds, const int* rows
     prefetch_row(src, lds, rows, static_cast<int>(r), n, Dh);
     const float* sr = source(r);
     if (!transposed) {  // a row's words in place, as the GEMM converts a row of A
-      bg::pack_a(d, 1, Dh, sr, 0);
+      bg::pack_a(d, 1, Dh, sr, 0, bg::depth_pairs(Dh));
       continue;
     }
     for (int k = 0; k < Dh; k += 2 * bg::L) {

@@ -23,6 +23,7 @@
 #include <utility>
 
 #include "tjepa/core/error.hpp"
+#include "tjepa/kernels/detail/amx.hpp"
 #include "tjepa/kernels/detail/sgemm.hpp"
 
 #include "tjepa/kernels/precision.hpp"
@@ -175,12 +176,13 @@ inline void pack_panel(std::uint32_t* dst, const float* b, std::ptrdiff_t ldb, O
 }
 
 // Row-major A's rows [0, R) × depths [0, kc) as bf16 pairs for the micro-kernel, a(i, k) =
-// a[i·ars + k] → dst [R][kc/2] (32 depths of a row per conversion). Zero high halves after an odd kc.
-TJEPA_PROFILE_INLINE void pack_a(std::uint32_t* dst, int R, int kc, const float* a, std::ptrdiff_t ars) {
-  const int kc2 = depth_pairs(kc);
+// a[i·ars + k] → dst [R][kc/2] (row stride ld ≥ kc/2 words; 32 depths of a row per conversion).
+// Zero high halves after an odd kc.
+TJEPA_PROFILE_INLINE void pack_a(std::uint32_t* dst, int R, int kc, const float* a, std::ptrdiff_t ars,
+                                 std::ptrdiff_t ld) {
   for (int i = 0; i < R; ++i)
     for (int k = 0; k < kc; k += 2 * L)
-      _mm512_mask_storeu_epi32(dst + i * kc2 + k / 2, first_lanes((std::min(2 * L, kc - k) + 1) / 2),
+      _mm512_mask_storeu_epi32(dst + i * ld + k / 2, first_lanes((std::min(2 * L, kc - k) + 1) / 2),
                                row_pairs(a + i * ars + k, std::min(2 * L, kc - k)));
 }
 
@@ -273,9 +275,83 @@ constexpr auto kernel_table(std::integer_sequence<int, R...>) {
 inline constexpr std::array<std::array<Kernel, MR>, 2> kernels = {
     kernel_table<false>(std::make_integer_sequence<int, MR>{}), kernel_table<true>(std::make_integer_sequence<int, MR>{})};
 
+#if TJEPA_AMX_NATIVE
+// Column-major A's rows [0, R ≤ 32) × depths [0, kc), a(i, k) = a[k·acs + i], as row-major pairs
+// dst [32][ld] (ld a multiple of 16; the A tiles' layout; zero past R): 16 pairs of 16 rows
+// converted (pairs16), then transposed in registers.
+TJEPA_PROFILE_INLINE void pack_a_cols_to_rows(std::uint32_t* dst, std::ptrdiff_t ld, int R, int kc, const float* a,
+                                             std::ptrdiff_t acs) {
+  const int kc2 = depth_pairs(kc);
+  alignas(64) std::uint32_t block[L][L];
+  for (int i0 = 0; i0 < amx::MB; i0 += L) {
+    if (i0 >= R) {
+      for (int i = i0; i < i0 + L; ++i) std::fill(dst + i * ld, dst + i * ld + kc2, 0u);
+      continue;
+    }
+    for (int q0 = 0; q0 < kc2; q0 += L) {
+      const int nq = std::min(L, kc2 - q0);
+      for (int t = 0; t < nq; ++t) {
+        const int q = q0 + t;
+        const float* lo = a + std::ptrdiff_t(2 * q) * acs + i0;
+        // Each depth is a line of another row of a: 8 pairs ahead, prefetched (a stride of a row
+        // defeats the hardware's prefetchers; without it the conversion waited on every line).
+        if (2 * q + 17 < kc) {
+          __builtin_prefetch(lo + 16 * acs);
+          __builtin_prefetch(lo + 17 * acs);
+        }
+        _mm512_store_si512(block[t], pairs16(lo, 2 * q + 1 < kc ? lo + acs : nullptr, R - i0));
+      }
+      for (int t = nq; t < L; ++t) _mm512_store_si512(block[t], _mm512_setzero_si512());
+      transpose16([&](int t) { return static_cast<const std::uint32_t*>(block[t]); }, dst + i0 * ld + q0, ld);
+    }
+  }
+}
+
+// compute_rows on AMX tiles: blocks of 32 rows × one panel (amx::block_product), A converted per
+// 32 rows × KC depths into the tiles' layout, then sgemm's epilogue row by row.
+inline void compute_rows_amx(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
+                             const std::uint32_t* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
+  constexpr int MB = amx::MB;
+  const amx::Tiles tiles;
+  const int panels = (cols + NR - 1) / NR, depth2 = depth_pairs(depth);
+  thread_local AlignedVector<std::uint32_t> abuf_storage;
+  std::uint32_t* const abuf = grow(abuf_storage, std::size_t(MB) * (KC / 2));
+  alignas(64) float tile[MB * NR];
+  for (int k0 = 0; k0 < depth; k0 += KC) {
+    const int kc = std::min(KC, depth - k0), kc2 = depth_pairs(kc);
+    const std::ptrdiff_t ald = (kc2 + amx::TK - 1) / amx::TK * amx::TK;
+    const bool first = k0 == 0, last = k0 + kc == depth;
+    const float* c_in = !first || e.accumulate ? C : e.residual;
+    for (int i0 = r0; i0 < r1; i0 += MB) {
+      const int R = std::min(MB, r1 - i0);
+      if (a_order == Order::row_major) {
+        pack_a(abuf, R, kc, A + i0 * lda + k0, lda, ald);
+        for (int i = R; i < MB; ++i) std::fill(abuf + i * ald, abuf + i * ald + kc2, 0u);
+      } else {
+        pack_a_cols_to_rows(abuf, ald, R, kc, A + i0 + std::ptrdiff_t(k0) * lda, lda);
+      }
+      for (int p = 0; p < panels; ++p) {
+        const int n0 = p * NR, nc = std::min(NR, cols - n0);
+        amx::block_product<NR>(kc2, abuf, ald, packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR,
+                               nc, R, tile);
+        for (int i = 0; i < R; ++i) {
+          const std::ptrdiff_t at = std::ptrdiff_t(i0 + i) * ldc + n0;
+          sgemm::finish_tile<1, NV>(tile + i * NR, C + at, ldc, nc, c_in ? c_in + at : nullptr,
+                                    first && e.bias ? e.bias + n0 : nullptr, last && e.gelu ? e.gelu + at : nullptr,
+                                    last && e.scale ? e.scale + at : nullptr);
+        }
+      }
+    }
+  }
+}
+#endif
+
 // Rows [r0, r1) of C from the packed B.
 inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
                          const std::uint32_t* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
+#if TJEPA_AMX_NATIVE
+  if (amx_enabled()) return compute_rows_amx(r0, r1, cols, depth, A, lda, a_order, packed, C, ldc, e);
+#endif
   const bool col_major = a_order == Order::col_major;
   const int panels = (cols + NR - 1) / NR, depth2 = depth_pairs(depth);
   alignas(64) std::uint32_t apack[MR * KC / 2];
@@ -290,7 +366,7 @@ inline void compute_rows(int r0, int r1, int cols, int depth, const float* A, st
       const int R = std::min(MR, r1 - i0);
       const int c0 = r0 + (i0 - r0) / CH * CH;  // the chunk of rows holding this block
       if (!col_major)
-        pack_a(apack, R, kc, A + i0 * lda + k0, lda);
+        pack_a(apack, R, kc, A + i0 * lda + k0, lda, kc2);
       else if (i0 == c0)
         pack_a_cols(abuf, CH, std::min(CH, r1 - c0), kc, A + c0 + std::ptrdiff_t(k0) * lda, lda);
       const std::uint32_t* a = col_major ? abuf + (i0 - c0) : apack;
