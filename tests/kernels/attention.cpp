@@ -15,6 +15,8 @@
 #include <tjepa/core/random.hpp>
 #include <tjepa/kernels/attention.hpp>
 
+#include "../support/gradcheck.hpp"
+
 namespace {
 
 namespace kernels = tjepa::kernels;
@@ -378,35 +380,39 @@ TEST_SUITE("kernels") {
     // Without AVX512-BF16 the call is the fp32 kernel, bit for bit.
     std::uint64_t seed = 900;
     double worst = 0;
-    for (int L : {1, 7, 17, 131, 368}) {
-      for (int Dh : {64, 13}) {
-        for (bool masked : {false, true}) {
-          CAPTURE(L);
-          CAPTURE(Dh);
-          CAPTURE(masked);
-          for (auto p : {make_problem<float>(L, L, 3, Dh, true, masked, ++seed, 0.5),
-                         make_problem<float>(L, 2 * L + 5, 2, Dh, false, masked, ++seed, 0.5, 5)}) {
-            tjepa::kernels::AttentionWorkspace<float> ws;
-            std::vector<float> out16, lse16, out32, lse32;
-            forward(Impl::fast_bf16, p, out16, lse16, ws);
-            forward(Impl::fast, p, out32, lse32, ws);
-            if (!tjepa::detail::bgemm::native) {
-              CHECK(out16 == out32);
-              continue;
+    for (const bool amx : tjepa::test::amx_modes()) {  // vdpbf16ps, then AMX tiles where the machine has them
+      const tjepa::test::Amx engine(amx);
+      CAPTURE(amx);
+      for (int L : {1, 7, 17, 131, 368}) {
+        for (int Dh : {64, 13}) {
+          for (bool masked : {false, true}) {
+            CAPTURE(L);
+            CAPTURE(Dh);
+            CAPTURE(masked);
+            for (auto p : {make_problem<float>(L, L, 3, Dh, true, masked, ++seed, 0.5),
+                           make_problem<float>(L, 2 * L + 5, 2, Dh, false, masked, ++seed, 0.5, 5)}) {
+              tjepa::kernels::AttentionWorkspace<float> ws;
+              std::vector<float> out16, lse16, out32, lse32;
+              forward(Impl::fast_bf16, p, out16, lse16, ws);
+              forward(Impl::fast, p, out32, lse32, ws);
+              if (!tjepa::detail::bgemm::native) {
+                CHECK(out16 == out32);
+                continue;
+              }
+              for (auto* x : {&p.q, &p.k, &p.v, &p.qkv})
+                for (float& e : *x) e = tjepa::detail::bgemm::round_bf16(e);
+              std::vector<float> outr, lser;
+              forward(Impl::ref, p, outr, lser, ws);
+              double vmax = 0, lse_err = 0;
+              for (float e : p.fused ? p.qkv : p.v) vmax = std::max(vmax, double(std::abs(e)));
+              for (std::size_t i = 0; i < lser.size(); ++i)
+                if (std::isfinite(lser[i])) lse_err = std::max(lse_err, double(std::abs(lse16[i] - lser[i])));
+              const double err = max_abs_diff_out(p, out16, naive_attention(p)) / vmax;
+              worst = std::max(worst, err);
+              CHECK(lse_err < 1e-5);
+              CHECK(err < 1e-2);
+              CHECK(out16 != out32);  // the bf16 products ran
             }
-            for (auto* x : {&p.q, &p.k, &p.v, &p.qkv})
-              for (float& e : *x) e = tjepa::detail::bgemm::round_bf16(e);
-            std::vector<float> outr, lser;
-            forward(Impl::ref, p, outr, lser, ws);
-            double vmax = 0, lse_err = 0;
-            for (float e : p.fused ? p.qkv : p.v) vmax = std::max(vmax, double(std::abs(e)));
-            for (std::size_t i = 0; i < lser.size(); ++i)
-              if (std::isfinite(lser[i])) lse_err = std::max(lse_err, double(std::abs(lse16[i] - lser[i])));
-            const double err = max_abs_diff_out(p, out16, naive_attention(p)) / vmax;
-            worst = std::max(worst, err);
-            CHECK(lse_err < 1e-5);
-            CHECK(err < 1e-2);
-            CHECK(out16 != out32);  // the bf16 products ran
           }
         }
       }
@@ -516,34 +522,38 @@ TEST_SUITE("kernels") {
     // fp32 gradient entry of its buffer (measured: 0.6 %). Without AVX512-BF16 they are equal.
     std::uint64_t seed = 1900;
     double worst = 0;
-    for (int L : {1, 7, 17, 131, 200}) {
-      for (int Dh : {64, 13}) {
-        for (bool masked : {false, true}) {
-          CAPTURE(L);
-          CAPTURE(Dh);
-          CAPTURE(masked);
-          for (const auto& p : {make_problem<float>(L, L, 3, Dh, true, masked, ++seed, 0.5),
-                                make_problem<float>(L, 2 * L + 5, 2, Dh, false, masked, ++seed, 0.5, 5)}) {
-            tjepa::kernels::AttentionWorkspace<float> ws;
-            std::vector<float> out16, lse16, out32, lse32;
-            forward(Impl::fast_bf16, p, out16, lse16, ws);
-            forward(Impl::fast, p, out32, lse32, ws);
-            const Grads<float> g16 = backward(Impl::fast_bf16, p, out16, lse16, ws);
-            const Grads<float> g32 = backward(Impl::fast, p, out32, lse32, ws);
-            for (const auto& [a, b] : {std::pair{&g16.dq, &g32.dq}, std::pair{&g16.dk, &g32.dk},
-                                        std::pair{&g16.dv, &g32.dv}, std::pair{&g16.dqkv, &g32.dqkv}}) {
-              if (!tjepa::detail::bgemm::native) {
-                CHECK(*a == *b);
-                continue;
+    for (const bool amx : tjepa::test::amx_modes()) {  // vdpbf16ps, then AMX tiles where the machine has them
+      const tjepa::test::Amx engine(amx);
+      CAPTURE(amx);
+      for (int L : {1, 7, 17, 131, 200}) {
+        for (int Dh : {64, 13}) {
+          for (bool masked : {false, true}) {
+            CAPTURE(L);
+            CAPTURE(Dh);
+            CAPTURE(masked);
+            for (const auto& p : {make_problem<float>(L, L, 3, Dh, true, masked, ++seed, 0.5),
+                                  make_problem<float>(L, 2 * L + 5, 2, Dh, false, masked, ++seed, 0.5, 5)}) {
+              tjepa::kernels::AttentionWorkspace<float> ws;
+              std::vector<float> out16, lse16, out32, lse32;
+              forward(Impl::fast_bf16, p, out16, lse16, ws);
+              forward(Impl::fast, p, out32, lse32, ws);
+              const Grads<float> g16 = backward(Impl::fast_bf16, p, out16, lse16, ws);
+              const Grads<float> g32 = backward(Impl::fast, p, out32, lse32, ws);
+              for (const auto& [a, b] : {std::pair{&g16.dq, &g32.dq}, std::pair{&g16.dk, &g32.dk},
+                                          std::pair{&g16.dv, &g32.dv}, std::pair{&g16.dqkv, &g32.dqkv}}) {
+                if (!tjepa::detail::bgemm::native) {
+                  CHECK(*a == *b);
+                  continue;
+                }
+                double scale = 0, err = 0;
+                for (std::size_t i = 0; i < b->size(); ++i) {
+                  scale = std::max(scale, double(std::abs((*b)[i])));
+                  err = std::max(err, double(std::abs((*a)[i] - (*b)[i])));
+                }
+                if (scale == 0) continue;
+                worst = std::max(worst, err / scale);
+                CHECK(err / scale < 2e-2);
               }
-              double scale = 0, err = 0;
-              for (std::size_t i = 0; i < b->size(); ++i) {
-                scale = std::max(scale, double(std::abs((*b)[i])));
-                err = std::max(err, double(std::abs((*a)[i] - (*b)[i])));
-              }
-              if (scale == 0) continue;
-              worst = std::max(worst, err / scale);
-              CHECK(err / scale < 2e-2);
             }
           }
         }

@@ -30,6 +30,7 @@
 #include <cstdint>
 #include <initializer_list>
 #include <limits>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -303,6 +304,10 @@ void attention_forward(const AttentionShape& s, const T* q, const T* k, const T*
 #if TJEPA_BF16_NATIVE
   constexpr bool can_bf16 = std::is_same_v<T, float>;
   const bool bf16 = can_bf16 && detail::bgemm::resolve(precision) == Precision::bf16;
+#if TJEPA_AMX_NATIVE
+  std::optional<detail::amx::Tiles> tiles;  // one tile configuration for all the products below
+  if (bf16 && amx_enabled()) tiles.emplace();
+#endif
   auto words = [base](std::ptrdiff_t off) { return reinterpret_cast<std::uint32_t*>(base + off); };
   const std::ptrdiff_t Dh2 = lay.Dh2;
 #else
@@ -424,6 +429,10 @@ void attention_backward(const AttentionShape& s, const T* q, const T* k, const T
 #if TJEPA_BF16_NATIVE
   constexpr bool can_bf16 = std::is_same_v<T, float>;
   const bool bf16 = can_bf16 && detail::bgemm::resolve(precision) == Precision::bf16;
+#if TJEPA_AMX_NATIVE
+  std::optional<detail::amx::Tiles> tiles;  // one tile configuration for all the products below
+  if (bf16 && amx_enabled()) tiles.emplace();
+#endif
   auto words = [base](std::ptrdiff_t off) { return reinterpret_cast<std::uint32_t*>(base + off); };
   const std::ptrdiff_t Dh2 = lay.Dh2;
   constexpr int BQB = Tl::BQB;

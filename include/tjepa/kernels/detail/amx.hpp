@@ -77,24 +77,35 @@ inline constexpr int MB = 2 * TM;  // rows of C per block_product
 
 // Every tile 16 rows × 64 bytes (palette 1), loaded for the calling thread while a Tiles lives,
 // released after: the tile state is per thread, and another library on the same thread may load
-// another configuration between two products.
+// another configuration between two products. Nested scopes on one thread load it once (the
+// outermost: attention holds one around its many small products).
 class Tiles {
  public:
   Tiles() {
+    if (depth()++ > 0) return;
+    // In static storage: g++ 12 does not see ldtilecfg read its operand, and dropped the zeroing
+    // stores of a configuration on the stack (the unused tiles' bytes were then stack garbage, and
+    // ldtilecfg faulted on them).
     struct alignas(64) Config {
-      std::uint8_t palette = 1, start_row = 0, reserved[14] = {};
-      std::uint16_t colsb[16] = {};
-      std::uint8_t rows[16] = {};
-    } config;
-    for (int t = 0; t < 8; ++t) {
-      config.colsb[t] = 64;
-      config.rows[t] = TM;
-    }
+      std::uint8_t palette, start_row, reserved[14];
+      std::uint16_t colsb[16];
+      std::uint8_t rows[16];
+    };
+    alignas(64) static constexpr Config config = {
+        1, 0, {}, {64, 64, 64, 64, 64, 64, 64, 64}, {TM, TM, TM, TM, TM, TM, TM, TM}};
     _tile_loadconfig(&config);
   }
-  ~Tiles() { _tile_release(); }
+  ~Tiles() {
+    if (--depth() == 0) _tile_release();
+  }
   Tiles(const Tiles&) = delete;
   Tiles& operator=(const Tiles&) = delete;
+
+ private:
+  static int& depth() {
+    thread_local int d = 0;
+    return d;
+  }
 };
 
 // tile[MB][NR] = A · B over kc2 depth pairs: a [MB][ald] pair words (row-major A, ald a multiple

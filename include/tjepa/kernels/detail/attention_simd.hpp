@@ -264,6 +264,91 @@ inline void micro_dispatch(int mr, int nv, int K, const typename D::Elem* A, std
   micro_kernel<T, MRm, NVm, S, D>(K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
 }
 
+#if TJEPA_AMX_NATIVE
+// gemm's bf16 product on AMX tiles (amx_enabled()): per 32 rows of C, A staged into the tiles'
+// rows (32 × K pairs rounded up to 16, zero past M and K; rows of A copied, or transposed 16 × 16
+// at a time where its pairs run down a column), B's whole groups of 16 pairs read in place and
+// its last partial group staged with zero pairs after it; per 32 columns, 2 × 2 C tiles (2 × 1 at
+// a last 16), stored, then written to C by the store S. Runs inside the caller's amx::Tiles.
+template <Store S>
+inline void gemm_amx(int M, int N, int K, const std::uint32_t* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
+                     const std::uint32_t* B, std::ptrdiff_t ldb, float* C, std::ptrdiff_t ldc, const float* alpha) {
+  constexpr int TM = amx::TM, TK = amx::TK, MB = amx::MB;
+  const amx::Tiles tiles;
+  const int Kp = static_cast<int>(round_up(K, TK)), whole = K / TK * TK;
+  thread_local AlignedVector<std::uint32_t> a_storage, b_storage;
+  std::uint32_t* const at = grow(a_storage, std::size_t(MB) * std::size_t(Kp));
+  // B's last partial group of pairs, zero-padded to 16 rows (N words each).
+  std::uint32_t* const bt = grow(b_storage, std::size_t(TK) * std::size_t(N));
+  if (whole < K) {
+    for (int q = whole; q < K; ++q) std::copy(B + q * ldb, B + q * ldb + N, bt + std::ptrdiff_t(q - whole) * N);
+    std::fill(bt + std::ptrdiff_t(K - whole) * N, bt + std::ptrdiff_t(TK) * N, 0u);
+  }
+  alignas(64) float ct[MB * MB];
+  for (int m0 = 0; m0 < M; m0 += MB) {
+    const int mr = std::min(MB, M - m0);
+    const std::uint32_t* a = A + m0 * a_rs;
+    if (a_cs == 1) {
+      for (int i = 0; i < mr; ++i) {
+        std::copy(a + i * a_rs, a + i * a_rs + K, at + i * Kp);
+        std::fill(at + i * Kp + K, at + (i + 1) * Kp, 0u);
+      }
+    } else {
+      for (int i0 = 0; i0 < mr; i0 += TM)
+        for (int q0 = 0; q0 < Kp; q0 += TK) {
+          if (a_rs == 1 && i0 + TM <= mr && q0 + TK <= K) {
+            transpose16([&](int t) { return a + (q0 + t) * a_cs + i0; }, at + i0 * Kp + q0, Kp);
+            continue;
+          }
+          for (int i = i0; i < std::min(mr, i0 + TM); ++i)
+            for (int q = q0; q < q0 + TK; ++q) at[i * Kp + q] = q < K ? a[i * a_rs + q * a_cs] : 0u;
+        }
+    }
+    for (int i = mr; i < MB; ++i) std::fill(at + i * Kp, at + (i + 1) * Kp, 0u);
+    for (int n0 = 0; n0 < N; n0 += 2 * TM) {
+      const bool two = n0 + 2 * TM <= N;
+      _tile_zero(0);
+      _tile_zero(1);
+      _tile_zero(2);
+      _tile_zero(3);
+      for (int q = 0; q < Kp; q += TK) {
+        const bool staged = q >= whole;
+        const std::uint32_t* b = staged ? bt + n0 : B + q * ldb + n0;
+        const std::ptrdiff_t bs = (staged ? N : ldb) * 4;
+        _tile_loadd(4, at + q, Kp * 4);
+        _tile_loadd(5, at + TM * Kp + q, Kp * 4);
+        _tile_loadd(6, b, bs);
+        _tile_dpbf16ps(0, 4, 6);
+        _tile_dpbf16ps(2, 5, 6);
+        if (two) {
+          _tile_loadd(7, b + TM, bs);
+          _tile_dpbf16ps(1, 4, 7);
+          _tile_dpbf16ps(3, 5, 7);
+        }
+      }
+      _tile_stored(0, ct, MB * 4);
+      _tile_stored(2, ct + TM * MB, MB * 4);
+      if (two) {
+        _tile_stored(1, ct + TM, MB * 4);
+        _tile_stored(3, ct + TM * MB + TM, MB * 4);
+      }
+      for (int i = 0; i < mr; ++i) {
+        float* c = C + (m0 + i) * ldc + n0;
+        for (int j = 0; j < (two ? 2 : 1); ++j) {
+          const Vec<float> v = Vec<float>::load_aligned(ct + i * MB + j * TM);
+          if constexpr (S == Store::overwrite)
+            v.store_aligned(c + j * TM);
+          else if constexpr (S == Store::add)
+            (Vec<float>::load_aligned(c + j * TM) + v).store_aligned(c + j * TM);
+          else
+            xsimd::fma(Vec<float>(alpha[m0 + i]), Vec<float>::load_aligned(c + j * TM), v).store_aligned(c + j * TM);
+        }
+      }
+    }
+  }
+}
+#endif
+
 // C[M, N] (op)= A[M, K] B[K, N] for N a multiple of W: column panels of NVm vectors outside (the B
 // panel stays in L1), strips of MRm rows inside. alpha [M] is read only by Store::rescale_add.
 // MRm * NVm accumulators must fit the register file. With Bf16Dot, A and B hold bf16 pairs (K
@@ -272,6 +357,11 @@ template <class T, Store S, int MRm = MR<T>, int NVm = NV, class D = FloatDot<T>
 inline void gemm(int M, int N, int K, const typename D::Elem* A, std::ptrdiff_t a_rs, std::ptrdiff_t a_cs,
                  const typename D::Elem* B, std::ptrdiff_t ldb, T* C, std::ptrdiff_t ldc, const T* alpha = nullptr) {
   constexpr int w = W<T>;
+#if TJEPA_AMX_NATIVE
+  if constexpr (std::is_same_v<D, Bf16Dot>) {
+    if (amx_enabled()) return gemm_amx<S>(M, N, K, A, a_rs, a_cs, B, ldb, C, ldc, alpha);
+  }
+#endif
   for (int n0 = 0; n0 < N; n0 += NVm * w) {
     const int nv = std::min(NVm, (N - n0) / w);
     for (int m0 = 0; m0 < M; m0 += MRm) {
