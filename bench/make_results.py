@@ -410,12 +410,12 @@ for name, value, ok in goals22:
     print(f"| {name} | {value} | {ok} |")
 # The profile section is bench/profile.sh's (it needs perf), the data-parallel one bench/dist.sh's
 # (it needs mpirun), the latency one bench/latency.sh's, the threads one bench/scale.sh's, the
-# AlexNet, -O2 and Xeon ones and the notes on earlier runs are written by hand: all kept from the
+# AlexNet, -O2, Xeon and AMX ones and the notes on earlier runs are written by hand: all kept from the
 # current file, below.
 _previous = pathlib.Path(__file__).with_name("RESULTS.md")
 _previous_text = _previous.read_text() if _previous.exists() else ""
 _kept = [m.group(0) for m in (re.search(rf"<!-- {n}:begin -->.*?<!-- {n}:end -->", _previous_text, flags=re.S)
-                              for n in ("profile", "dist", "latency", "row_owned", "scale", "mlp_backward", "o2", "xeon", "cnn",
+                              for n in ("profile", "dist", "latency", "row_owned", "scale", "mlp_backward", "o2", "xeon", "amx", "cnn",
                                         "notes")) if m]
 if any("85%" in name and ok != "met" for name, _, ok in goals22) and "<!-- profile:begin -->" in _previous_text:
     print("\nWhere the fp32 goals of 85 % of the peak are not met, the section \"Where the time goes\" "

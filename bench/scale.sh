@@ -22,17 +22,18 @@ threads=$(seq -s, 1 "$cores")
 # What was measured, for the report: the commit (and whether the tree differed from it) and the day.
 echo "$(git rev-parse --short HEAD)$(git status --porcelain --untracked-files=no include bench | grep -q . && echo ' with uncommitted changes')" >"$out/commit.txt"
 date -u +%Y-%m-%d >"$out/date.txt"
-# One core's peaks: fp32 FMAs, and vdpbf16ps where the build has AVX512-BF16 (the bf16 products'
-# ceiling: on some CPUs below the FMA's).
+# One core's peaks: fp32 FMAs, vdpbf16ps where the build has AVX512-BF16 (the bf16 products'
+# ceiling: on some CPUs below the FMA's), and AMX tiles where they run the bf16 products.
 peak() {  # peak BENCHMARK FILE: the median GFLOP/s of 3 repetitions, 1 thread, core 0
   OMP_NUM_THREADS=1 taskset -c 0 build/release/bench/tjepa_bench --benchmark_filter="^$1\$" \
     --benchmark_repetitions=3 --benchmark_report_aggregates_only=true --benchmark_format=json |
-    /usr/bin/python3 -c 'import json,sys; b=[x for x in json.load(sys.stdin)["benchmarks"] if x.get("aggregate_name")=="median"]; b and print("%.1f" % b[0]["GFLOP/s"])' \
+    /usr/bin/python3 -c 'import json,sys; b=[x for x in json.load(sys.stdin)["benchmarks"] if x.get("aggregate_name")=="median" and "GFLOP/s" in x]; b and print("%.1f" % b[0]["GFLOP/s"])' \
     >"$2"
   [ -s "$2" ] || rm -f "$2"
 }
 peak BM_FmaPeak "$out/peak.txt"
 peak BM_Bf16DotPeak "$out/bf16_peak.txt"
+peak BM_AmxPeak "$out/amx_peak.txt"  # where the build has AMX and the tiles are enabled (TJEPA_AMX)
 for skin in allegro deco; do
   for precision in fp32 bf16; do
     echo "tjepa_scale --skin $skin --precision $precision --threads $threads" >&2

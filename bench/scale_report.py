@@ -49,6 +49,11 @@ def step_speedup(steps, t):
 peak = float((d / "peak.txt").read_text().strip())
 bf16_file = d / "bf16_peak.txt"
 bf16_peak = float(bf16_file.read_text().strip()) if bf16_file.exists() else None
+# Where AMX ran the bf16 products (BM_AmxPeak measured: the build has AMX and it was enabled), the
+# bf16 rows' ceiling is the tiles' peak.
+amx_file = d / "amx_peak.txt"
+amx_peak = float(amx_file.read_text().strip()) if amx_file.exists() else None
+bf16_ceiling = amx_peak or bf16_peak
 runs = {}  # (skin, precision) -> rows
 for path in sorted(d.glob("tjepa_*.jsonl"), key=lambda p: (p.name.split("_")[1], "bf16" in p.name)):  # fp32 first
     rows = load_jsonl(path)
@@ -78,6 +83,8 @@ print(f"`bench/scale.sh`, {day}, commit {measured}, "
       f"{cpu} (family {family}, model {model}, {amx}), {sh('nproc')} cores; `BM_FmaPeak` in the same run: "
       f"{peak:.0f} GFLOP/s on one core"
       + (f", `BM_Bf16DotPeak` (vdpbf16ps) {bf16_peak:.0f} ({bf16_peak / peak:.2f}× the FMA's)" if bf16_peak else "")
+      + (f", `BM_AmxPeak` (AMX tiles, which run the bf16 products here) {amx_peak:.0f} ({amx_peak / peak:.1f}×)"
+         if amx_peak else "")
       + ". `build/release/bench/tjepa_scale --skin <skin> --precision <p> "
       f"--threads 1,...,{sh('nproc')} --reps {reps}`: one JEPA step (bench/jepa_setup.hpp: ViT-Tiny, batch 8, "
       "no drop-path) timed phase by phase by its own StageClock marks, the thread counts taking turns "
@@ -88,8 +95,8 @@ print(f"`bench/scale.sh`, {day}, commit {measured}, "
       "variant (branches on 5 of 8 samples: less work) in the last column.\n")
 print("Serial fraction f from the measured speed-up S_t at t threads: f = (t/S_t − 1)/(t − 1) (Amdahl); "
       "the speed-ups f predicts at more threads beside it. % of peak: of t cores' BM_FmaPeak"
-      + (" (bf16 rows: of t cores' BM_Bf16DotPeak, the bf16 products' ceiling; the step's GFLOP/s count "
-         "its products in fp32 and bf16 alike)" if bf16_peak else "") + ".\n")
+      + (f" (bf16 rows: of t cores' {'BM_AmxPeak' if amx_peak else 'BM_Bf16DotPeak'}, the bf16 products' ceiling; "
+         "the step's GFLOP/s count its products in fp32 and bf16 alike)" if bf16_ceiling else "") + ".\n")
 print("Paired: the median over repetitions of the 1-thread step over the t-thread step of the same repetition "
       "(a second apart, so a slow spell of the machine longer than that cancels), with its quartiles; f and "
       "the predictions are from it where the run has it, else from the ratio of the medians.\n")
@@ -108,7 +115,7 @@ for (skin, precision), rows in runs.items():
         pt = torch.get((N_OF[skin], "timm", t)) if precision == "fp32" else None
         pd = torch.get((N_OF[skin], "dinov2", t)) if precision == "fp32" else None
         cells = [f"{skin} ({N_OF[skin]})", precision, str(t), f"{r['ms']:.0f}", f"{r['gflops']:.0f}",
-                 f"{100 * r['gflops'] / ((bf16_peak if precision == 'bf16' and bf16_peak else peak) * t):.0f}%", f"{s:.2f}×" if s else "",
+                 f"{100 * r['gflops'] / ((bf16_ceiling if precision == 'bf16' and bf16_ceiling else peak) * t):.0f}%", f"{s:.2f}×" if s else "",
                  f"{paired:.2f}× ({r['paired_speedup_quartiles'][0]:.2f}-{r['paired_speedup_quartiles'][1]:.2f})"
                  if paired else "",
                  f"{100 * f:.1f}%" if f is not None else ""]
