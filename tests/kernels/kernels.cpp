@@ -431,8 +431,10 @@ TEST_SUITE("kernels") {
       for (int m = 0; m < M; ++m)
         for (int n = 0; n < N; ++n)
           for (int k = 0; k < K; ++k) dW[std::size_t(n) * K + k] += double(o.g[std::size_t(m) * N + n]) * o.x[std::size_t(m) * K + k];
-      for (const auto& [p, amx] : {std::pair{Precision::fp32, false}, std::pair{Precision::bf16, false},
-                                   std::pair{Precision::bf16, amx_available()}}) {
+      for (const auto& engine_case : {std::pair{Precision::fp32, false}, std::pair{Precision::bf16, false},
+                                      std::pair{Precision::bf16, amx_available()}}) {
+        const Precision p = engine_case.first;
+        const bool amx = engine_case.second;
         INFO(precision_name(p), ", AMX ", amx);
         const test::Amx engine(amx);
         std::vector<std::vector<float>> runs;

@@ -22,8 +22,9 @@
 
 #include "tjepa/core/error.hpp"
 
-#if defined(__AVX512BF16__) && defined(__AVX512F__) && defined(__AVX512BW__) && defined(__AMX_TILE__) && \
-    defined(__AMX_BF16__) && defined(__linux__)
+// g++ names the AMX macros __AMX_TILE__ and __AMX_BF16__, clang++ __AMXTILE__ and __AMXBF16__.
+#if defined(__AVX512BF16__) && defined(__AVX512F__) && defined(__AVX512BW__) && defined(__linux__) && \
+    (defined(__AMX_TILE__) || defined(__AMXTILE__)) && (defined(__AMX_BF16__) || defined(__AMXBF16__))
 #define TJEPA_AMX_NATIVE 1
 #include <cpuid.h>
 #include <immintrin.h>
