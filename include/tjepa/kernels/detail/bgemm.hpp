@@ -276,35 +276,33 @@ inline constexpr std::array<std::array<Kernel, MR>, 2> kernels = {
     kernel_table<false>(std::make_integer_sequence<int, MR>{}), kernel_table<true>(std::make_integer_sequence<int, MR>{})};
 
 #if TJEPA_AMX_NATIVE
-// Column-major A's rows [0, R ≤ 32) × depths [0, kc), a(i, k) = a[k·acs + i], as row-major pairs
-// dst [32][ld] (ld a multiple of 16; the A tiles' layout; zero past R): 16 pairs of 16 rows
-// converted (pairs16), then transposed in registers.
-TJEPA_PROFILE_INLINE void pack_a_cols_to_rows(std::uint32_t* dst, std::ptrdiff_t ld, int R, int kc, const float* a,
-                                             std::ptrdiff_t acs) {
-  const int kc2 = depth_pairs(kc);
-  alignas(64) std::uint32_t block[L][L];
-  for (int i0 = 0; i0 < amx::MB; i0 += L) {
-    if (i0 >= R) {
-      for (int i = i0; i < i0 + L; ++i) std::fill(dst + i * ld, dst + i * ld + kc2, 0u);
-      continue;
-    }
-    for (int q0 = 0; q0 < kc2; q0 += L) {
-      const int nq = std::min(L, kc2 - q0);
-      for (int t = 0; t < nq; ++t) {
-        const int q = q0 + t;
-        const float* lo = a + std::ptrdiff_t(2 * q) * acs + i0;
-        // Each depth is a line of another row of a: 8 pairs ahead, prefetched (a stride of a row
-        // defeats the hardware's prefetchers; without it the conversion waited on every line).
-        if (2 * q + 17 < kc) {
-          __builtin_prefetch(lo + 16 * acs);
-          __builtin_prefetch(lo + 17 * acs);
-        }
-        _mm512_store_si512(block[t], pairs16(lo, 2 * q + 1 < kc ? lo + acs : nullptr, R - i0));
+// Column-major A's rows [0, R) × depths [0, kc), a(i, k) = a[k·acs + i], as row-major pairs
+// dst [rows][ld] (ld a multiple of 16: the A tiles' layout; rows zero from R to `rows`, a multiple
+// of 16 ≥ R). 16 depth pairs at a time: each of their 32 rows of a read whole and converted into
+// stage [R/16][16 pairs][16 rows], each 16 × 16 block then transposed into place. Read so, a is
+// read row after row; 32 rows of C at a time, each depth would be a line of another row of a.
+TJEPA_PROFILE_INLINE void pack_a_cols_to_rows(std::uint32_t* dst, std::ptrdiff_t ld, int R, int rows, int kc,
+                                             const float* a, std::ptrdiff_t acs) {
+  const int kc2 = depth_pairs(kc), blocks = (R + L - 1) / L;
+  thread_local AlignedVector<std::uint32_t> stage_storage;
+  std::uint32_t* const stage = grow(stage_storage, std::size_t(blocks) * L * L);
+  for (int q0 = 0; q0 < kc2; q0 += L) {
+    for (int t = 0; t < L; ++t) {
+      const int q = q0 + t;
+      if (q >= kc2) {
+        for (int b = 0; b < blocks; ++b) _mm512_store_si512(stage + (b * L + t) * L, _mm512_setzero_si512());
+        continue;
       }
-      for (int t = nq; t < L; ++t) _mm512_store_si512(block[t], _mm512_setzero_si512());
-      transpose16([&](int t) { return static_cast<const std::uint32_t*>(block[t]); }, dst + i0 * ld + q0, ld);
+      const float* lo = a + std::ptrdiff_t(2 * q) * acs;
+      const float* hi = 2 * q + 1 < kc ? lo + acs : nullptr;
+      for (int b = 0; b < blocks; ++b)
+        _mm512_store_si512(stage + (b * L + t) * L, pairs16(lo + b * L, hi ? hi + b * L : nullptr, R - b * L));
     }
+    for (int b = 0; b < blocks; ++b)
+      transpose16([&](int t) { return static_cast<const std::uint32_t*>(stage + (b * L + t) * L); },
+                  dst + std::ptrdiff_t(b) * L * ld + q0, ld);
   }
+  for (int i = blocks * L; i < rows; ++i) std::fill(dst + i * ld, dst + i * ld + kc2, 0u);
 }
 
 // compute_rows on AMX tiles: blocks of 32 rows × one panel (amx::block_product), A converted per
@@ -314,25 +312,29 @@ inline void compute_rows_amx(int r0, int r1, int cols, int depth, const float* A
   constexpr int MB = amx::MB;
   const amx::Tiles tiles;
   const int panels = (cols + NR - 1) / NR, depth2 = depth_pairs(depth);
+  // Row-major A: converted per block of 32 rows; column-major A: all of rows [r0, r1) at once
+  // (pack_a_cols_to_rows reads it row by row).
+  const bool col_major = a_order == Order::col_major;
+  const int padded = (r1 - r0 + MB - 1) / MB * MB;
   thread_local AlignedVector<std::uint32_t> abuf_storage;
-  std::uint32_t* const abuf = grow(abuf_storage, std::size_t(MB) * (KC / 2));
+  std::uint32_t* const abuf = grow(abuf_storage, std::size_t(col_major ? padded : MB) * (KC / 2));
   alignas(64) float tile[MB * NR];
   for (int k0 = 0; k0 < depth; k0 += KC) {
     const int kc = std::min(KC, depth - k0), kc2 = depth_pairs(kc);
     const std::ptrdiff_t ald = (kc2 + amx::TK - 1) / amx::TK * amx::TK;
     const bool first = k0 == 0, last = k0 + kc == depth;
     const float* c_in = !first || e.accumulate ? C : e.residual;
+    if (col_major) pack_a_cols_to_rows(abuf, ald, r1 - r0, padded, kc, A + r0 + std::ptrdiff_t(k0) * lda, lda);
     for (int i0 = r0; i0 < r1; i0 += MB) {
       const int R = std::min(MB, r1 - i0);
-      if (a_order == Order::row_major) {
+      if (!col_major) {
         pack_a(abuf, R, kc, A + i0 * lda + k0, lda, ald);
         for (int i = R; i < MB; ++i) std::fill(abuf + i * ald, abuf + i * ald + kc2, 0u);
-      } else {
-        pack_a_cols_to_rows(abuf, ald, R, kc, A + i0 + std::ptrdiff_t(k0) * lda, lda);
       }
+      const std::uint32_t* a = col_major ? abuf + (i0 - r0) * ald : abuf;
       for (int p = 0; p < panels; ++p) {
         const int n0 = p * NR, nc = std::min(NR, cols - n0);
-        amx::block_product<NR>(kc2, abuf, ald, packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR,
+        amx::block_product<NR>(kc2, a, ald, packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR,
                                nc, R, tile);
         for (int i = 0; i < R; ++i) {
           const std::ptrdiff_t at = std::ptrdiff_t(i0 + i) * ldc + n0;
