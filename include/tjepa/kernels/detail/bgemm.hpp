@@ -20,6 +20,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string_view>
+#include <type_traits>
 #include <utility>
 
 #include "tjepa/core/error.hpp"
@@ -336,12 +337,16 @@ inline void compute_rows_amx(int r0, int r1, int cols, int depth, const float* A
         const int n0 = p * NR, nc = std::min(NR, cols - n0);
         amx::block_product<NR>(kc2, a, ald, packed + std::ptrdiff_t(p) * depth2 * NR + std::ptrdiff_t(k0 / 2) * NR,
                                nc, R, tile);
-        for (int i = 0; i < R; ++i) {
+        // The epilogue: whole 16-row tiles of C at once, the rows past the last one by one.
+        auto finish = [&]<int Rows>(std::integral_constant<int, Rows>, int i) {
           const std::ptrdiff_t at = std::ptrdiff_t(i0 + i) * ldc + n0;
-          sgemm::finish_tile<1, NV>(tile + i * NR, C + at, ldc, nc, c_in ? c_in + at : nullptr,
-                                    first && e.bias ? e.bias + n0 : nullptr, last && e.gelu ? e.gelu + at : nullptr,
-                                    last && e.scale ? e.scale + at : nullptr);
-        }
+          sgemm::finish_tile<Rows, NV>(tile + i * NR, C + at, ldc, nc, c_in ? c_in + at : nullptr,
+                                       first && e.bias ? e.bias + n0 : nullptr, last && e.gelu ? e.gelu + at : nullptr,
+                                       last && e.scale ? e.scale + at : nullptr);
+        };
+        int i = 0;
+        for (; i + amx::TM <= R; i += amx::TM) finish(std::integral_constant<int, amx::TM>{}, i);
+        for (; i < R; ++i) finish(std::integral_constant<int, 1>{}, i);
       }
     }
   }
