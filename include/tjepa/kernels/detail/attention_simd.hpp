@@ -307,31 +307,14 @@ inline void gemm_amx(int M, int N, int K, const std::uint32_t* A, std::ptrdiff_t
     for (int i = mr; i < MB; ++i) std::fill(at + i * Kp, at + (i + 1) * Kp, 0u);
     for (int n0 = 0; n0 < N; n0 += 2 * TM) {
       const bool two = n0 + 2 * TM <= N;
-      _tile_zero(0);
-      _tile_zero(1);
-      _tile_zero(2);
-      _tile_zero(3);
-      for (int q = 0; q < Kp; q += TK) {
-        const bool staged = q >= whole;
-        const std::uint32_t* b = staged ? bt + n0 : B + q * ldb + n0;
-        const std::ptrdiff_t bs = (staged ? N : ldb) * 4;
-        _tile_loadd(4, at + q, Kp * 4);
-        _tile_loadd(5, at + TM * Kp + q, Kp * 4);
-        _tile_loadd(6, b, bs);
-        _tile_dpbf16ps(0, 4, 6);
-        _tile_dpbf16ps(2, 5, 6);
-        if (two) {
-          _tile_loadd(7, b + TM, bs);
-          _tile_dpbf16ps(1, 4, 7);
-          _tile_dpbf16ps(3, 5, 7);
-        }
-      }
-      _tile_stored(0, ct, MB * 4);
-      _tile_stored(2, ct + TM * MB, MB * 4);
-      if (two) {
-        _tile_stored(1, ct + TM, MB * 4);
-        _tile_stored(3, ct + TM * MB + TM, MB * 4);
-      }
+      amx::tile_block(
+          Kp / TK, at, Kp * 4,
+          [&](int g) {
+            const int q = g * TK;
+            using Group = std::pair<const std::uint32_t*, std::ptrdiff_t>;
+            return q >= whole ? Group{bt + n0, std::ptrdiff_t(N) * 4} : Group{B + q * ldb + n0, ldb * 4};
+          },
+          two, ct, MB * 4);
       for (int i = 0; i < mr; ++i) {
         float* c = C + (m0 + i) * ldc + n0;
         for (int j = 0; j < (two ? 2 : 1); ++j) {

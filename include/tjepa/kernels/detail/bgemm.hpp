@@ -306,8 +306,9 @@ TJEPA_PROFILE_INLINE void pack_a_cols_to_rows(std::uint32_t* dst, std::ptrdiff_t
   for (int i = blocks * L; i < rows; ++i) std::fill(dst + i * ld, dst + i * ld + kc2, 0u);
 }
 
-// compute_rows on AMX tiles: blocks of 32 rows × one panel (amx::block_product), A converted per
-// 32 rows × KC depths into the tiles' layout, then sgemm's epilogue row by row.
+// compute_rows on AMX tiles: blocks of 32 rows × one panel (amx::block_product), A converted into
+// the tiles' layout per KC depths (row-major A per 32 rows, column-major A for all of rows
+// [r0, r1) at once), then sgemm's epilogue per 16-row tile of C.
 inline void compute_rows_amx(int r0, int r1, int cols, int depth, const float* A, std::ptrdiff_t lda, Order a_order,
                              const std::uint32_t* packed, float* C, std::ptrdiff_t ldc, const Epilogue& e) {
   constexpr int MB = amx::MB;
