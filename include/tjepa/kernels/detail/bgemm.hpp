@@ -279,31 +279,23 @@ inline constexpr std::array<std::array<Kernel, MR>, 2> kernels = {
 #if TJEPA_AMX_NATIVE
 // Column-major A's rows [0, R) × depths [0, kc), a(i, k) = a[k·acs + i], as row-major pairs
 // dst [rows][ld] (ld a multiple of 16: the A tiles' layout; rows zero from R to `rows`, a multiple
-// of 16 ≥ R). 16 depth pairs at a time: each of their 32 rows of a read whole and converted into
-// stage [R/16][16 pairs][16 rows], each 16 × 16 block then transposed into place. Read so, a is
-// read row after row; 32 rows of C at a time, each depth would be a line of another row of a.
+// of 16 ≥ R). 16 depth pairs at a time: pack_a_cols converts them for all R rows into stage
+// [16 pairs][R rounded up to 16], reading a row after row, then each 16 × 16 block is transposed
+// into place. (32 rows of C at a time, each depth would be a line of another row of a.)
 TJEPA_PROFILE_INLINE void pack_a_cols_to_rows(std::uint32_t* dst, std::ptrdiff_t ld, int R, int rows, int kc,
                                              const float* a, std::ptrdiff_t acs) {
-  const int kc2 = depth_pairs(kc), blocks = (R + L - 1) / L;
+  const int kc2 = depth_pairs(kc), blocks = (R + L - 1) / L, lds = blocks * L;
   thread_local AlignedVector<std::uint32_t> stage_storage;
-  std::uint32_t* const stage = grow(stage_storage, std::size_t(blocks) * L * L);
+  std::uint32_t* const stage = grow(stage_storage, std::size_t(L) * std::size_t(lds));
   for (int q0 = 0; q0 < kc2; q0 += L) {
-    for (int t = 0; t < L; ++t) {
-      const int q = q0 + t;
-      if (q >= kc2) {
-        for (int b = 0; b < blocks; ++b) _mm512_store_si512(stage + (b * L + t) * L, _mm512_setzero_si512());
-        continue;
-      }
-      const float* lo = a + std::ptrdiff_t(2 * q) * acs;
-      const float* hi = 2 * q + 1 < kc ? lo + acs : nullptr;
-      for (int b = 0; b < blocks; ++b)
-        _mm512_store_si512(stage + (b * L + t) * L, pairs16(lo + b * L, hi ? hi + b * L : nullptr, R - b * L));
-    }
+    const int nq = std::min(L, kc2 - q0);
+    pack_a_cols(stage, lds, R, std::min(2 * L, kc - 2 * q0), a + std::ptrdiff_t(2 * q0) * acs, acs);
+    std::fill(stage + std::ptrdiff_t(nq) * lds, stage + std::ptrdiff_t(L) * lds, 0u);
     for (int b = 0; b < blocks; ++b)
-      transpose16([&](int t) { return static_cast<const std::uint32_t*>(stage + (b * L + t) * L); },
+      transpose16([&](int t) { return static_cast<const std::uint32_t*>(stage + t * lds + b * L); },
                   dst + std::ptrdiff_t(b) * L * ld + q0, ld);
   }
-  for (int i = blocks * L; i < rows; ++i) std::fill(dst + i * ld, dst + i * ld + kc2, 0u);
+  for (int i = lds; i < rows; ++i) std::fill(dst + i * ld, dst + i * ld + kc2, 0u);
 }
 
 // compute_rows on AMX tiles: blocks of 32 rows × one panel (amx::block_product), A converted into
